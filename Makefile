@@ -1,0 +1,40 @@
+# One-command set-up: every target bootstraps .venv from requirements.lock on a fresh machine.
+PYTHON ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: run test lint typecheck check bench lock clean
+
+$(STAMP): requirements.lock pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade "pip>=24"
+	$(BIN)/python -m pip install --quiet -r requirements.lock
+	$(BIN)/python -m pip install --quiet --no-deps -e .
+	touch $(STAMP)
+
+run: $(STAMP)  ## the main job on embedded defaults
+	$(BIN)/cabinplan robot cabin8
+
+test: $(STAMP)  ## lint, type-check and the whole test suite
+	$(BIN)/ruff check planner api tests bench
+	$(BIN)/mypy planner api
+	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check planner api tests bench
+	$(BIN)/ruff format --check planner api tests bench
+
+typecheck: $(STAMP)
+	$(BIN)/mypy planner api
+
+bench: $(STAMP)
+	$(BIN)/python -m bench.kinematics
+
+lock:  ## re-pin requirements.lock from a fresh resolve of pyproject.toml
+	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock
+	/tmp/cabinplan-lock/bin/pip install --quiet ".[dev]"
+	/tmp/cabinplan-lock/bin/pip freeze --exclude cabinplan > requirements.lock
+
+clean:
+	rm -rf $(VENV) build *.egg-info .mypy_cache .ruff_cache .pytest_cache

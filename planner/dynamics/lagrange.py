@@ -1,0 +1,205 @@
+"""Inverse dynamics of cabin8 by the Lagrange equations (paper eq. 47-48) and drive forces by virtual work
+(paper eq. 49-53).
+
+Energy model (paper eq. 47 sums the kinetic and potential energy of every member; the paper gives no
+numbers, the masses come from the description file):
+
+* the carriage moves with the rail only: ``T = m v_d1^2 / 2``, constant height;
+* every other member is a uniform slender bar between two points p0(q), p1(q) -- the stage links AB, CD,
+  EF and the platform BC between their joint centres, the column, arm and slide between frame origins
+  (2->3, 3->4, 4->6). Integrating over the bar gives the exact kinetic energy
+  ``T = m (v0.v0 + v0.v1 + v1.v1) / 6`` (translation plus rotation normal to the bar; a slender bar has no
+  inertia about its axis) and ``U = -m g.(p0 + p1)/2``;
+* the tool is a point mass at the tool origin; the payload a rigid body with mass m, centre c and
+  inertia I_c in the tool frame: ``T = m |v_c|^2 / 2 + omega^T R I_c R^T omega / 2``.
+  Slider carriages are taken as massless (no mass is specified for them).
+
+With L = T - U the generalised joint forces are
+``tau_q = d/dt(dL/dq_dot) - dL/dq = M(q) q_ddot + (d(dT/dq_dot)/dq) q_dot - dT/dq + dU/dq``,
+built by CasADi automatic differentiation and compiled once. Drive forces follow from virtual work:
+``tau_q . dq = tau_u . du`` with ``du = G dq`` gives ``tau_u = G^-T tau_q = J_qu^T tau_q`` where
+J_qu = dq/du (paper eq. 53 with the force Jacobian of the drive map).
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.dynamics.payload import RigidPayload
+from planner.kinematics import chain, parallel
+from planner.kinematics.compiled import FastFunction, dense_function
+from planner.robots.cabin8 import Cabin8
+
+Array = NDArray[np.float64]
+
+
+def _bar(m: float, p0: ca.SX, p1: ca.SX, q: ca.SX, qd: ca.SX, g: ca.DM) -> tuple[ca.SX, ca.SX]:
+    v0 = ca.mtimes(ca.jacobian(p0, q), qd)
+    v1 = ca.mtimes(ca.jacobian(p1, q), qd)
+    T = m / 6.0 * (ca.dot(v0, v0) + ca.dot(v0, v1) + ca.dot(v1, v1))
+    U = -m * ca.dot(g, 0.5 * (p0 + p1))
+    return T, U
+
+
+class Cabin8Dynamics:
+    """Compiled inverse dynamics and energies of a :class:`Cabin8` model.
+
+    Every method takes the payload as a :class:`RigidPayload` (default: none).
+    """
+
+    def __init__(self, robot: Cabin8) -> None:
+        self.robot = robot
+        kin = robot.kin
+        desc = robot.desc
+        q, qd = kin.q_sx, kin.qd_sx
+        qdd = ca.SX.sym("qdd", 8)
+        par = ca.SX.sym("payload", 10)
+        g = ca.DM(desc.gravity_m_s2)
+        ms = desc.masses
+        frames = kin.frames_sx
+        pts = parallel.stage_points(kin.geometry, q[chain.X], q[chain.Y], q[chain.GAMMA], xp=ca)
+
+        def p3(pt: tuple[ca.SX, ca.SX]) -> ca.SX:
+            return ca.vertcat(pt[0], pt[1], q[chain.D1])
+
+        def origin(i: int) -> ca.SX:
+            return frames[i][0:3, 3]
+
+        T_kin = 0.5 * ms.carriage * qd[chain.D1] ** 2
+        U_pot = ca.SX(0)
+        bars = [
+            (ms.platform, p3(pts.B), p3(pts.C)),
+            (ms.link_ab, p3(pts.A), p3(pts.B)),
+            (ms.link_cd, p3(pts.C), p3(pts.D)),
+            (ms.link_ef, p3(pts.E), p3(pts.F)),
+            (ms.column, origin(2), origin(3)),
+            (ms.arm, origin(3), origin(4)),
+            (ms.slide, origin(4), origin(6)),
+        ]
+        for m, a, b in bars:
+            t, u = _bar(m, a, b, q, qd, g)
+            T_kin += t
+            U_pot += u
+        p_tool = origin(6)
+        v_tool = ca.mtimes(ca.jacobian(p_tool, q), qd)
+        T_kin += 0.5 * ms.tool * ca.dot(v_tool, v_tool)
+        U_pot += -ms.tool * ca.dot(g, p_tool)
+        # Payload rigid body.
+        m_p, c_p = par[0], par[1:4]
+        inertia = ca.vertcat(
+            ca.horzcat(par[4], par[7], par[8]), ca.horzcat(par[7], par[5], par[9]), ca.horzcat(par[8], par[9], par[6])
+        )
+        R6 = frames[6][0:3, 0:3]
+        p_com = p_tool + ca.mtimes(R6, c_p)
+        v_com = ca.mtimes(ca.jacobian(p_com, q), qd)
+        omega = ca.mtimes(kin.Jq_sx[3:6, :], qd)
+        I_world = ca.mtimes(ca.mtimes(R6, inertia), R6.T)
+        T_kin += 0.5 * m_p * ca.dot(v_com, v_com) + 0.5 * ca.dot(omega, ca.mtimes(I_world, omega))
+        U_pot += -m_p * ca.dot(g, p_com)
+
+        dT_dqd = ca.gradient(T_kin, qd)
+        M = ca.jacobian(dT_dqd, qd)
+        bias = ca.mtimes(ca.jacobian(dT_dqd, q), qd) - ca.gradient(T_kin, q)
+        grav = ca.gradient(U_pot, q)
+        self._energy = FastFunction(dense_function("energy", [q, qd, par], [T_kin, U_pot]))
+        self._terms = FastFunction(dense_function("lagrange_terms", [q, qd, par], [M, bias, grav]))
+
+        # The same equations of motion by d'Alembert / virtual work, which is far cheaper to evaluate:
+        # every quadratic kinetic-energy term 1/2 sum w_ij v_i.v_j with v_i = J_i(q) q_dot contributes
+        # sum_j w_ij J_i^T a_j, a_j = J_j q_ddot + J_j_dot q_dot (products by forward/reverse AD).
+        def acc(p: ca.SX) -> ca.SX:
+            return ca.jtimes(ca.jtimes(p, q, qd), q, qd) + ca.jtimes(p, q, qdd)
+
+        def pull(p: ca.SX, f: ca.SX) -> ca.SX:
+            return ca.jtimes(p, q, f, True)
+
+        tau = ca.SX.zeros(8)
+        tau[chain.D1] += ms.carriage * qdd[chain.D1]
+        for m, a, b in bars:
+            a0, a1 = acc(a), acc(b)
+            tau += pull(a, m / 6.0 * (2 * a0 + a1) - 0.5 * m * g) + pull(b, m / 6.0 * (a0 + 2 * a1) - 0.5 * m * g)
+        tau += pull(p_tool, ms.tool * (acc(p_tool) - g))
+        tau += pull(p_com, m_p * (acc(p_com) - g))
+        omega_dot = ca.jtimes(ca.mtimes(kin.Jq_sx[3:6, :], qd), q, qd) + ca.mtimes(kin.Jq_sx[3:6, :], qdd)
+        moment = ca.mtimes(I_world, omega_dot) + ca.cross(omega, ca.mtimes(I_world, omega))
+        tau += ca.mtimes(kin.Jq_sx[3:6, :].T, moment)
+        tau_u = ca.mtimes(kin.G_inv_sx.T, tau)
+        self._id = FastFunction(
+            dense_function("inverse_dynamics", [q, qd, qdd, par], [tau, tau_u], {"cse": True})
+        )
+        lagrange_tau = ca.mtimes(M, qdd) + bias + grav
+        self._id_lagrange = FastFunction(dense_function("id_lagrange", [q, qd, qdd, par], [lagrange_tau]))
+
+    def inverse_dynamics(
+        self, q: Array, qd: Array, qdd: Array, payload: RigidPayload | None = None
+    ) -> tuple[Array, Array]:
+        """Generalised joint forces tau_q (8,) and drive forces/torques tau_u (8,) [N, N m].
+
+        Args:
+            q: Joint positions (8,) [m, rad].
+            qd: Joint velocities (8,).
+            qdd: Joint accelerations (8,).
+            payload: Payload carried by the tool (default: none).
+        """
+        tq, tu = self._id(q, qd, qdd, _params(payload))
+        return tq, tu
+
+    def drive_efforts(
+        self, u: Array, ud: Array, udd: Array, payload: RigidPayload | None = None
+    ) -> Array:
+        """Drive forces/torques for drive trajectories, (N, 8) arrays -> (N, 8) [N, N m].
+
+        Joint states follow from the drive states: q = FK_stage(u), q_dot = G^-1 u_dot,
+        q_ddot = G^-1 (u_ddot - G_dot q_dot) with G_dot q_dot the second derivative of the drive map.
+        """
+        u2, ud2, udd2 = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (u, ud, udd))
+        q = self.robot.joints_from_drives(u2)
+        par = _params(payload)
+        out = np.empty_like(u2)
+        for i in range(u2.shape[0]):
+            qd, qdd = self.joint_rates(q[i], ud2[i], udd2[i])
+            out[i] = self._id(q[i], qd, qdd, par)[1]
+        return out
+
+    def joint_rates(self, q: Array, ud: Array, udd: Array) -> tuple[Array, Array]:
+        """Joint velocity and acceleration (q_dot, q_ddot) from drive velocity and acceleration at q."""
+        return self._joint_rates(q, ud, udd)
+
+    @cached_property
+    def _joint_rates(self) -> FastFunction:
+        kin = self.robot.kin
+        q = kin.q_sx
+        ud = ca.SX.sym("ud", 8)
+        udd = ca.SX.sym("udd", 8)
+        G_inv = kin.G_inv_sx
+        qd = ca.mtimes(G_inv, ud)
+        u = kin.drives_sx(q)
+        G = ca.jacobian(u, q)
+        gdqd = ca.mtimes(ca.jacobian(ca.mtimes(G, kin.qd_sx), q), kin.qd_sx)
+        gdqd = ca.substitute(gdqd, kin.qd_sx, qd)
+        qdd = ca.mtimes(G_inv, udd - gdqd)
+        return FastFunction(dense_function("joint_rates", [q, ud, udd], [qd, qdd]))
+
+    def inverse_dynamics_lagrange(
+        self, q: Array, qd: Array, qdd: Array, payload: RigidPayload | None = None
+    ) -> Array:
+        """tau_q from the Lagrangian (M q_ddot + C q_dot + g): the slow, independent route for checks."""
+        return self._id_lagrange(q, qd, qdd, _params(payload))[0]
+
+    def energy(self, q: Array, qd: Array, payload: RigidPayload | None = None) -> tuple[float, float]:
+        """Kinetic and potential energy (T, U) [J]; U is zero at height y = 0 (and for the carriage)."""
+        T, U = self._energy(q, qd, _params(payload))
+        return float(T[0]), float(U[0])
+
+    def terms(self, q: Array, qd: Array, payload: RigidPayload | None = None) -> tuple[Array, Array, Array]:
+        """(M(q) 8x8, bias C(q, q_dot) q_dot (8,), gravity dU/dq (8,)) in joint space."""
+        M, b, g = self._terms(q, qd, _params(payload))
+        return M, b, g
+
+
+def _params(payload: RigidPayload | None) -> Array:
+    return (payload or RigidPayload()).params()

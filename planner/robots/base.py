@@ -1,0 +1,107 @@
+"""The generic robot-model interface every mechanism implements.
+
+The planner, the CLI and the service talk to robots only through :class:`RobotModel`: drive names and
+limits, the drive <-> joint maps, and a summary. Mechanism-specific capabilities (a tool frame for a
+serial-parallel arm, a platform pose for a parallel platform) live on the concrete classes.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """Per-drive limits in drive order, each of shape (n_drives,), SI units."""
+
+    lower: Array
+    upper: Array
+    v_max: Array
+    a_max: Array
+    effort_max: Array
+
+    def __post_init__(self) -> None:
+        n = self.lower.shape
+        for name in ("upper", "v_max", "a_max", "effort_max"):
+            if getattr(self, name).shape != n:
+                raise ValueError(f"DriveLimits.{name} has shape {getattr(self, name).shape}, expected {n}")
+        if np.any(self.lower >= self.upper):
+            raise ValueError("DriveLimits: every lower limit must be below its upper limit")
+        for arr in (self.lower, self.upper, self.v_max, self.a_max, self.effort_max):
+            arr.setflags(write=False)
+
+
+class RobotModel(ABC):
+    """A mechanism: named drives with limits, and maps between drive and joint coordinates."""
+
+    name: str
+    kind: str
+    drive_names: tuple[str, ...]
+    drive_units: tuple[str, ...]
+    joint_names: tuple[str, ...]
+    limits: DriveLimits
+    description_sha256: str
+
+    @property
+    def n_drives(self) -> int:
+        """Number of actuated drives."""
+        return len(self.drive_names)
+
+    @abstractmethod
+    def drives_from_joints(self, q: Array) -> Array:
+        """Drive positions for joint coordinates, (N, n) -> (N, n_drives) or (n,) -> (n_drives,)."""
+
+    @abstractmethod
+    def joints_from_drives(self, u: Array) -> Array:
+        """Joint coordinates for drive positions (the mechanism's forward map of its closed loops)."""
+
+    @abstractmethod
+    def summary(self) -> dict[str, Any]:
+        """JSON-serialisable description: drives, units, limits, geometry."""
+
+    def drives_dict(self, u: Array) -> dict[str, float]:
+        """Name -> value mapping of one drive vector."""
+        return {n: float(v) for n, v in zip(self.drive_names, np.asarray(u, dtype=float), strict=True)}
+
+    def joints_dict(self, q: Array) -> dict[str, float]:
+        """Name -> value mapping of one joint vector."""
+        return {n: float(v) for n, v in zip(self.joint_names, np.asarray(q, dtype=float), strict=True)}
+
+    def drives_from_dict(self, values: dict[str, float], field: str = "drives") -> Array:
+        """Drive vector from a name -> value mapping; every drive must be given, nothing else.
+
+        Raises:
+            InvalidInput: a drive is missing, unknown, or not a finite number (the message names it).
+        """
+        return _vector_from_dict(values, self.drive_names, field)
+
+    def joints_from_dict(self, values: dict[str, float], field: str = "joints") -> Array:
+        """Joint vector from a name -> value mapping; every joint must be given, nothing else."""
+        return _vector_from_dict(values, self.joint_names, field)
+
+
+def _vector_from_dict(values: dict[str, float], names: tuple[str, ...], field: str) -> Array:
+    from planner.exceptions import InvalidInput
+
+    if not isinstance(values, dict):
+        raise InvalidInput(f"{field}: expected an object mapping names to numbers", field=field)
+    unknown = sorted(set(values) - set(names))
+    if unknown:
+        raise InvalidInput(f"{field}: unknown name(s) {unknown}; expected {list(names)}", field=field)
+    missing = [n for n in names if n not in values]
+    if missing:
+        raise InvalidInput(f"{field}: missing {missing}", field=field)
+    out = np.empty(len(names))
+    for i, n in enumerate(names):
+        v = values[n]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+            raise InvalidInput(f"{field}.{n}: expected a finite number, got {v!r}", field=f"{field}.{n}")
+        out[i] = float(v)
+    return out

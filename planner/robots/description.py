@@ -1,0 +1,169 @@
+"""Robot description files: the pydantic schema and the loader.
+
+A description is a YAML file in SI units (m, rad, s, kg, N, N·m). It is validated once on load; the
+resulting objects are immutable and are what the kinematics, dynamics and limits are built from.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Mapping
+from functools import cached_property
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from planner.exceptions import InvalidRobotDescription
+
+Array = NDArray[np.float64]
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class DriveSpec(_Frozen):
+    """One actuated drive: position range and rate, acceleration and effort limits (SI)."""
+
+    name: str
+    kind: Literal["prismatic", "revolute"]
+    lower: float = Field(description="lower position limit [m] or [rad]")
+    upper: float = Field(description="upper position limit [m] or [rad]")
+    v_max: float = Field(gt=0, description="speed limit [m/s] or [rad/s]")
+    a_max: float = Field(gt=0, description="acceleration limit [m/s^2] or [rad/s^2]")
+    effort_max: float = Field(gt=0, description="force [N] or torque [N m] limit")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> DriveSpec:
+        if not self.lower < self.upper:
+            raise ValueError(f"drive {self.name}: lower {self.lower} must be below upper {self.upper}")
+        return self
+
+    @property
+    def unit(self) -> str:
+        """Position unit of the drive."""
+        return "m" if self.kind == "prismatic" else "rad"
+
+
+class ParallelStageSpec(_Frozen):
+    """Planar PRR/PR(PRR)R stage geometry and admissibility margins (paper Fig. 5)."""
+
+    L1: float = Field(gt=0, description="AB [m]")
+    L2: float = Field(gt=0, description="BC, the platform [m]")
+    L3: float = Field(gt=0, description="CD [m]")
+    L4: float = Field(gt=0, description="EF, E the midpoint of AB [m]")
+    min_slider_gap: float = Field(ge=0, description="x3-x1 and x2-x3 lower bound [m]")
+    y_range: tuple[float, float] = Field(description="platform centre height range [m]")
+    gamma_max: float = Field(gt=0, lt=math.pi / 2, description="|gamma| bound [rad]")
+    min_sin_cbd: float = Field(gt=0, lt=1, description="lower bound of sin(angle CBD)")
+    max_link_height_ratio: float = Field(gt=0, lt=1, description="y_B/L1, y_C/L3, y_B/(2 L4) bound")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ParallelStageSpec:
+        lo, hi = self.y_range
+        if not 0 < lo < hi:
+            raise ValueError(f"y_range {self.y_range} must satisfy 0 < lower < upper")
+        return self
+
+
+class MDHSpec(_Frozen):
+    """One link of Craig's modified DH: RotX(alpha) TransX(a) RotZ(theta) TransZ(d)."""
+
+    alpha: float
+    a: float
+    theta: float
+    d: float
+    variable: str = Field(description="joint that replaces theta (revolute) or d (prismatic)")
+
+
+class Masses(_Frozen):
+    """Link masses [kg]; links are uniform slender bodies between their joint centres."""
+
+    carriage: float = Field(ge=0)
+    platform: float = Field(ge=0)
+    link_ab: float = Field(ge=0)
+    link_cd: float = Field(ge=0)
+    link_ef: float = Field(ge=0)
+    column: float = Field(ge=0)
+    arm: float = Field(ge=0)
+    slide: float = Field(ge=0)
+    tool: float = Field(ge=0)
+
+
+class Hybrid8Description(_Frozen):
+    """Description of a hybrid rail + planar parallel stage + serial arm robot (``kind: hybrid8``)."""
+
+    name: str
+    kind: Literal["hybrid8"]
+    description: str
+    gravity_m_s2: tuple[float, float, float]
+    joints: tuple[str, ...]
+    drives: tuple[DriveSpec, ...]
+    parallel_stage: ParallelStageSpec
+    serial_chain: tuple[MDHSpec, ...]
+    masses: Masses
+    home: dict[str, float]
+
+    @model_validator(mode="after")
+    def _structure(self) -> Hybrid8Description:
+        expected_joints = ("d1", "x", "y", "gamma", "theta3", "theta4", "d5", "theta6")
+        expected_drives = ("d1", "x1", "x2", "x3", "theta3", "theta4", "d5", "theta6")
+        if self.joints != expected_joints:
+            raise ValueError(f"joints must be {list(expected_joints)}, got {list(self.joints)}")
+        names = tuple(d.name for d in self.drives)
+        if names != expected_drives:
+            raise ValueError(f"drives must be {list(expected_drives)} in this order, got {list(names)}")
+        variables = tuple(link.variable for link in self.serial_chain)
+        if variables != expected_joints[4:]:
+            raise ValueError(f"serial_chain variables must be {list(expected_joints[4:])}, got {variables}")
+        if set(self.home) != set(expected_drives):
+            raise ValueError(f"home must give every drive {list(expected_drives)}")
+        return self
+
+    @property
+    def drive_names(self) -> tuple[str, ...]:
+        """Drive names in drive order."""
+        return tuple(d.name for d in self.drives)
+
+    @cached_property
+    def lower(self) -> Array:
+        """Lower drive position limits, shape (8,)."""
+        return np.array([d.lower for d in self.drives])
+
+    @cached_property
+    def upper(self) -> Array:
+        """Upper drive position limits, shape (8,)."""
+        return np.array([d.upper for d in self.drives])
+
+
+def description_hash(path: Path) -> str:
+    """SHA-256 of a description file's bytes (for plan provenance)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def load_description(path: Path) -> Hybrid8Description:
+    """Load and validate a description file.
+
+    Raises:
+        InvalidRobotDescription: the file is missing, not YAML, or fails the schema (the message names
+            the field and the reason).
+    """
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise InvalidRobotDescription(f"cannot read robot description {path}: {exc}", path=str(path)) from exc
+    if not isinstance(raw, Mapping):
+        raise InvalidRobotDescription(f"robot description {path} is not a mapping", path=str(path))
+    try:
+        return Hybrid8Description.model_validate(raw)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "<root>"
+        raise InvalidRobotDescription(
+            f"robot description {path.name}: {where}: {first['msg']}", path=str(path), field=where
+        ) from exc
