@@ -1,5 +1,4 @@
-"""Inverse dynamics of cabin8 by the Lagrange equations (paper eq. 47-48) and drive forces by virtual work
-(paper eq. 49-53).
+"""Inverse dynamics of cabin8: Lagrange equations (paper eq. 47-48), drive forces by virtual work (49-53).
 
 Energy model (paper eq. 47 sums the kinetic and potential energy of every member; the paper gives no
 numbers, the masses come from the description file):
@@ -91,7 +90,9 @@ class Cabin8Dynamics:
         # Payload rigid body.
         m_p, c_p = par[0], par[1:4]
         inertia = ca.vertcat(
-            ca.horzcat(par[4], par[7], par[8]), ca.horzcat(par[7], par[5], par[9]), ca.horzcat(par[8], par[9], par[6])
+            ca.horzcat(par[4], par[7], par[8]),
+            ca.horzcat(par[7], par[5], par[9]),
+            ca.horzcat(par[8], par[9], par[6]),
         )
         R6 = frames[6][0:3, 0:3]
         p_com = p_tool + ca.mtimes(R6, c_p)
@@ -121,7 +122,9 @@ class Cabin8Dynamics:
         tau[chain.D1] += ms.carriage * qdd[chain.D1]
         for m, a, b in bars:
             a0, a1 = acc(a), acc(b)
-            tau += pull(a, m / 6.0 * (2 * a0 + a1) - 0.5 * m * g) + pull(b, m / 6.0 * (a0 + 2 * a1) - 0.5 * m * g)
+            tau += pull(a, m / 6.0 * (2 * a0 + a1) - 0.5 * m * g) + pull(
+                b, m / 6.0 * (a0 + 2 * a1) - 0.5 * m * g
+            )
         tau += pull(p_tool, ms.tool * (acc(p_tool) - g))
         tau += pull(p_com, m_p * (acc(p_com) - g))
         omega_dot = ca.jtimes(ca.mtimes(kin.Jq_sx[3:6, :], qd), q, qd) + ca.mtimes(kin.Jq_sx[3:6, :], qdd)
@@ -148,9 +151,7 @@ class Cabin8Dynamics:
         tq, tu = self._id(q, qd, qdd, _params(payload))
         return tq, tu
 
-    def drive_efforts(
-        self, u: Array, ud: Array, udd: Array, payload: RigidPayload | None = None
-    ) -> Array:
+    def drive_efforts(self, u: Array, ud: Array, udd: Array, payload: RigidPayload | None = None) -> Array:
         """Drive forces/torques for drive trajectories, (N, 8) arrays -> (N, 8) [N, N m].
 
         Joint states follow from the drive states: q = FK_stage(u), q_dot = G^-1 u_dot,
@@ -167,7 +168,8 @@ class Cabin8Dynamics:
 
     def joint_rates(self, q: Array, ud: Array, udd: Array) -> tuple[Array, Array]:
         """Joint velocity and acceleration (q_dot, q_ddot) from drive velocity and acceleration at q."""
-        return self._joint_rates(q, ud, udd)
+        qd, qdd = self._joint_rates(q, ud, udd)
+        return qd, qdd
 
     @cached_property
     def _joint_rates(self) -> FastFunction:

@@ -36,11 +36,15 @@ class RigidPayload:
         object.__setattr__(self, "com_tool", com)
         object.__setattr__(self, "inertia_tool", inertia)
         if not np.isfinite(self.mass) or self.mass < 0:
-            raise InvalidInput(f"payload.mass: must be a finite mass >= 0 kg, got {self.mass}", field="payload.mass")
+            raise InvalidInput(
+                f"payload.mass: must be a finite mass >= 0 kg, got {self.mass}", field="payload.mass"
+            )
         if not np.all(np.isfinite(com)):
             raise InvalidInput("payload.com: must be finite", field="payload.com")
         if not np.all(np.isfinite(inertia)) or not np.allclose(inertia, inertia.T, atol=1e-9):
-            raise InvalidInput("payload.inertia: must be a finite symmetric 3x3 matrix", field="payload.inertia")
+            raise InvalidInput(
+                "payload.inertia: must be a finite symmetric 3x3 matrix", field="payload.inertia"
+            )
         eig = np.linalg.eigvalsh(inertia)
         tol = 1e-9 * max(1.0, float(np.abs(eig).max()))
         if eig[0] < -tol or eig[2] > eig[0] + eig[1] + tol:
@@ -64,7 +68,15 @@ class RigidPayload:
     def params(self) -> Array:
         """The 10 inertial parameters (m, c_x, c_y, c_z, I_xx, I_yy, I_zz, I_xy, I_xz, I_yz)."""
         inertia = self.inertia_tool
-        return np.array([
-            self.mass, *self.com_tool,
-            inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2],
-        ])
+        return np.array(
+            [
+                self.mass,
+                *self.com_tool,
+                inertia[0, 0],
+                inertia[1, 1],
+                inertia[2, 2],
+                inertia[0, 1],
+                inertia[0, 2],
+                inertia[1, 2],
+            ]
+        )

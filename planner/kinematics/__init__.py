@@ -1,0 +1,1 @@
+"""Kinematics: planar parallel stage, serial chain, closed-form redundant IK, compiled CasADi maps."""

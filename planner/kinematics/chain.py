@@ -93,14 +93,34 @@ def frames_batch(links: Sequence[MDHSpec], q: Array) -> Array:
 
 
 def tool_batch(links: Sequence[MDHSpec], q: Array) -> Array:
-    """T_base_tool for (N, 8) joint vectors, shape (N, 4, 4); cheaper than :func:`frames_batch`."""
+    """T_base_tool for (N, 8) joint vectors, shape (N, 4, 4); the fast route (no 4x4 products).
+
+    The rotation is carried as three column arrays and each MDH link updates them in place of a matrix
+    product: with M = RotX(alpha) RotZ(theta),
+    ``r0' = c r0 + ca s r1 + sa s r2``, ``r1' = -s r0 + ca c r1 + sa c r2``, ``r2' = -sa r1 + ca r2`` and
+    ``p' = p + a r0 + d r2'``, all elementwise on (3, N) arrays. :func:`frames_batch` (matrix products)
+    is the independent check.
+    """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     n = q.shape[0]
-    T = platform_batch(q)
+    cg, sg = np.cos(q[:, GAMMA]), np.sin(q[:, GAMMA])
+    zeros, ones = np.zeros(n), np.ones(n)
+    r0 = np.stack([cg, sg, zeros])  # (3, N) columns of the platform rotation
+    r1 = np.stack([-sg, cg, zeros])
+    r2 = np.stack([zeros, zeros, ones])
+    p = np.stack([q[:, X], q[:, Y], q[:, D1]])
     for i, link in enumerate(links):
         j, _ = _LINK_VARIABLES[i]
         theta, d = _link_values(links, i, q[:, j])
-        T = T @ mdh_batch(link.alpha, link.a, theta, d, n)
+        c, s = np.cos(theta), np.sin(theta)
+        ca_, sa = float(np.cos(link.alpha)), float(np.sin(link.alpha))
+        p = p + link.a * r0  # TransX(a) after RotX(alpha): along the unchanged x column
+        u1, u2 = ca_ * r1 + sa * r2, -sa * r1 + ca_ * r2
+        r0, r1, r2 = c * r0 + s * u1, c * u1 - s * r0, u2
+        p = p + d * u2
+    T = np.zeros((n, 4, 4))
+    T[:, :3, 0], T[:, :3, 1], T[:, :3, 2], T[:, :3, 3] = r0.T, r1.T, r2.T, p.T
+    T[:, 3, 3] = 1.0
     return T
 
 
@@ -124,7 +144,10 @@ def frames_sx(links: Sequence[MDHSpec], q: ca.SX) -> list[ca.SX]:
     )
     c, s = ca.cos(q[GAMMA]), ca.sin(q[GAMMA])
     platform = ca.vertcat(
-        ca.horzcat(c, -s, 0, q[X]), ca.horzcat(s, c, 0, q[Y]), ca.horzcat(0, 0, 1, q[D1]), ca.horzcat(0, 0, 0, 1)
+        ca.horzcat(c, -s, 0, q[X]),
+        ca.horzcat(s, c, 0, q[Y]),
+        ca.horzcat(0, 0, 1, q[D1]),
+        ca.horzcat(0, 0, 0, 1),
     )
     frames = [eye, carriage, platform]
     for i, link in enumerate(links):
@@ -147,5 +170,7 @@ def geometric_jacobian_sx(T: ca.SX, q: ca.SX) -> ca.SX:
     for i in range(q.shape[0]):
         dR = ca.jacobian(ca.vec(R), q[i])
         W = ca.mtimes(ca.reshape(dR, 3, 3), R.T)
-        cols.append(ca.vertcat(0.5 * (W[2, 1] - W[1, 2]), 0.5 * (W[0, 2] - W[2, 0]), 0.5 * (W[1, 0] - W[0, 1])))
+        cols.append(
+            ca.vertcat(0.5 * (W[2, 1] - W[1, 2]), 0.5 * (W[0, 2] - W[2, 0]), 0.5 * (W[1, 0] - W[0, 1]))
+        )
     return ca.vertcat(Jv, ca.horzcat(*cols))

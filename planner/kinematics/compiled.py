@@ -33,10 +33,11 @@ class _Slot:
         self.buf, self.trigger = fn.buffer()
         self.args = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
         self.res = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
+        # The buffer keeps raw pointers into these arrays, which live as long as the slot.
         for i, a in enumerate(self.args):
-            self.buf.set_arg(i, memoryview(a))
+            self.buf.set_arg(i, memoryview(a))  # type: ignore[call-arg, arg-type]
         for i, r in enumerate(self.res):
-            self.buf.set_res(i, memoryview(r))
+            self.buf.set_res(i, memoryview(r))  # type: ignore[call-arg, arg-type]
 
 
 class FastFunction:
@@ -45,6 +46,8 @@ class FastFunction:
     def __init__(self, fn: ca.Function) -> None:
         self.fn = fn
         self._shapes = [(fn.size1_out(i), fn.size2_out(i)) for i in range(fn.n_out())]
+        ends = np.cumsum([n1 * n2 for n1, n2 in self._shapes]).tolist()
+        self._spans = list(zip([0, *ends[:-1]], ends, strict=True))
         self._local = threading.local()
 
     def _slot(self) -> _Slot:
@@ -55,14 +58,14 @@ class FastFunction:
         return slot
 
     def __call__(self, *args: Any) -> tuple[Array, ...]:
+        """Evaluate with the given inputs (anything numpy can ravel to the input size)."""
         slot = self._slot()
         for dst, src in zip(slot.args, args, strict=True):
             dst[:] = np.ravel(src, order="F")
         slot.trigger()
-        out = []
-        for r, (n1, n2) in zip(slot.res, self._shapes, strict=True):
-            if n2 == 1:
-                out.append(r.copy())
-            else:
-                out.append(r.reshape((n1, n2), order="F").copy())
-        return tuple(out)
+        # One copy of every result, then views into it (column-major matrices become F-ordered views).
+        flat = np.concatenate(slot.res) if len(slot.res) > 1 else slot.res[0].copy()
+        return tuple(
+            flat[a:b] if n2 == 1 else flat[a:b].reshape((n1, n2), order="F")
+            for (a, b), (n1, n2) in zip(self._spans, self._shapes, strict=True)
+        )

@@ -139,12 +139,12 @@ def inverse(g: StageGeometry, pose: Array) -> Array:
     yb = y - h * np.sin(gamma)
     yc = y + h * np.sin(gamma)
     checks = {
+        "finite pose": np.all(np.isfinite(p2), axis=1),
         "y_B > 0 (B above the rail)": yb > 0,
         "y_C > 0 (C above the rail)": yc > 0,
         "y_B < L1 (AB reaches the rail)": yb < g.L1,
         "y_C < L3 (CD reaches the rail)": yc < g.L3,
         "y_B/2 < L4 (EF reaches the rail)": 0.5 * yb < g.L4,
-        "finite pose": np.all(np.isfinite(p2), axis=1),
     }
     for condition, ok in checks.items():
         if not np.all(ok):
@@ -181,7 +181,7 @@ def forward(g: StageGeometry, sliders: Array) -> Array:
     x1, x2, x3 = u2[:, 0], u2[:, 1], u2[:, 2]
     ae = 0.5 * g.L1
     af = x3 - x1
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         cos_a = (ae**2 + af**2 - g.L4**2) / (2.0 * ae * af)
         sin_a = np.sqrt(1.0 - cos_a**2)
         xb, yb = x1 + g.L1 * cos_a, g.L1 * sin_a

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
@@ -15,15 +17,17 @@ def rotation_log(R: Array) -> Array:
     Accurate across the whole range, including angles near 0 (series) and near pi (from the symmetric
     part), which the textbook ``acos`` formula is not.
     """
-    cos_t = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
-    cos_t = min(1.0, max(-1.0, cos_t))
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    sin_t = 0.5 * float(np.linalg.norm(w))
-    theta = float(np.arctan2(sin_t, cos_t))
+    r = R.tolist()
+    cos_t = min(1.0, max(-1.0, 0.5 * (r[0][0] + r[1][1] + r[2][2] - 1.0)))
+    wx, wy, wz = r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]
+    sin_t = 0.5 * math.sqrt(wx * wx + wy * wy + wz * wz)
+    theta = math.atan2(sin_t, cos_t)
     if theta < 1e-6:
-        return 0.5 * (1.0 + theta**2 / 6.0) * w
-    if np.pi - theta > 1e-4:
-        return theta / (2.0 * np.sin(theta)) * w
+        k = 0.5 * (1.0 + theta * theta / 6.0)
+        return np.array([k * wx, k * wy, k * wz])
+    if math.pi - theta > 1e-4:
+        k = theta / (2.0 * math.sin(theta))
+        return np.array([k * wx, k * wy, k * wz])
     # Near pi: axis from the diagonal of (R + I) / 2 = n n^T, sign from the skew part.
     return np.asarray(Rotation.from_matrix(R).as_rotvec(), dtype=float)
 
@@ -47,7 +51,4 @@ def pose_error(T_target: Array, T: Array) -> Array:
     dp = p_target - p and dtheta = log(R_target R^T), matching a geometric Jacobian whose angular rows
     are the angular velocity in the base frame.
     """
-    err = np.empty(6)
-    err[:3] = T_target[:3, 3] - T[:3, 3]
-    err[3:] = rotation_log(T_target[:3, :3] @ T[:3, :3].T)
-    return err
+    return np.concatenate((T_target[:3, 3] - T[:3, 3], rotation_log(T_target[:3, :3] @ T[:3, :3].T)))

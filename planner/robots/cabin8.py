@@ -80,7 +80,10 @@ class Cabin8Kinematics:
         self.jdot_qdot = FastFunction(dense_function("jdot_qdot", [q, qd], [jdqd]))
         # Drive-space bias: with q_dot = G^-1 u_dot, tool acceleration = J_u u_ddot + jdot_udot.
         self.jdot_udot = FastFunction(dense_function("jdot_udot", [q, qd], [jdud]))
-        self.constraints = FastFunction(dense_function("constraints", [q], [c, ca.jacobian(c, q)]))
+        dc = ca.jacobian(c, q)
+        self.constraints = FastFunction(dense_function("constraints", [q], [c, dc]))
+        # Everything one redundancy-resolution step needs, in one call.
+        self.step = FastFunction(dense_function("step", [q], [T, Jq, Ju, c, dc], {"cse": True}))
 
     def drives_sx(self, q: ca.SX) -> ca.SX:
         """Symbolic drive map u = g(q) (8x1)."""
@@ -89,18 +92,32 @@ class Cabin8Kinematics:
 
     def constraints_sx(self, q: ca.SX) -> ca.SX:
         """Symbolic admissibility vector c(q), in the order of :meth:`Cabin8.constraint_specs`."""
-        m = parallel.stage_measures(self.geometry, q[chain.X], q[chain.Y], q[chain.GAMMA], xp=ca)
-        return ca.vertcat(
-            self.drives_sx(q),
-            q[chain.Y],
-            q[chain.GAMMA],
-            m["gap_fa"],
-            m["gap_df"],
-            m["sin_cbd"],
-            m["h_ab"],
-            m["h_cd"],
-            m["h_ef"],
-        )
+        return ca.vertcat(*constraint_terms(self.geometry, [q[i] for i in range(8)], ca))
+
+
+def constraint_terms(geometry: parallel.StageGeometry, q: list[Any], xp: Any) -> list[Any]:
+    """The admissibility quantities c(q) as a list of scalars/arrays (one source for numpy and CasADi).
+
+    Order: the 8 drives, platform y and gamma, slider gaps x3-x1 and x2-x3, sin(CBD), y_B/L1, y_C/L3,
+    y_E/L4 -- the order of :attr:`Cabin8.constraint_specs`.
+    """
+    pts = parallel.stage_points(geometry, q[chain.X], q[chain.Y], q[chain.GAMMA], xp=xp)
+    m = parallel.stage_measures(geometry, q[chain.X], q[chain.Y], q[chain.GAMMA], xp=xp)
+    return [
+        q[0],
+        pts.A[0],
+        pts.D[0],
+        pts.F[0],
+        *q[4:8],
+        q[chain.Y],
+        q[chain.GAMMA],
+        m["gap_fa"],
+        m["gap_df"],
+        m["sin_cbd"],
+        m["h_ab"],
+        m["h_cd"],
+        m["h_ef"],
+    ]
 
 
 @cache
@@ -155,9 +172,12 @@ class Cabin8(RobotModel):
         )
         ps = desc.parallel_stage
         self.home_drives = self.drives_from_dict(desc.home, field="home")
-        specs = [Constraint(n, lo, hi, un) for n, lo, hi, un in zip(
-            self.drive_names, self.limits.lower, self.limits.upper, self.drive_units, strict=True
-        )]
+        specs = [
+            Constraint(n, lo, hi, un)
+            for n, lo, hi, un in zip(
+                self.drive_names, self.limits.lower, self.limits.upper, self.drive_units, strict=True
+            )
+        ]
         inf = float("inf")
         r = ps.max_link_height_ratio
         specs += [
@@ -199,7 +219,7 @@ class Cabin8(RobotModel):
         return chain.tool_batch(self.desc.serial_chain, q)
 
     def frames(self, q: Array) -> Array:
-        """Every frame T_base_i, i = 0..6 (base, carriage, platform, 3, 4, 5, tool), for (N, 8) -> (N,7,4,4)."""
+        """Every frame T_base_i, i = 0..6 (base, carriage, platform, 3, 4, 5, tool), shape (N, 7, 4, 4)."""
         return chain.frames_batch(self.desc.serial_chain, q)
 
     def fk_jacobians(self, q: Array) -> tuple[Array, Array, Array]:
@@ -229,7 +249,7 @@ class Cabin8(RobotModel):
         return self.kin.jdot_qdot(q, qd)[0]
 
     def jdot_udot(self, q: Array, ud: Array) -> Array:
-        """Drive-space bias (6,): tool acceleration = J_u u_ddot + jdot_udot(q, u_dot)."""
+        """Drive-space bias (6,), so that the tool acceleration is J_u u_ddot plus this term."""
         _, _, G_inv = self.kin.drive_map(q)
         return self.kin.jdot_udot(q, G_inv @ np.asarray(ud, dtype=float))[0]
 
@@ -239,9 +259,20 @@ class Cabin8(RobotModel):
 
     # ---------------------------------------------------------- admissibility
     def constraint_values(self, q: Array) -> tuple[Array, Array]:
-        """(c(q), dc/dq) for the admissibility vector of :attr:`constraint_specs`."""
+        """Admissibility vector and its Jacobian, (c(q), dc/dq), in :attr:`constraint_specs` order."""
         c, dc = self.kin.constraints(q)
         return c, dc
+
+    def constraint_values_batch(self, q: Array) -> Array:
+        """c(q) for (N, 8) joint vectors, shape (N, m), numpy-vectorised; NaN where a link cannot close."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        with np.errstate(invalid="ignore"):
+            return np.stack(constraint_terms(self.geometry, list(q.T), np), axis=-1)
+
+    def margins_batch(self, q: Array) -> Array:
+        """Signed distance of each constraint to its nearest bound for (N, 8) joints, (N, m); NaN outside."""
+        c = self.constraint_values_batch(q)
+        return np.minimum(c - self.c_lower, self.c_upper - c)
 
     def violations(self, q: Array, tol: float = 1e-9) -> list[dict[str, Any]]:
         """Every violated limit or margin at q (empty when admissible)."""
@@ -264,8 +295,12 @@ class Cabin8(RobotModel):
         """Raise :class:`LimitViolation` listing every violated limit/margin at q."""
         bad = self.violations(q, tol)
         if bad:
-            names = ", ".join(f"{b['name']}={b['value']:.6g} not in [{b['lower']:.6g}, {b['upper']:.6g}]"
-                              if isinstance(b["value"], float) else b["name"] for b in bad)
+            names = ", ".join(
+                f"{b['name']}={b['value']:.6g} not in [{b['lower']:.6g}, {b['upper']:.6g}]"
+                if isinstance(b["value"], float)
+                else b["name"]
+                for b in bad
+            )
             raise LimitViolation(f"configuration violates {names}", violations=bad)
 
     # --------------------------------------------------------------- summary
@@ -278,7 +313,9 @@ class Cabin8(RobotModel):
             "description": self.desc.description,
             "description_sha256": self.description_sha256,
             "frames": "base: z along the rail (cabin axis), y up (gravity -y), x lateral",
-            "joints": [{"name": n, "unit": u} for n, u in zip(self.joint_names, self.joint_units, strict=True)],
+            "joints": [
+                {"name": n, "unit": u} for n, u in zip(self.joint_names, self.joint_units, strict=True)
+            ],
             "drives": [
                 {
                     "name": d.name,
@@ -295,9 +332,14 @@ class Cabin8(RobotModel):
                 )
             ],
             "parallel_stage": {
-                "L1_m": ps.L1, "L2_m": ps.L2, "L3_m": ps.L3, "L4_m": ps.L4,
-                "min_slider_gap_m": ps.min_slider_gap, "y_range_m": list(ps.y_range),
-                "gamma_max_rad": ps.gamma_max, "min_sin_cbd": ps.min_sin_cbd,
+                "L1_m": ps.L1,
+                "L2_m": ps.L2,
+                "L3_m": ps.L3,
+                "L4_m": ps.L4,
+                "min_slider_gap_m": ps.min_slider_gap,
+                "y_range_m": list(ps.y_range),
+                "gamma_max_rad": ps.gamma_max,
+                "min_sin_cbd": ps.min_sin_cbd,
                 "max_link_height_ratio": ps.max_link_height_ratio,
             },
             "serial_chain_mdh": [link.model_dump() for link in self.desc.serial_chain],

@@ -1,0 +1,74 @@
+"""Boundary value types shared by scenario files, the CLI and the HTTP API (pydantic, SI units)."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+
+from planner.kinematics.so3 import matrix_to_quat_wxyz, quat_wxyz_to_matrix
+
+Array = NDArray[np.float64]
+
+
+def _finite(v: float) -> float:
+    if not math.isfinite(v):
+        raise ValueError("must be a finite number")
+    return v
+
+
+Finite = Annotated[float, AfterValidator(_finite)]
+
+
+class Quaternion(BaseModel):
+    """Unit quaternion {w, x, y, z}; accepted within 1e-3 of unit norm and normalised."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    w: Finite
+    x: Finite
+    y: Finite
+    z: Finite
+
+    @model_validator(mode="after")
+    def _unit(self) -> Quaternion:
+        n = math.sqrt(self.w**2 + self.x**2 + self.y**2 + self.z**2)
+        if abs(n - 1.0) > 1e-3:
+            raise ValueError(f"quaternion norm is {n:.6g}; a rotation needs a unit quaternion (w, x, y, z)")
+        return self
+
+    def matrix(self) -> Array:
+        """3x3 rotation matrix."""
+        return quat_wxyz_to_matrix((self.w, self.x, self.y, self.z))
+
+
+IDENTITY = Quaternion(w=1.0, x=0.0, y=0.0, z=0.0)
+
+
+class Pose(BaseModel):
+    """A rigid pose: position [m] and orientation, of a frame in its parent frame."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    position: tuple[Finite, Finite, Finite] = Field(description="[x, y, z] in metres")
+    orientation: Quaternion = IDENTITY
+
+    def matrix(self) -> Array:
+        """4x4 homogeneous transform."""
+        T = np.eye(4)
+        T[:3, :3] = self.orientation.matrix()
+        T[:3, 3] = self.position
+        return T
+
+    @classmethod
+    def from_matrix(cls, T: Array) -> Pose:
+        """Pose of a 4x4 homogeneous transform."""
+        w, x, y, z = matrix_to_quat_wxyz(np.asarray(T)[:3, :3])
+        p = np.asarray(T)[:3, 3]
+        return cls(
+            position=(float(p[0]), float(p[1]), float(p[2])),
+            orientation=Quaternion(w=float(w), x=float(x), y=float(y), z=float(z)),
+        )

@@ -1,0 +1,37 @@
+"""Shared fixtures: the reference robot and admissible random configurations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.robots.cabin8 import Cabin8
+
+
+@pytest.fixture(scope="session")
+def robot() -> Cabin8:
+    return Cabin8()
+
+
+def admissible_joints(robot: Cabin8, n: int, seed: int) -> np.ndarray:
+    """N admissible joint vectors drawn uniformly (rejection sampling), reproducible by seed."""
+    rng = np.random.default_rng(seed)
+    ps = robot.desc.parallel_stage
+    lo = robot.limits.lower.copy()
+    hi = robot.limits.upper.copy()
+    lo[1:4] = [-0.3, ps.y_range[0], -ps.gamma_max]
+    hi[1:4] = [0.3, ps.y_range[1], ps.gamma_max]
+    out: list[np.ndarray] = []
+    while len(out) < n:
+        cand = rng.uniform(lo, hi, size=(4 * n, 8))
+        for q in cand:
+            if not robot.violations(q):
+                out.append(q)
+                if len(out) == n:
+                    break
+    return np.array(out)
+
+
+@pytest.fixture(scope="session")
+def configs(robot: Cabin8) -> np.ndarray:
+    return admissible_joints(robot, 300, seed=42)

@@ -1,0 +1,152 @@
+"""Inverse dynamics by physics: power balance, gravity = grad U, virtual work, two independent routes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.payload import RigidPayload, box_inertia
+from planner.exceptions import InvalidInput
+from planner.robots.cabin8 import Cabin8
+
+
+@pytest.fixture(scope="module")
+def dyn(robot: Cabin8) -> Cabin8Dynamics:
+    return Cabin8Dynamics(robot)
+
+
+@pytest.fixture(scope="module")
+def payload() -> RigidPayload:
+    grasp = np.eye(4)
+    grasp[:3, 3] = [0.0, 0.0, 0.30]
+    inertia = box_inertia(100.0, (0.45, 0.35, 0.50))
+    return RigidPayload.from_grasp(100.0, np.array([0.02, -0.01, 0.03]), inertia, grasp)
+
+
+def trajectory(q0: np.ndarray, t: float, amp: np.ndarray, freq: np.ndarray) -> tuple[np.ndarray, ...]:
+    return q0 + amp * np.sin(freq * t), amp * freq * np.cos(freq * t), -amp * freq**2 * np.sin(freq * t)
+
+
+def test_power_balance_along_random_trajectories(
+    robot: Cabin8, dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    """tau_q . q_dot = dE/dt with E = T + U (no friction): the generalised forces do exactly the work."""
+    rng = np.random.default_rng(11)
+    for q0 in configs[:25]:
+        amp = rng.uniform(-0.05, 0.05, 8)
+        freq = rng.uniform(0.3, 2.0, 8)
+        for t in (0.1, 0.7, 1.3):
+            q, qd, qdd = trajectory(q0, t, amp, freq)
+            tau, _ = dyn.inverse_dynamics(q, qd, qdd, payload)
+            h = 1e-5
+            e = [sum(dyn.energy(*trajectory(q0, t + s, amp, freq)[:2], payload)) for s in (-h, h)]
+            de_dt = (e[1] - e[0]) / (2 * h)
+            assert tau @ qd == pytest.approx(de_dt, rel=1e-6, abs=1e-6)
+
+
+def test_static_forces_are_the_gradient_of_potential(
+    dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    zero = np.zeros(8)
+    for q in configs[:30]:
+        tau, _ = dyn.inverse_dynamics(q, zero, zero, payload)
+        h = 1e-6
+        grad = np.array(
+            [
+                (dyn.energy(q + h * e, zero, payload)[1] - dyn.energy(q - h * e, zero, payload)[1]) / (2 * h)
+                for e in np.eye(8)
+            ]
+        )
+        np.testing.assert_allclose(tau, grad, atol=1e-5 * max(1.0, np.abs(grad).max()))
+        assert tau[0] == pytest.approx(0.0, abs=1e-9), "the rail is horizontal: no static rail force"
+
+
+def test_drive_forces_by_virtual_work(
+    robot: Cabin8, dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    rng = np.random.default_rng(5)
+    for q in configs[:30]:
+        qd, qdd = rng.normal(size=8) * 0.1, rng.normal(size=8) * 0.2
+        tau_q, tau_u = dyn.inverse_dynamics(q, qd, qdd, payload)
+        G, _ = robot.drive_map_jacobian(q)
+        for dq in rng.normal(size=(3, 8)):
+            du = G @ dq
+            assert tau_u @ du == pytest.approx(tau_q @ dq, rel=1e-9, abs=1e-9)
+
+
+def test_lagrange_and_dalembert_routes_agree(
+    dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    rng = np.random.default_rng(6)
+    for q in configs[:30]:
+        qd, qdd = rng.normal(size=8) * 0.3, rng.normal(size=8)
+        a, _ = dyn.inverse_dynamics(q, qd, qdd, payload)
+        b = dyn.inverse_dynamics_lagrange(q, qd, qdd, payload)
+        np.testing.assert_allclose(a, b, atol=1e-9 * max(1.0, np.abs(b).max()))
+
+
+def test_mass_matrix_symmetric_positive_definite(
+    dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    for q in configs[:30]:
+        M, _, _ = dyn.terms(q, np.zeros(8), payload)
+        np.testing.assert_allclose(M, M.T, atol=1e-9)
+        assert np.linalg.eigvalsh(M).min() > 0
+        # The rail carries every mass: M[d1, d1] is the robot's total mass plus the payload.
+        total = sum(dyn.robot.desc.masses.model_dump().values()) + payload.mass
+        assert M[0, 0] == pytest.approx(total, rel=1e-12)
+
+
+def test_drive_efforts_match_joint_route(
+    robot: Cabin8, dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    rng = np.random.default_rng(8)
+    q = configs[:10]
+    u = robot.drives_from_joints(q)
+    ud, udd = rng.normal(size=(10, 8)) * 0.05, rng.normal(size=(10, 8)) * 0.1
+    efforts = dyn.drive_efforts(u, ud, udd, payload)
+    for i in range(10):
+        _, G_inv = robot.drive_map_jacobian(q[i])
+        qd = G_inv @ ud[i]
+        # q_ddot from the time derivative of u = g(q): u_ddot = G q_ddot + G_dot q_dot.
+        h = 1e-6
+        Gp, _ = robot.drive_map_jacobian(q[i] + h * qd)
+        Gm, _ = robot.drive_map_jacobian(q[i] - h * qd)
+        gdot_qd = (Gp - Gm) / (2 * h) @ qd
+        qdd = G_inv @ (udd[i] - gdot_qd)
+        _, tau_u = dyn.inverse_dynamics(q[i], qd, qdd, payload)
+        np.testing.assert_allclose(efforts[i], tau_u, atol=1e-5 * max(1.0, np.abs(tau_u).max()))
+
+
+def test_payload_weight_shows_in_rail_free_directions(
+    robot: Cabin8, dyn: Cabin8Dynamics, configs: np.ndarray
+) -> None:
+    """Adding a point payload of mass m at the tool origin adds exactly -m g . dp/dq to the static forces."""
+    zero = np.zeros(8)
+    point = RigidPayload(50.0)
+    for q in configs[:20]:
+        base, _ = dyn.inverse_dynamics(q, zero, zero)
+        loaded, _ = dyn.inverse_dynamics(q, zero, zero, point)
+        Jv = robot.jacobian(q)[:3]
+        expected = -50.0 * Jv.T @ np.array(robot.desc.gravity_m_s2)
+        np.testing.assert_allclose(loaded - base, expected, atol=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"mass": -1.0}, "payload.mass"),
+        ({"mass": float("nan")}, "payload.mass"),
+        ({"mass": 1.0, "inertia_tool": np.diag([1.0, 1.0, 3.0])}, "payload.inertia"),
+        (
+            {"mass": 1.0, "inertia_tool": np.array([[1.0, 0.5, 0], [0, 1.0, 0], [0, 0, 1.0]])},
+            "payload.inertia",
+        ),
+        ({"mass": 1.0, "com_tool": np.array([0.0, np.inf, 0.0])}, "payload.com"),
+    ],
+)
+def test_payload_validation(kwargs: dict, field: str) -> None:
+    with pytest.raises(InvalidInput) as err:
+        RigidPayload(**kwargs)
+    assert err.value.details["field"] == field
