@@ -1,0 +1,1 @@
+"""Reference cabin meshes and the script that generates them (see README.md)."""

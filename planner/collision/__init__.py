@@ -1,0 +1,16 @@
+"""Collision world: cabin, payload and robot geometry.
+
+The mesh layer (:mod:`planner.collision.mesh_loader`) turns STL/OBJ/PLY/GLB/glTF files into validated
+triangle meshes in metres, in the robot base frame.
+"""
+
+from planner.collision.mesh_loader import (
+    SUPPORTED_EXTENSIONS,
+    LoadedMesh,
+    MeshLimits,
+    MeshReport,
+    Units,
+    load_mesh,
+)
+
+__all__ = ["SUPPORTED_EXTENSIONS", "LoadedMesh", "MeshLimits", "MeshReport", "Units", "load_mesh"]

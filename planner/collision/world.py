@@ -1,0 +1,632 @@
+"""The collision world: robot + payload against a cabin mesh and themselves, exact and certified.
+
+Every decision that something is *clear* is certified; nothing is sampled at a fixed resolution:
+
+* **State check** (:meth:`CollisionWorld.check_state`): limits and singularity margins, then each body
+  against the cabin and each non-adjacent pair of bodies. Bodies are grown by the clearance and tested with
+  FCL *collision* queries (microseconds), never distance queries (milliseconds). Before that, a
+  conservative prune: every body is covered by spheres, and a sphere whose certified distance lower bound
+  (:class:`~planner.collision.clearance_grid.ClearanceGrid`) exceeds its radius plus the clearance cannot
+  touch the cabin; two bodies whose sphere covers are apart by more than the clearance cannot touch each
+  other. Only what the prune cannot prove clear goes to FCL.
+* **Motion check** (:meth:`CollisionWorld.check_motion`): along the straight joint-space segment
+  q(t) = q_a + t (q_b - q_a), no point of body b moves more than D_b = rho_b . |q_b - q_a| (reach bounds,
+  :mod:`planner.collision.bodies`); a pair's relative displacement is bounded likewise, without the joints
+  that move both bodies rigidly together. Each body and pair is advanced along t with certified steps
+  (its proven spare clearance over its displacement bound), so every body keeps ``clearance`` everywhere
+  along the segment, not just at the checked states.
+* **Distances** (:meth:`CollisionWorld.min_distance`, :meth:`clearance_profile`): FCL distance queries,
+  where a number is needed (reports), pruned by the same lower bounds (branch and bound).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cache
+from typing import Any
+
+import casadi as ca
+import fcl
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.collision.bodies import BodySet, PayloadGeometry, Shape, cabin8_bodies
+from planner.collision.clearance_grid import ClearanceGrid
+from planner.collision.mesh_loader import LoadedMesh
+from planner.exceptions import InvalidInput
+from planner.kinematics import chain, parallel
+from planner.kinematics.compiled import FastFunction, dense_function
+from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
+
+Array = NDArray[np.float64]
+
+DEFAULT_CLEARANCE_M = 0.01
+DEFAULT_MOTION_MARGIN_M = 0.005
+DEFAULT_SELF_CLEARANCE_M = 0.005
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Why a state is invalid: a limit, a body against the cabin, or a pair of bodies."""
+
+    kind: str  # "limit" | "cabin" | "self"
+    bodies: tuple[str, ...]
+    detail: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"kind": self.kind, "bodies": list(self.bodies), "detail": self.detail}
+
+
+@dataclass(frozen=True)
+class StateReport:
+    """Result of a state check: ``valid`` and, when not, every contact found."""
+
+    valid: bool
+    contacts: tuple[Contact, ...] = ()
+
+
+@dataclass(frozen=True)
+class MotionReport:
+    """Result of a certified motion check."""
+
+    valid: bool
+    states_checked: int
+    fcl_queries: int
+    t_fail: float | None = None
+    contacts: tuple[Contact, ...] = ()
+
+
+@dataclass(frozen=True)
+class _State:
+    """Body poses and certified lower bounds at one configuration."""
+
+    R: Array
+    p: Array
+    lengths: Array
+    cabin_lb: Array
+    pair_lb: Array
+
+
+@dataclass(frozen=True)
+class Distance:
+    """Minimum distance between the robot (with payload) and the cabin or itself, with witnesses."""
+
+    distance_m: float
+    bodies: tuple[str, str]
+    point_a: Array = field(repr=False)
+    point_b: Array = field(repr=False)
+
+
+def _cover_centres_sx(R: ca.SX, p: ca.SX, length: ca.SX, shape: Shape, local: Array) -> list[ca.SX]:
+    if shape.kind == "capsule":
+        return [p + float(z) * length * R[:, 2] for z in local[:, 2]]
+    return [p + ca.mtimes(R, ca.DM(c)) for c in local]
+
+
+def _pose_function(kin: Cabin8Kinematics, bodies: BodySet) -> ca.Function:
+    """Compiled (q, T_tool_box) -> body poses and the world centres of both sphere covers.
+
+    Outputs: R, p, length (13 values per body); fine and coarse cover centres, (S, 3) each, row-major.
+    """
+    names = bodies.names
+    q = kin.q_sx
+    T_tb = ca.SX.sym("T_tool_box", 4, 4)
+    frames = kin.frames_sx
+    pts = parallel.stage_points(kin.geometry, q[chain.X], q[chain.Y], q[chain.GAMMA], xp=ca)
+
+    def p3(pt: tuple[ca.SX, ca.SX]) -> ca.SX:
+        return ca.vertcat(pt[0], pt[1], q[chain.D1])
+
+    def seg(a: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+        d = b - a
+        length = ca.norm_2(d)
+        z = d / length
+        # Any unit vector normal to z completes the frame (a capsule is symmetric about its axis).
+        helper = ca.if_else(ca.fabs(z[0]) < 0.9, ca.DM([1, 0, 0]), ca.DM([0, 1, 0]))
+        x = ca.cross(helper, z)
+        x = x / ca.norm_2(x)
+        y = ca.cross(z, x)
+        return ca.horzcat(x, y, z), 0.5 * (a + b), length
+
+    outs: list[ca.SX] = []
+    fine: list[ca.SX] = []
+    coarse: list[ca.SX] = []
+    for name in names:
+        if name == "carriage":
+            R, p, length = ca.SX.eye(3), ca.vertcat(0, -0.06, q[chain.D1]), ca.SX(0)
+        elif name == "platform":
+            R, p, length = frames[2][0:3, 0:3], frames[2][0:3, 3], ca.SX(0)
+        elif name == "payload":
+            T = ca.mtimes(frames[6], T_tb)
+            R, p, length = T[0:3, 0:3], T[0:3, 3], ca.SX(0)
+        else:
+            a, b = {
+                "link_ab": (p3(pts.A), p3(pts.B)),
+                "link_cd": (p3(pts.C), p3(pts.D)),
+                "link_ef": (p3(pts.E), p3(pts.F)),
+                "column": (frames[2][0:3, 3], frames[3][0:3, 3]),
+                "arm": (frames[3][0:3, 3], frames[4][0:3, 3]),
+                "slide": (frames[4][0:3, 3], frames[6][0:3, 3]),
+            }[name]
+            R, p, length = seg(a, b)
+        outs.append(ca.vertcat(ca.vec(R), p, length))
+        fine += _cover_centres_sx(
+            R, p, length, bodies.shapes[len(outs) - 1], bodies.sphere_centres[len(outs) - 1]
+        )
+        coarse += _cover_centres_sx(
+            R, p, length, bodies.shapes[len(outs) - 1], bodies.coarse_centres[len(outs) - 1]
+        )
+    return dense_function(
+        "body_poses",
+        [q, T_tb],
+        [ca.vertcat(*outs), ca.vertcat(*[c.T for c in fine]), ca.vertcat(*[c.T for c in coarse])],
+        {"cse": True},
+    )
+
+
+@cache
+def _cabin_bvh(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> fcl.BVHModel:
+    vertices = np.frombuffer(vertices_bytes).reshape(-1, 3)
+    faces = np.frombuffer(faces_bytes, dtype=np.int64).reshape(-1, 3)
+    model = fcl.BVHModel()
+    model.beginModel(len(vertices), len(faces))
+    model.addSubModel(vertices, faces.astype(np.int32))
+    model.endModel()
+    return model
+
+
+@cache
+def _cabin_grid(sha256: str, vertices_bytes: bytes, faces_bytes: bytes, step: float) -> ClearanceGrid:
+    vertices = np.frombuffer(vertices_bytes).reshape(-1, 3)
+    faces = np.frombuffer(faces_bytes, dtype=np.int64).reshape(-1, 3)
+    return ClearanceGrid.build(vertices, faces, step=step)
+
+
+@cache
+def _box_bvh(size: tuple[float, float, float]) -> fcl.BVHModel:
+    import trimesh
+
+    m = trimesh.creation.box(extents=size)
+    model = fcl.BVHModel()
+    model.beginModel(len(m.vertices), len(m.faces))
+    model.addSubModel(np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int32))
+    model.endModel()
+    return model
+
+
+def _fcl_geometry(shape: Shape, margin: float, length: float) -> Any:
+    grown = shape.inflated(margin)
+    if grown.kind == "box":
+        return fcl.Box(*grown.size)
+    return fcl.Capsule(grown.radius, length)
+
+
+class CollisionWorld:
+    """Robot (+ payload) and cabin, with exact, certified state and motion checks.
+
+    Args:
+        robot: The cabin8 model.
+        cabin: The cabin mesh in the base frame (``None``: free space, self-collision only).
+        payload: The carried payload (``None``: none).
+        grid_step_m: Node spacing of the clearance lower-bound grid [m].
+
+    Geometry that depends only on the cabin (FCL BVH, clearance grid) is cached per mesh content and pose,
+    so several worlds on one cabin share it.
+    """
+
+    def __init__(
+        self,
+        robot: Cabin8,
+        cabin: LoadedMesh | None = None,
+        payload: PayloadGeometry | None = None,
+        grid_step_m: float = 0.03,
+        self_clearance: float = DEFAULT_SELF_CLEARANCE_M,
+    ) -> None:
+        _check_clearance(self_clearance)
+        self.self_clearance = float(self_clearance)
+        self.robot = robot
+        self.cabin = cabin
+        self.payload = payload
+        self.bodies: BodySet = cabin8_bodies(robot, payload)
+        self.names = self.bodies.names
+        self._pose_fn = _pose_function(robot.kin, self.bodies)
+        self._pose_fast = FastFunction(self._pose_fn)
+        self._T_tool_box = payload.T_tool_box if payload is not None else np.eye(4)
+        self._cabin_obj: fcl.CollisionObject | None = None
+        self._grid: ClearanceGrid | None = None
+        if cabin is not None:
+            key = (
+                cabin.sha256 + cabin.T_base_mesh.tobytes().hex(),
+                cabin.vertices.tobytes(),
+                cabin.faces.astype(np.int64).tobytes(),
+            )
+            self._cabin_obj = fcl.CollisionObject(_cabin_bvh(*key), fcl.Transform())
+            self._grid = _cabin_grid(*key, grid_step_m)
+        self._geoms: dict[tuple[int, float, float], Any] = {}
+        self._req = fcl.CollisionRequest()
+        self._n_bodies = len(self.names)
+        self._fcl_queries = 0
+        # Fine cover (cabin bounds): radii and the first sphere of each body, for per-body minima.
+        fine_counts = [len(r) for r in self.bodies.sphere_radii]
+        self._fine_r = np.concatenate(self.bodies.sphere_radii)
+        self._fine_start = np.concatenate([[0], np.cumsum(fine_counts)[:-1]]).astype(int)
+        # Coarse cover (self bounds): every sphere pair of every checked body pair, grouped by body pair.
+        counts = [len(r) for r in self.bodies.coarse_radii]
+        self._sph_r = np.concatenate(self.bodies.coarse_radii)
+        self._sph_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
+        self._pair_a = np.array([a for a, _ in self.bodies.pairs], dtype=int)
+        self._pair_b = np.array([b for _, b in self.bodies.pairs], dtype=int)
+        ia, ib = [], []
+        for a, b in self.bodies.pairs:
+            ga, gb = np.meshgrid(
+                np.arange(self._sph_start[a], self._sph_start[a] + counts[a]),
+                np.arange(self._sph_start[b], self._sph_start[b] + counts[b]),
+                indexing="ij",
+            )
+            ia.append(ga.ravel())
+            ib.append(gb.ravel())
+        sizes = [len(x) for x in ia]
+        bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self._pair_ia = np.concatenate(ia) if ia else np.zeros(0, dtype=int)
+        self._pair_ib = np.concatenate(ib) if ib else np.zeros(0, dtype=int)
+        self._pair_rsum = self._sph_r[self._pair_ia] + self._sph_r[self._pair_ib]
+        self._pair_sph = [np.arange(bounds[k], bounds[k + 1]) for k in range(len(self.bodies.pairs))]
+        self._carriage = self.names.index("carriage")
+        self._carriage_table = self._build_carriage_table() if self._cabin_obj is not None else None
+
+    # ------------------------------------------------------------------ poses
+    def _evaluate(self, q: Array) -> tuple[Array, Array, Array, Array, Array]:
+        """Body poses and cover-sphere centres for (N, 8) or (8,) joints.
+
+        Returns:
+            R (N, B, 3, 3), p (N, B, 3), capsule lengths (N, B), fine centres (N, S, 3), coarse centres
+            (N, S', 3).
+        """
+        q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        n = q2.shape[0]
+        if n == 1:
+            flat, fine, coarse = (x[None, :] for x in self._pose_fast(q2[0], self._T_tool_box))
+        else:
+            # CasADi evaluates a function column-wise when given N stacked columns.
+            outs = self._pose_fn(ca.DM(q2.T), ca.DM(self._T_tool_box))
+            flat, fine, coarse = (np.asarray(o.full(), dtype=float).T for o in outs)
+        per = flat.reshape(n, self._n_bodies, 13)
+        R = per[:, :, :9].reshape(n, self._n_bodies, 3, 3).transpose(0, 1, 3, 2)
+        return R, per[:, :, 9:12], per[:, :, 12], fine.reshape(n, -1, 3), coarse.reshape(n, -1, 3)
+
+    def poses(self, q: Array) -> tuple[Array, Array, Array]:
+        """(R (N, B, 3, 3), p (N, B, 3), lengths (N, B)) of every body for (N, 8) or (8,) joints.
+
+        Each body frame is centred on the body; a capsule's axis is its frame's z axis.
+        """
+        R, p, lengths, _, _ = self._evaluate(q)
+        return R, p, lengths
+
+    def cabin_lower_bounds(self, fine_centres: Array, d1: Array) -> Array:
+        """(N, B) certified lower bound of each body's distance to the cabin (inf without a cabin).
+
+        From the fine sphere cover and the clearance grid; for the carriage, which moves with d1 only, also
+        from its exact clearance table along the rail (whichever bound is larger).
+        """
+        n = fine_centres.shape[0]
+        if self._grid is None:
+            return np.full((n, self._n_bodies), np.inf)
+        lb = self._grid.query(fine_centres) - self._fine_r[None, :]
+        out = np.minimum.reduceat(lb, self._fine_start, axis=1)
+        if self._carriage_table is not None:
+            z0, dz, table = self._carriage_table
+            k = np.clip(np.rint((d1 - z0) / dz).astype(int), 0, len(table) - 1)
+            exact = table[k] - np.abs(d1 - (z0 + k * dz))
+            out[:, self._carriage] = np.maximum(out[:, self._carriage], exact)
+        return out
+
+    def pair_lower_bounds(self, centres: Array, threshold: float) -> Array:
+        """(N, P) certified lower bound of the distance between the bodies of each checked pair.
+
+        First the separation of the bodies' boxes (from their coarse sphere covers) along the axes; where
+        that is not above ``threshold`` for some state, also the sphere-cover gap (the larger bound counts).
+        """
+        n = centres.shape[0]
+        if len(self._pair_a) == 0:
+            return np.full((n, 0), np.inf)
+        r = self._sph_r[None, :, None]
+        lo = np.minimum.reduceat(centres - r, self._sph_start, axis=1)
+        hi = np.maximum.reduceat(centres + r, self._sph_start, axis=1)
+        sep = np.maximum(lo[:, self._pair_b] - hi[:, self._pair_a], lo[:, self._pair_a] - hi[:, self._pair_b])
+        out = np.max(sep, axis=2)
+        close = np.flatnonzero(np.any(out <= threshold, axis=0))
+        if close.size:
+            idx = np.concatenate([self._pair_sph[k] for k in close])
+            starts = np.concatenate([[0], np.cumsum([len(self._pair_sph[k]) for k in close])[:-1]])
+            ia, ib = self._pair_ia[idx], self._pair_ib[idx]
+            gap = np.linalg.norm(centres[:, ia] - centres[:, ib], axis=2) - self._pair_rsum[idx][None, :]
+            out[:, close] = np.maximum(out[:, close], np.minimum.reduceat(gap, starts, axis=1))
+        return out
+
+    # ------------------------------------------------------------------- FCL
+    def _geometry(self, b: int, margin: float, length: float) -> Any:
+        shape = self.bodies.shapes[b]
+        key = (b, margin, round(length, 9) if shape.kind == "capsule" else 0.0)
+        geom = self._geoms.get(key)
+        if geom is None:
+            if len(self._geoms) > 4096:
+                self._geoms.clear()
+            geom = _fcl_geometry(shape, margin, length)
+            self._geoms[key] = geom
+        return geom
+
+    def _object(self, b: int, R: Array, p: Array, length: float, margin: float) -> fcl.CollisionObject:
+        return fcl.CollisionObject(self._geometry(b, margin, length), fcl.Transform(R, p))
+
+    def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject) -> bool:
+        self._fcl_queries += 1
+        return bool(fcl.collide(o1, o2, self._req, fcl.CollisionResult()) > 0)
+
+    # --------------------------------------------------------------- checks
+    def _limit_contacts(self, q: Array) -> list[Contact]:
+        return [
+            Contact(
+                "limit",
+                (v["name"],),
+                f"{v['name']}={v['value']:.6g} outside [{v['lower']:.6g}, {v['upper']:.6g}]"
+                if isinstance(v["value"], float)
+                else "non-finite configuration",
+            )
+            for v in self.robot.violations(q)
+        ]
+
+    def check_state(
+        self, q: Array, clearance: float = DEFAULT_CLEARANCE_M, all_contacts: bool = False
+    ) -> StateReport:
+        """Check one configuration: limits and margins, cabin clearance, self-collision.
+
+        Args:
+            q: Joint vector (8,).
+            clearance: Minimum distance [m] every body keeps from the cabin. Non-adjacent bodies keep the
+                world's ``self_clearance`` from each other.
+            all_contacts: Collect every contact instead of stopping at the first.
+        """
+        _check_clearance(clearance)
+        q = np.asarray(q, dtype=float)
+        ok = bool(np.all(np.isfinite(q))) and self.robot.is_admissible(q)
+        contacts = [] if ok else self._limit_contacts(q)
+        if contacts and (not all_contacts or not np.all(np.isfinite(q))):
+            return StateReport(False, tuple(contacts))
+        state = self._state(q, self.self_clearance)
+        for b in np.flatnonzero(state.cabin_lb <= clearance).tolist():
+            if self._cabin_hit(state, b, clearance):
+                contacts.append(self._cabin_contact(b, clearance))
+                if not all_contacts:
+                    break
+        else:
+            for k in np.flatnonzero(state.pair_lb <= self.self_clearance).tolist():
+                if self._pair_hit(state, k, self.self_clearance):
+                    contacts.append(self._pair_contact(k, self.self_clearance))
+                    if not all_contacts:
+                        break
+        return StateReport(not contacts, tuple(contacts))
+
+    def is_valid(self, q: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
+        """True when limits, margins, cabin clearance and self-clearance all hold at q."""
+        return self.check_state(q, clearance).valid
+
+    def _states(self, qs: Array, threshold: float) -> list[_State]:
+        """Poses and certified bounds for (N, 8) configurations (vectorised)."""
+        R, p, lengths, fine, coarse = self._evaluate(qs)
+        cabin = self.cabin_lower_bounds(fine, np.atleast_2d(qs)[:, chain.D1])
+        pairs = self.pair_lower_bounds(coarse, threshold)
+        return [_State(R[i], p[i], lengths[i], cabin[i], pairs[i]) for i in range(R.shape[0])]
+
+    def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> _State:
+        return self._states(q[None, :], threshold)[0]
+
+    def _carriage_clearance(self, d1_a: float, d1_b: float) -> float:
+        """Certified carriage-to-cabin clearance for every d1 between d1_a and d1_b (table minimum)."""
+        assert self._carriage_table is not None
+        z0, dz, table = self._carriage_table
+        lo, hi = sorted((d1_a, d1_b))
+        k0 = int(np.clip(np.floor((lo - z0) / dz), 0, len(table) - 1))
+        k1 = int(np.clip(np.ceil((hi - z0) / dz), 0, len(table) - 1))
+        if lo < z0 or hi > z0 + dz * (len(table) - 1):
+            return -np.inf
+        # Every d1 in [lo, hi] is within dz/2 of a sample in k0..k1; the distance is 1-Lipschitz in d1.
+        return float(table[k0 : k1 + 1].min()) - 0.5 * dz
+
+    def _build_carriage_table(self, step: float = 0.01) -> tuple[float, float, Array]:
+        """Exact carriage-to-cabin distance every ``step`` along the rail (the carriage moves with d1 only).
+
+        Between samples the distance changes by at most the rail displacement (it is 1-Lipschitz in d1),
+        which the lookup subtracts.
+        """
+        assert self._cabin_obj is not None
+        lo, hi = float(self.robot.limits.lower[0]), float(self.robot.limits.upper[0])
+        z = np.arange(lo, hi + step, step)
+        b = self._carriage
+        geom = self._geometry(b, 0.0, 0.0)
+        req = fcl.DistanceRequest()
+        table = np.array(
+            [
+                fcl.distance(
+                    fcl.CollisionObject(geom, fcl.Transform(np.array([0.0, -0.06, zi]))),
+                    self._cabin_obj,
+                    req,
+                    fcl.DistanceResult(),
+                )
+                for zi in z
+            ]
+        )
+        return lo, step, np.where(table < 0, -np.inf, table)
+
+    def _cabin_hit(self, st: _State, b: int, margin: float) -> bool:
+        assert self._cabin_obj is not None
+        return self._collide(self._object(b, st.R[b], st.p[b], st.lengths[b], margin), self._cabin_obj)
+
+    def _pair_hit(self, st: _State, k: int, margin: float) -> bool:
+        a, b = self.bodies.pairs[k]
+        oa = self._object(a, st.R[a], st.p[a], st.lengths[a], margin / 2)
+        ob = self._object(b, st.R[b], st.p[b], st.lengths[b], margin / 2)
+        return self._collide(oa, ob)
+
+    def _cabin_contact(self, b: int, margin: float) -> Contact:
+        return Contact("cabin", (self.names[b],), f"{self.names[b]} within {margin:.4g} m of the cabin")
+
+    def _pair_contact(self, k: int, margin: float) -> Contact:
+        a, b = self.bodies.pairs[k]
+        return Contact(
+            "self",
+            (self.names[a], self.names[b]),
+            f"{self.names[a]} within {margin:.4g} m of {self.names[b]}",
+        )
+
+    def check_motion(
+        self,
+        q_a: Array,
+        q_b: Array,
+        clearance: float = DEFAULT_CLEARANCE_M,
+        motion_margin: float = DEFAULT_MOTION_MARGIN_M,
+    ) -> MotionReport:
+        """Certify that the straight joint-space motion q_a -> q_b keeps ``clearance`` everywhere.
+
+        Each body (and each checked pair) is advanced separately along t in [0, 1]. At a checked t the body
+        is proven clear by a margin E beyond ``clearance`` -- for free when its sphere lower bound allows,
+        else by an FCL query on the body grown by ``clearance + E`` for E in a few levels down to
+        ``motion_margin``. With D the body's displacement bound for the whole segment, every t' with
+        |t' - t| <= E / D is then clear, so the next check is at ``t + (E + motion_margin) / D`` and must
+        prove at least ``motion_margin``. A check that cannot prove ``motion_margin`` is refused (it may be
+        a real contact). Limits and margins are checked on a schedule where no body moves more than
+        ``2 motion_margin`` between states.
+        """
+        _check_clearance(clearance)
+        if not motion_margin > 0:
+            raise InvalidInput(f"motion_margin: must be positive, got {motion_margin}", field="motion_margin")
+        q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)
+        dq = q_b - q_a
+        reach = self.bodies.rho @ np.abs(dq)
+        n_fine = int(min(10_000, max(1, np.ceil(float(reach.max()) / (2 * motion_margin)))))
+        t_fine = np.linspace(0.0, 1.0, n_fine + 1)
+        qs = q_a[None, :] + t_fine[:, None] * dq[None, :]
+        c = self.robot.constraint_values_batch(qs)
+        bad = ~np.all((c >= self.robot.c_lower - 1e-9) & (c <= self.robot.c_upper + 1e-9), axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            return MotionReport(False, n_fine + 1, 0, float(t_fine[i]), tuple(self._limit_contacts(qs[i])))
+        before = self._fcl_queries
+        levels = (4 * motion_margin, 2 * motion_margin, motion_margin)
+        tasks: list[tuple[str, int, float]] = []
+        if self._cabin_obj is not None:
+            tasks += [("cabin", b, float(reach[b])) for b in range(self._n_bodies)]
+        pair_reach = self.bodies.pair_rho @ np.abs(dq)
+        tasks += [("self", k, float(pair_reach[k])) for k in range(len(self.bodies.pairs))]
+        # One schedule for all: spacing such that no body or pair moves more than motion_margin between
+        # neighbouring states; each task's next check is snapped down onto it (a shorter step stays
+        # certified).
+        d_max = max((d for _, _, d in tasks), default=0.0)
+        n = int(min(20_000, max(1, np.ceil(d_max / motion_margin))))
+        t_grid = np.linspace(0.0, 1.0, n + 1)
+        cache: dict[int, _State] = {}
+
+        def state(i: int) -> _State:  # evaluated lazily: the walks visit few of the n + 1 states
+            st = cache.get(i)
+            if st is None:
+                st = cache[i] = self._state(q_a + t_grid[i] * dq, self.self_clearance + levels[0])
+            return st
+
+        for kind, idx, D in tasks:
+            if kind == "cabin" and idx == self._carriage and self._carriage_table is not None:
+                # The carriage moves with d1 only: its exact clearance table covers the whole segment.
+                if self._carriage_clearance(q_a[chain.D1], q_b[chain.D1]) > clearance:
+                    continue
+            i, last = 0, motion_margin
+            base = clearance if kind == "cabin" else self.self_clearance
+            while True:
+                st = state(i)
+                free = (st.cabin_lb[idx] if kind == "cabin" else st.pair_lb[idx]) - base
+                E = free if free >= motion_margin else 0.0
+                # A collision query on a grown body is far cheaper than another state: probe for more spare
+                # clearance than the bound proves (twice what held last time), then fall back level by level.
+                probes = [min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))] if D > 0.0 else []
+                probes += [lv for lv in levels if E == 0.0]
+                for level in probes:
+                    if level <= E:
+                        continue
+                    hit = (
+                        self._cabin_hit(st, idx, base + level)
+                        if kind == "cabin"
+                        else self._pair_hit(st, idx, base + level)
+                    )
+                    if not hit:
+                        E = level
+                        break
+                last = max(E, motion_margin)
+                if E == 0.0:
+                    contact = (
+                        self._cabin_contact(idx, base + motion_margin)
+                        if kind == "cabin"
+                        else self._pair_contact(idx, base + motion_margin)
+                    )
+                    return MotionReport(
+                        False, len(cache), self._fcl_queries - before, float(t_grid[i]), (contact,)
+                    )
+                if i == n or D <= 0.0:
+                    break
+                i = min(n, max(i + 1, int(np.floor((t_grid[i] + (E + motion_margin) / D) * n + 1e-9))))
+        return MotionReport(True, len(cache), self._fcl_queries - before)
+
+    def motion_valid(self, q_a: Array, q_b: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
+        """True when the straight motion q_a -> q_b is certified clear (see :meth:`check_motion`)."""
+        return self.check_motion(q_a, q_b, clearance).valid
+
+    # ------------------------------------------------------------- distances
+    def min_distance(self, q: Array, include_self: bool = True) -> Distance:
+        """Smallest distance from any body to the cabin (and between non-adjacent bodies), with witnesses.
+
+        Distances are exact FCL queries on the un-grown shapes; candidates whose certified lower bound
+        already exceeds the best distance found are skipped (branch and bound). Penetration gives <= 0.
+        """
+        st = self._state(np.asarray(q, dtype=float))
+        candidates: list[tuple[float, str, int]] = []
+        if self._cabin_obj is not None:
+            candidates += [(float(lb), "cabin", b) for b, lb in enumerate(st.cabin_lb)]
+        if include_self:
+            candidates += [(float(lb), "self", k) for k, lb in enumerate(st.pair_lb)]
+        best = Distance(np.inf, ("", ""), np.full(3, np.nan), np.full(3, np.nan))
+        req = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
+        for lb, kind, idx in sorted(candidates, key=lambda x: x[0]):
+            if lb >= best.distance_m:
+                break
+            # FCL returns the witness points of a shape-vs-mesh query in swapped order, and its box-box
+            # distance is wrong in degenerate (face-parallel) cases: so the first object is always a mesh
+            # (the cabin, or the first box of a box pair as a triangle mesh), whose point comes first.
+            if kind == "cabin":
+                a, other = idx, "cabin"
+                first = self._cabin_obj
+                second = self._object(a, st.R[a], st.p[a], st.lengths[a], 0.0)
+            else:
+                a, b = self.bodies.pairs[idx]
+                other = self.names[b]
+                if self.bodies.shapes[a].kind == "box" and self.bodies.shapes[b].kind == "box":
+                    first = fcl.CollisionObject(
+                        _box_bvh(self.bodies.shapes[b].size), fcl.Transform(st.R[b], st.p[b])
+                    )
+                    second = self._object(a, st.R[a], st.p[a], st.lengths[a], 0.0)
+                else:
+                    first = self._object(b, st.R[b], st.p[b], st.lengths[b], 0.0)
+                    second = self._object(a, st.R[a], st.p[a], st.lengths[a], 0.0)
+            res = fcl.DistanceResult()
+            d = float(fcl.distance(first, second, req, res))
+            if d < best.distance_m:
+                p_other, p_body = res.nearest_points
+                best = Distance(d, (self.names[a], other), np.array(p_body), np.array(p_other))
+        return best
+
+    def clearance_profile(self, qs: Array, include_self: bool = True) -> Array:
+        """Minimum distance [m] at each configuration of a path, shape (N,)."""
+        return np.array([self.min_distance(q, include_self).distance_m for q in np.atleast_2d(qs)])
+
+
+def _check_clearance(clearance: float) -> None:
+    if not (np.isfinite(clearance) and 0.0 <= clearance <= 0.5):
+        raise InvalidInput(
+            f"clearance: must be a finite distance in [0, 0.5] m, got {clearance}", field="clearance"
+        )
