@@ -179,6 +179,7 @@ class BodySet:
     pairs: tuple[tuple[int, int], ...]
     rho: Array  # (n_bodies, 8) reach bounds [m per m or m per rad]
     pair_rho: Array  # (n_pairs, 8) relative reach bounds of each checked pair
+    pair_rigid: Array  # (n_pairs, 8) bool: joint j moves both bodies of the pair rigidly together
     sphere_centres: tuple[Array, ...]  # fine cover (cabin bounds)
     sphere_radii: tuple[Array, ...]
     coarse_centres: tuple[Array, ...]  # coarse cover (self-collision bounds)
@@ -222,23 +223,54 @@ def cabin8_bodies(robot: Cabin8, payload: PayloadGeometry | None) -> BodySet:
         s.sphere_cover(max(0.10, min(s.size))) if s.kind == "box" else s.sphere_cover() for s in ordered
     ]
     rho = _reach_bounds(robot, names, shapes, payload_reach)
-    pair_rho = np.array(
-        [
-            [0.0 if {names[a], names[b]} <= RIGID_GROUPS[j] else rho[a, j] + rho[b, j] for j in range(8)]
-            for a, b in pairs
-        ]
+    pair_rigid = np.array(
+        [[{names[a], names[b]} <= RIGID_GROUPS[j] for j in range(8)] for a, b in pairs], dtype=bool
     ).reshape(len(pairs), 8)
+    pair_rho = pair_reach_bounds(rho, pairs, pair_rigid)
     return BodySet(
         tuple(names),
         ordered,
         pairs,
         rho,
         pair_rho,
+        pair_rigid,
         tuple(c for c, _ in covers),
         tuple(r for _, r in covers),
         tuple(c for c, _ in coarse),
         tuple(r for _, r in coarse),
     )
+
+
+def pair_reach_bounds(rho: Array, pairs: tuple[tuple[int, int], ...], rigid: Array) -> Array:
+    """Relative reach bounds of body pairs: rho_a + rho_b, except 0 for joints moving both rigidly."""
+    if not pairs:
+        return np.zeros((0, 8))
+    a = np.array([p[0] for p in pairs])
+    b = np.array([p[1] for p in pairs])
+    return np.where(rigid, 0.0, rho[a] + rho[b])
+
+
+def link_slope_bound(ratio: float) -> float:
+    """Bound of |d x_slider / d y_joint| = y / sqrt(L^2 - y^2) for a link-height ratio y / L <= ratio."""
+    ratio = min(max(ratio, 0.0), 0.99)
+    return ratio / float(np.sqrt(1.0 - ratio**2))
+
+
+def segment_reach_bounds(robot: Cabin8, bodies: BodySet, ratio_bound: float) -> tuple[Array, Array]:
+    """Reach bounds (bodies, pairs) for a segment along which every link-height ratio stays <= ratio_bound.
+
+    The stage links' bounds grow with the slope of the links (``link_slope_bound``); the static bounds use
+    the worst admissible slope, a segment far from the singular heights can use its own, much smaller one.
+    """
+    k = link_slope_bound(ratio_bound)
+    h = 0.5 * robot.geometry.L2
+    rho = bodies.rho.copy()
+    for name in ("link_ab", "link_cd", "link_ef"):
+        if name in bodies.names:
+            b = bodies.names.index(name)
+            rho[b, chain.Y] = max(1.0, k)
+            rho[b, chain.GAMMA] = h * (1.0 + k)
+    return rho, pair_reach_bounds(rho, bodies.pairs, bodies.pair_rigid)
 
 
 def _reach_bounds(robot: Cabin8, names: list[str], shapes: dict[str, Shape], payload_reach: float) -> Array:
@@ -254,8 +286,7 @@ def _reach_bounds(robot: Cabin8, names: list[str], shapes: dict[str, Shape], pay
     g = robot.geometry
     links = robot.desc.serial_chain
     h = 0.5 * g.L2
-    ratio = 0.99
-    k = ratio / np.sqrt(1 - ratio**2)  # |d x_slider / d y_joint| bound
+    k = link_slope_bound(0.99)  # |d x_slider / d y_joint| bound
     column, arm = links[0].d, links[1].a
     slide = float(
         np.hypot(links[2].a, max(abs(robot.limits.lower[6]), abs(robot.limits.upper[6])) + links[3].d)
@@ -280,7 +311,7 @@ def _reach_bounds(robot: Cabin8, names: list[str], shapes: dict[str, Shape], pay
             # slider end A: |dx1| <= |dx_B| + k |dy_B| <= |dx| + k |dy| + h (1 + k) |dgamma| (C, D alike);
             # E = (A + B)/2 and F (|dy_E| = |dy_B|/2) reach the same bound. The capsule radius rides along.
             rho[b, chain.X] = 1.0
-            rho[b, chain.Y] = k
+            rho[b, chain.Y] = max(1.0, k)
             rho[b, chain.GAMMA] = h * (1.0 + k)
             continue
         rho[b, chain.X] = rho[b, chain.Y] = 1.0

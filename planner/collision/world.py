@@ -30,7 +30,8 @@ import fcl
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.collision.bodies import BodySet, PayloadGeometry, Shape, cabin8_bodies
+from planner.collision import _kernels
+from planner.collision.bodies import BodySet, PayloadGeometry, Shape, cabin8_bodies, segment_reach_bounds
 from planner.collision.clearance_grid import ClearanceGrid
 from planner.collision.mesh_loader import LoadedMesh
 from planner.exceptions import InvalidInput
@@ -86,6 +87,7 @@ class _State:
     lengths: Array
     cabin_lb: Array
     pair_lb: Array
+    admissible: bool = True
 
 
 @dataclass(frozen=True)
@@ -98,16 +100,10 @@ class Distance:
     point_b: Array = field(repr=False)
 
 
-def _cover_centres_sx(R: ca.SX, p: ca.SX, length: ca.SX, shape: Shape, local: Array) -> list[ca.SX]:
-    if shape.kind == "capsule":
-        return [p + float(z) * length * R[:, 2] for z in local[:, 2]]
-    return [p + ca.mtimes(R, ca.DM(c)) for c in local]
-
-
 def _pose_function(kin: Cabin8Kinematics, bodies: BodySet) -> ca.Function:
-    """Compiled (q, T_tool_box) -> body poses and the world centres of both sphere covers.
+    """Compiled (q, T_tool_box) -> body poses and the admissibility vector c(q).
 
-    Outputs: R, p, length (13 values per body); fine and coarse cover centres, (S, 3) each, row-major.
+    Body poses: R column-major, p, capsule length -- 13 values per body.
     """
     names = bodies.names
     q = kin.q_sx
@@ -130,8 +126,6 @@ def _pose_function(kin: Cabin8Kinematics, bodies: BodySet) -> ca.Function:
         return ca.horzcat(x, y, z), 0.5 * (a + b), length
 
     outs: list[ca.SX] = []
-    fine: list[ca.SX] = []
-    coarse: list[ca.SX] = []
     for name in names:
         if name == "carriage":
             R, p, length = ca.SX.eye(3), ca.vertcat(0, -0.06, q[chain.D1]), ca.SX(0)
@@ -151,16 +145,10 @@ def _pose_function(kin: Cabin8Kinematics, bodies: BodySet) -> ca.Function:
             }[name]
             R, p, length = seg(a, b)
         outs.append(ca.vertcat(ca.vec(R), p, length))
-        fine += _cover_centres_sx(
-            R, p, length, bodies.shapes[len(outs) - 1], bodies.sphere_centres[len(outs) - 1]
-        )
-        coarse += _cover_centres_sx(
-            R, p, length, bodies.shapes[len(outs) - 1], bodies.coarse_centres[len(outs) - 1]
-        )
     return dense_function(
         "body_poses",
         [q, T_tb],
-        [ca.vertcat(*outs), ca.vertcat(*[c.T for c in fine]), ca.vertcat(*[c.T for c in coarse])],
+        [ca.vertcat(*outs), kin.constraints_sx(q)],
         {"cse": True},
     )
 
@@ -273,35 +261,91 @@ class CollisionWorld:
         self._pair_rsum = self._sph_r[self._pair_ia] + self._sph_r[self._pair_ib]
         self._pair_sph = [np.arange(bounds[k], bounds[k + 1]) for k in range(len(self.bodies.pairs))]
         self._carriage = self.names.index("carriage")
-        self._carriage_table = self._build_carriage_table() if self._cabin_obj is not None else None
+        self._carriage_table: tuple[float, float, Array] | None = None
+        if self._cabin_obj is not None:
+            self._carriage_table = self._build_carriage_table()
+        # Flat views and bounds for the compiled kernels.
+        self._fine_bounds = np.concatenate([self._fine_start, [len(self._fine_r)]]).astype(np.int64)
+        self._coarse_bounds = np.concatenate([self._sph_start, [len(self._sph_r)]]).astype(np.int64)
+        self._grid_flat = self._grid.lower_bound.reshape(-1) if self._grid is not None else np.zeros(1)
+        self._grid_shape = np.array(self._grid.lower_bound.shape if self._grid is not None else (1, 1, 1))
+        self._fine_cover = _cover_table(self.bodies.shapes, self.bodies.sphere_centres)
+        self._coarse_cover = _cover_table(self.bodies.shapes, self.bodies.coarse_centres)
+        self._radius = np.array([s.radius for s in self.bodies.shapes])
+        self._capsule_pair = np.array(
+            [
+                self.bodies.shapes[a].kind == "capsule" and self.bodies.shapes[b].kind == "capsule"
+                for a, b in self.bodies.pairs
+            ],
+            dtype=np.bool_,
+        )
+        shapes = self.bodies.shapes
+        self._half = np.array([np.array(s.size) / 2 if s.kind == "box" else np.zeros(3) for s in shapes])
+        self._capsule_box = np.array(
+            [
+                1
+                if shapes[a].kind == "capsule" and shapes[b].kind == "box"
+                else 2
+                if shapes[a].kind == "box" and shapes[b].kind == "capsule"
+                else 0
+                for a, b in self.bodies.pairs
+            ],
+            dtype=np.int64,
+        )
+        self._exact_pair = self._capsule_pair | (self._capsule_box > 0)
+        self._c_lo = robot.c_lower - 1e-9
+        self._c_hi = robot.c_upper + 1e-9
+        g = self._grid
+        self._kernel_args = (
+            *self._fine_cover,
+            self._fine_r,
+            self._fine_bounds,
+            self._grid_flat,
+            g.origin if g is not None else np.zeros(3),
+            1.0 / g.step if g is not None else 1.0,
+            self._grid_shape,
+            g is not None,
+            *self._coarse_cover,
+            self._sph_r,
+            self._coarse_bounds,
+            self._pair_a,
+            self._pair_b,
+            self._radius,
+            self._capsule_pair,
+            self._half,
+            self._capsule_box,
+        )
 
     # ------------------------------------------------------------------ poses
-    def _evaluate(self, q: Array) -> tuple[Array, Array, Array, Array, Array]:
-        """Body poses and cover-sphere centres for (N, 8) or (8,) joints.
-
-        Returns:
-            R (N, B, 3, 3), p (N, B, 3), capsule lengths (N, B), fine centres (N, S, 3), coarse centres
-            (N, S', 3).
-        """
+    def _evaluate(self, q: Array) -> tuple[Array, Array]:
+        """Flat body poses (N, B, 13) and admissibility values c(q) (N, m) for (N, 8) or (8,) joints."""
         q2 = np.atleast_2d(np.asarray(q, dtype=float))
         n = q2.shape[0]
         if n == 1:
-            flat, fine, coarse = (x[None, :] for x in self._pose_fast(q2[0], self._T_tool_box))
+            flat, c = (x[None, :] for x in self._pose_fast(q2[0], self._T_tool_box))
         else:
             # CasADi evaluates a function column-wise when given N stacked columns.
             outs = self._pose_fn(ca.DM(q2.T), ca.DM(self._T_tool_box))
-            flat, fine, coarse = (np.asarray(o.full(), dtype=float).T for o in outs)
-        per = flat.reshape(n, self._n_bodies, 13)
-        R = per[:, :, :9].reshape(n, self._n_bodies, 3, 3).transpose(0, 1, 3, 2)
-        return R, per[:, :, 9:12], per[:, :, 12], fine.reshape(n, -1, 3), coarse.reshape(n, -1, 3)
+            flat, c = (np.asarray(o.full(), dtype=float).T for o in outs)
+        return np.ascontiguousarray(flat.reshape(n, self._n_bodies, 13)), c
+
+    def _split(self, flat: Array) -> tuple[Array, Array, Array]:
+        n = flat.shape[0]
+        R = flat[:, :, :9].reshape(n, self._n_bodies, 3, 3).transpose(0, 1, 3, 2)
+        return R, flat[:, :, 9:12], flat[:, :, 12]
+
+    def cover_centres(self, q: Array, coarse: bool = False) -> Array:
+        """World centres (N, S, 3) of the fine (cabin) or coarse (self) sphere cover, grouped by body."""
+        flat, _ = self._evaluate(q)
+        cover = self._coarse_cover if coarse else self._fine_cover
+        return np.stack([_kernels.cover_centres(f, *cover) for f in flat])
 
     def poses(self, q: Array) -> tuple[Array, Array, Array]:
         """(R (N, B, 3, 3), p (N, B, 3), lengths (N, B)) of every body for (N, 8) or (8,) joints.
 
         Each body frame is centred on the body; a capsule's axis is its frame's z axis.
         """
-        R, p, lengths, _, _ = self._evaluate(q)
-        return R, p, lengths
+        return self._split(self._evaluate(q)[0])
 
     def cabin_lower_bounds(self, fine_centres: Array, d1: Array) -> Array:
         """(N, B) certified lower bound of each body's distance to the cabin (inf without a cabin).
@@ -389,11 +433,12 @@ class CollisionWorld:
         """
         _check_clearance(clearance)
         q = np.asarray(q, dtype=float)
-        ok = bool(np.all(np.isfinite(q))) and self.robot.is_admissible(q)
-        contacts = [] if ok else self._limit_contacts(q)
-        if contacts and (not all_contacts or not np.all(np.isfinite(q))):
-            return StateReport(False, tuple(contacts))
+        if not np.all(np.isfinite(q)):
+            return StateReport(False, tuple(self._limit_contacts(q)))
         state = self._state(q, self.self_clearance)
+        contacts = [] if state.admissible else self._limit_contacts(q)
+        if contacts and not all_contacts:
+            return StateReport(False, tuple(contacts))
         for b in np.flatnonzero(state.cabin_lb <= clearance).tolist():
             if self._cabin_hit(state, b, clearance):
                 contacts.append(self._cabin_contact(b, clearance))
@@ -412,11 +457,20 @@ class CollisionWorld:
         return self.check_state(q, clearance).valid
 
     def _states(self, qs: Array, threshold: float) -> list[_State]:
-        """Poses and certified bounds for (N, 8) configurations (vectorised)."""
-        R, p, lengths, fine, coarse = self._evaluate(qs)
-        cabin = self.cabin_lower_bounds(fine, np.atleast_2d(qs)[:, chain.D1])
-        pairs = self.pair_lower_bounds(coarse, threshold)
-        return [_State(R[i], p[i], lengths[i], cabin[i], pairs[i]) for i in range(R.shape[0])]
+        """Poses and certified bounds for (N, 8) configurations."""
+        flat, c = self._evaluate(qs)
+        R, p, lengths = self._split(flat)
+        d1 = np.atleast_2d(qs)[:, chain.D1]
+        ok = np.all((c >= self._c_lo) & (c <= self._c_hi), axis=1)
+        out = []
+        for i in range(flat.shape[0]):
+            cabin, pairs = _kernels.state_bounds(flat[i], *self._kernel_args, threshold)
+            if self._carriage_table is not None:
+                z0, dz, table = self._carriage_table
+                k = min(max(int(round((d1[i] - z0) / dz)), 0), len(table) - 1)
+                cabin[self._carriage] = max(cabin[self._carriage], table[k] - abs(d1[i] - (z0 + k * dz)))
+            out.append(_State(R[i], p[i], lengths[i], cabin, pairs, bool(ok[i])))
+        return out
 
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> _State:
         return self._states(q[None, :], threshold)[0]
@@ -502,7 +556,8 @@ class CollisionWorld:
             raise InvalidInput(f"motion_margin: must be positive, got {motion_margin}", field="motion_margin")
         q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)
         dq = q_b - q_a
-        reach = self.bodies.rho @ np.abs(dq)
+        rho, pair_rho = self._segment_reach(q_a, q_b)
+        reach = rho @ np.abs(dq)
         n_fine = int(min(10_000, max(1, np.ceil(float(reach.max()) / (2 * motion_margin)))))
         t_fine = np.linspace(0.0, 1.0, n_fine + 1)
         qs = q_a[None, :] + t_fine[:, None] * dq[None, :]
@@ -516,7 +571,7 @@ class CollisionWorld:
         tasks: list[tuple[str, int, float]] = []
         if self._cabin_obj is not None:
             tasks += [("cabin", b, float(reach[b])) for b in range(self._n_bodies)]
-        pair_reach = self.bodies.pair_rho @ np.abs(dq)
+        pair_reach = pair_rho @ np.abs(dq)
         tasks += [("self", k, float(pair_reach[k])) for k in range(len(self.bodies.pairs))]
         # One schedule for all: spacing such that no body or pair moves more than motion_margin between
         # neighbouring states; each task's next check is snapped down onto it (a shorter step stays
@@ -545,8 +600,11 @@ class CollisionWorld:
                 E = free if free >= motion_margin else 0.0
                 # A collision query on a grown body is far cheaper than another state: probe for more spare
                 # clearance than the bound proves (twice what held last time), then fall back level by level.
-                probes = [min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))] if D > 0.0 else []
-                probes += [lv for lv in levels if E == 0.0]
+                exact = kind == "self" and bool(self._exact_pair[idx])  # E is the exact spare clearance
+                probes = (
+                    [min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))] if D > 0.0 and not exact else []
+                )
+                probes += [lv for lv in levels if E == 0.0 and not exact]
                 for level in probes:
                     if level <= E:
                         continue
@@ -572,6 +630,19 @@ class CollisionWorld:
                     break
                 i = min(n, max(i + 1, int(np.floor((t_grid[i] + (E + motion_margin) / D) * n + 1e-9))))
         return MotionReport(True, len(cache), self._fcl_queries - before)
+
+    def _segment_reach(self, q_a: Array, q_b: Array) -> tuple[Array, Array]:
+        """Reach bounds valid along the straight segment q_a -> q_b.
+
+        The link-height ratios y_B/L1, y_C/L3, y_E/L4 are affine in y and in sin(gamma); along the segment
+        they exceed the larger endpoint value by at most (L2/2) dgamma^2 / 8 over the shortest length
+        (the sine's deviation from its chord), which bounds the links' slopes.
+        """
+        c = self.robot.constraint_values_batch(np.stack([q_a, q_b]))
+        g = self.robot.geometry
+        end = float(np.nanmax(c[:, -3:])) if np.all(np.isfinite(c[:, -3:])) else 1.0
+        dev = 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
+        return segment_reach_bounds(self.robot, self.bodies, end + dev)
 
     def motion_valid(self, q_a: Array, q_b: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
         """True when the straight motion q_a -> q_b is certified clear (see :meth:`check_motion`)."""
@@ -623,6 +694,20 @@ class CollisionWorld:
     def clearance_profile(self, qs: Array, include_self: bool = True) -> Array:
         """Minimum distance [m] at each configuration of a path, shape (N,)."""
         return np.array([self.min_distance(q, include_self).distance_m for q in np.atleast_2d(qs)])
+
+
+def _cover_table(shapes: tuple[Shape, ...], centres: tuple[Array, ...]) -> tuple[Array, Array, Array]:
+    """(body index, local centre, capsule-length fraction) of every sphere of a cover, for the kernels."""
+    body, local, frac = [], [], []
+    for b, (shape, c) in enumerate(zip(shapes, centres, strict=True)):
+        body.append(np.full(len(c), b, dtype=np.int64))
+        if shape.kind == "capsule":
+            local.append(np.zeros_like(c))
+            frac.append(c[:, 2])
+        else:
+            local.append(c)
+            frac.append(np.zeros(len(c)))
+    return np.concatenate(body), np.ascontiguousarray(np.concatenate(local)), np.concatenate(frac)
 
 
 def _check_clearance(clearance: float) -> None:

@@ -238,3 +238,88 @@ def test_reference_bays_have_collision_free_ik(robot: Cabin8, payload: PayloadGe
             T[:3, 3] = np.array(bay["center_m"]) - 0.30 * R_tool[:, 2]
             good, _ = family_candidates(robot, T, robot.home_drives, 0.5, IKOptions())
             assert any(world.is_valid(c.q, 0.01) for c in good), f"{cabin['name']} bay {bay['id']}"
+
+
+def test_compiled_bounds_equal_the_numpy_reference(robot: Cabin8, aisle: CollisionWorld) -> None:
+    """The numba kernels compute exactly the bounds of the vectorised numpy reference."""
+    qs = admissible_joints(robot, 40, seed=77)
+    qs[:, 0] = np.linspace(0.3, 5.7, len(qs))
+    for threshold in (0.005, 0.1):
+        states = aisle._states(qs, threshold)
+        cabin = aisle.cabin_lower_bounds(aisle.cover_centres(qs), qs[:, 0])
+        pairs = aisle.pair_lower_bounds(aisle.cover_centres(qs, coarse=True), threshold)
+        np.testing.assert_allclose(np.array([s.cabin_lb for s in states]), cabin, atol=1e-12)
+        got = np.array([s.pair_lb for s in states])
+        # Where a pair's box separation exceeds the threshold the kernel may skip the sphere gap (both
+        # values then exceed the threshold); elsewhere they are equal.
+        caps = aisle._exact_pair[None, :]
+        near = (pairs <= threshold) & ~caps
+        np.testing.assert_allclose(got[near], pairs[near], atol=1e-12)
+        assert np.all(got[~near & ~caps] > threshold)
+        # Capsule pairs carry their exact distance, never below the sphere bound.
+        assert np.all(
+            got[np.broadcast_to(caps, got.shape)] >= pairs[np.broadcast_to(caps, got.shape)] - 1e-12
+        )
+
+
+def test_capsule_pairs_use_exact_distances(robot: Cabin8, payload: PayloadGeometry) -> None:
+    """The analytic capsule-capsule and capsule-box distances equal FCL's on the posed shapes."""
+    world = CollisionWorld(robot, None, payload)
+    req = fcl.DistanceRequest()
+    for q in admissible_joints(robot, 25, seed=5):
+        st = world._state(q, 0.005)
+        R, p, lengths = world.poses(q)
+        for k, (a, b) in enumerate(world.bodies.pairs):
+            if not world._exact_pair[k]:
+                continue
+            oa = world._object(a, R[0, a], p[0, a], lengths[0, a], 0.0)
+            ob = world._object(b, R[0, b], p[0, b], lengths[0, b], 0.0)
+            via_fcl = fcl.distance(oa, ob, req, fcl.DistanceResult())
+            if via_fcl <= 0:
+                continue
+            # Independent route: dense points along the capsule axis (exact point-to-shape distances).
+            shapes = world.bodies.shapes
+            cap, other = (a, b) if shapes[a].kind == "capsule" else (b, a)
+            ts = np.linspace(-0.5, 0.5, 20001)[:, None]
+            axis_pts = p[0, cap] + ts * lengths[0, cap] * R[0, cap][:, 2]
+            if shapes[other].kind == "box":
+                local = (axis_pts - p[0, other]) @ R[0, other]
+                gap = np.linalg.norm(
+                    np.maximum(np.abs(local) - np.array(shapes[other].size) / 2, 0.0), axis=1
+                )
+            else:
+                z = R[0, other][:, 2]
+                s = np.clip((axis_pts - p[0, other]) @ z, -lengths[0, other] / 2, lengths[0, other] / 2)
+                gap = np.linalg.norm(axis_pts - (p[0, other] + s[:, None] * z), axis=1) - shapes[other].radius
+            dense = float(gap.min()) - shapes[cap].radius
+            step = lengths[0, cap] / 20000
+            assert dense - step <= st.pair_lb[k] <= dense + 1e-12
+            # FCL's GJK stops a little above the true distance (up to ~0.3 mm here), never below.
+            assert st.pair_lb[k] <= via_fcl + 1e-9
+
+
+def test_segment_box_distance_known_answers() -> None:
+    from planner.collision._kernels import segment_box_distance, segment_distance
+
+    half = np.array([0.5, 0.25, 0.1])
+    cases = [
+        ((1.5, 0.0, 0.0), (2.5, 0.0, 0.0), 1.0),  # along x, beyond the face
+        ((-1.0, 1.25, 0.0), (1.0, 1.25, 0.0), 1.0),  # parallel to a face, above it
+        ((1.0, 1.0, 0.0), (2.0, 2.0, 0.0), float(np.hypot(0.5, 0.75))),  # nearest to an edge
+        ((-2.0, 0.0, 0.0), (2.0, 0.0, 0.0), 0.0),  # through the box
+        (
+            (0.5 + 0.3, 0.25 + 0.4, 0.1 + 1.2),
+            (3.0, 3.0, 5.0),
+            float(np.linalg.norm([0.3, 0.4, 1.2])),
+        ),  # corner
+    ]
+    for p, q, expected in cases:
+        assert segment_box_distance(np.array(p), np.array(q), half) == pytest.approx(expected, abs=1e-12)
+    assert (
+        segment_distance(np.zeros(3), np.array([1.0, 0, 0]), np.array([0.5, 1.0, 0]), np.array([0.5, 2.0, 0]))
+        == 1.0
+    )
+    assert (
+        segment_distance(np.zeros(3), np.array([1.0, 0, 0]), np.array([2.0, 0, 0]), np.array([3.0, 0, 0]))
+        == 1.0
+    )
