@@ -30,6 +30,7 @@ typecheck: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.kinematics
+	$(BIN)/python -m bench.collision
 
 lock:  ## re-pin requirements.lock from a fresh resolve of pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock
