@@ -584,7 +584,8 @@ class CollisionWorld:
         def state(i: int) -> _State:  # evaluated lazily: the walks visit few of the n + 1 states
             st = cache.get(i)
             if st is None:
-                st = cache[i] = self._state(q_a + t_grid[i] * dq, self.self_clearance + levels[0])
+                # Exact pair distances up to 0.3 m: they set the steps of the pair walks.
+                st = cache[i] = self._state(q_a + t_grid[i] * dq, 0.3)
             return st
 
         for kind, idx, D in tasks:
