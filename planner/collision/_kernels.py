@@ -190,9 +190,20 @@ def state_bounds(
     capsule_pair: np.ndarray,
     half: np.ndarray,
     capsule_box: np.ndarray,
+    carriage: int,
+    table: np.ndarray,  # exact carriage clearance along the rail (empty: none)
+    table_z0: float,
+    table_dz: float,
+    c: np.ndarray,  # admissibility values at this state
+    c_lo: np.ndarray,
+    c_hi: np.ndarray,
     threshold: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Everything one state needs in one call: (cabin bound per body, pair bound per checked pair)."""
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Everything one state needs in one call.
+
+    Returns the cabin bound per body (improved by the carriage's exact clearance table), the bound (or
+    exact distance) per checked pair, and whether every admissibility value is within its bounds.
+    """
     n_b = poses.shape[0]
     if has_grid:
         centres = cover_centres(poses, fine_body, fine_local, fine_frac)
@@ -203,7 +214,19 @@ def state_bounds(
     pairs = pair_bounds(coarse, coarse_r, coarse_bounds, pair_a, pair_b, threshold)
     capsule_pair_distances(poses, radius, pair_a, pair_b, capsule_pair, pairs, threshold)
     capsule_box_distances(poses, radius, half, pair_a, pair_b, capsule_box, pairs, threshold)
-    return cabin, pairs
+    if table.shape[0] > 0:
+        d1 = poses[carriage, 11]  # the carriage centre's z is the rail position
+        k = int(math.floor((d1 - table_z0) / table_dz + 0.5))
+        k = min(max(k, 0), table.shape[0] - 1)
+        exact = table[k] - abs(d1 - (table_z0 + k * table_dz))
+        # Without cover spheres (the usual case) the table is the carriage's only bound.
+        if exact > cabin[carriage] or cabin[carriage] == math.inf:
+            cabin[carriage] = exact
+    ok = True
+    for i in range(c.shape[0]):
+        if not (c[i] >= c_lo[i] and c[i] <= c_hi[i]):
+            ok = False
+    return cabin, pairs, ok
 
 
 @njit(cache=True, fastmath=False)

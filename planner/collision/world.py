@@ -21,6 +21,7 @@ Every decision that something is *clear* is certified; nothing is sampled at a f
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
@@ -80,14 +81,24 @@ class MotionReport:
 
 @dataclass(frozen=True)
 class _State:
-    """Body poses and certified lower bounds at one configuration."""
+    """Body poses (flat: R column-major, p, length per body) and certified bounds at one configuration."""
 
-    R: Array
-    p: Array
-    lengths: Array
+    flat: Array
     cabin_lb: Array
     pair_lb: Array
     admissible: bool = True
+
+    def R(self, b: int) -> Array:
+        """Rotation of body b."""
+        return self.flat[b, :9].reshape(3, 3).T
+
+    def p(self, b: int) -> Array:
+        """Centre of body b."""
+        return self.flat[b, 9:12]
+
+    def length(self, b: int) -> float:
+        """Capsule length of body b (0 for boxes)."""
+        return float(self.flat[b, 12])
 
 
 @dataclass(frozen=True)
@@ -232,13 +243,22 @@ class CollisionWorld:
             self._cabin_obj = fcl.CollisionObject(_cabin_bvh(*key), fcl.Transform())
             self._grid = _cabin_grid(*key, grid_step_m)
         self._geoms: dict[tuple[int, float, float], Any] = {}
+        self._local = threading.local()
         self._req = fcl.CollisionRequest()
         self._n_bodies = len(self.names)
         self._fcl_queries = 0
-        # Fine cover (cabin bounds): radii and the first sphere of each body, for per-body minima.
-        fine_counts = [len(r) for r in self.bodies.sphere_radii]
-        self._fine_r = np.concatenate(self.bodies.sphere_radii)
+        # Fine cover (cabin bounds): radii and the first sphere of each body, for per-body minima. With a
+        # cabin the carriage's bound comes from its exact clearance table, so it needs no spheres.
+        self._carriage = self.names.index("carriage")
+        fine_centres = list(self.bodies.sphere_centres)
+        fine_radii = list(self.bodies.sphere_radii)
+        if cabin is not None:
+            fine_centres[self._carriage] = np.zeros((0, 3))
+            fine_radii[self._carriage] = np.zeros(0)
+        fine_counts = [len(r) for r in fine_radii]
+        self._fine_r = np.concatenate(fine_radii)
         self._fine_start = np.concatenate([[0], np.cumsum(fine_counts)[:-1]]).astype(int)
+        self._fine_empty = np.array([n == 0 for n in fine_counts])
         # Coarse cover (self bounds): every sphere pair of every checked body pair, grouped by body pair.
         counts = [len(r) for r in self.bodies.coarse_radii]
         self._sph_r = np.concatenate(self.bodies.coarse_radii)
@@ -260,7 +280,6 @@ class CollisionWorld:
         self._pair_ib = np.concatenate(ib) if ib else np.zeros(0, dtype=int)
         self._pair_rsum = self._sph_r[self._pair_ia] + self._sph_r[self._pair_ib]
         self._pair_sph = [np.arange(bounds[k], bounds[k + 1]) for k in range(len(self.bodies.pairs))]
-        self._carriage = self.names.index("carriage")
         self._carriage_table: tuple[float, float, Array] | None = None
         if self._cabin_obj is not None:
             self._carriage_table = self._build_carriage_table()
@@ -269,7 +288,7 @@ class CollisionWorld:
         self._coarse_bounds = np.concatenate([self._sph_start, [len(self._sph_r)]]).astype(np.int64)
         self._grid_flat = self._grid.lower_bound.reshape(-1) if self._grid is not None else np.zeros(1)
         self._grid_shape = np.array(self._grid.lower_bound.shape if self._grid is not None else (1, 1, 1))
-        self._fine_cover = _cover_table(self.bodies.shapes, self.bodies.sphere_centres)
+        self._fine_cover = _cover_table(self.bodies.shapes, tuple(fine_centres))
         self._coarse_cover = _cover_table(self.bodies.shapes, self.bodies.coarse_centres)
         self._radius = np.array([s.radius for s in self.bodies.shapes])
         self._capsule_pair = np.array(
@@ -314,6 +333,12 @@ class CollisionWorld:
             self._capsule_pair,
             self._half,
             self._capsule_box,
+            self._carriage,
+            *(
+                (self._carriage_table[2], self._carriage_table[0], self._carriage_table[1])
+                if self._carriage_table is not None
+                else (np.zeros(0), 0.0, 1.0)
+            ),
         )
 
     # ------------------------------------------------------------------ poses
@@ -357,12 +382,14 @@ class CollisionWorld:
         if self._grid is None:
             return np.full((n, self._n_bodies), np.inf)
         lb = self._grid.query(fine_centres) - self._fine_r[None, :]
-        out = np.minimum.reduceat(lb, self._fine_start, axis=1)
+        out = np.minimum.reduceat(lb, np.minimum(self._fine_start, lb.shape[1] - 1), axis=1)
+        out[:, self._fine_empty] = np.inf  # reduceat returns an element for an empty group
         if self._carriage_table is not None:
             z0, dz, table = self._carriage_table
             k = np.clip(np.rint((d1 - z0) / dz).astype(int), 0, len(table) - 1)
             exact = table[k] - np.abs(d1 - (z0 + k * dz))
-            out[:, self._carriage] = np.maximum(out[:, self._carriage], exact)
+            current = out[:, self._carriage]
+            out[:, self._carriage] = np.where(np.isinf(current), exact, np.maximum(current, exact))
         return out
 
     def pair_lower_bounds(self, centres: Array, threshold: float) -> Array:
@@ -401,7 +428,20 @@ class CollisionWorld:
         return geom
 
     def _object(self, b: int, R: Array, p: Array, length: float, margin: float) -> fcl.CollisionObject:
-        return fcl.CollisionObject(self._geometry(b, margin, length), fcl.Transform(R, p))
+        """A posed FCL object of body b grown by ``margin``; objects are reused (per thread), only moved."""
+        key = (b, margin, round(length, 9) if self.bodies.shapes[b].kind == "capsule" else 0.0)
+        objects: dict[tuple[int, float, float], fcl.CollisionObject] | None = getattr(self._local, "objects", None)
+        if objects is None:
+            objects = self._local.objects = {}
+        obj = objects.get(key)
+        if obj is None:
+            if len(objects) > 4096:
+                objects.clear()
+            obj = objects[key] = fcl.CollisionObject(self._geometry(b, margin, length), fcl.Transform(R, p))
+        else:
+            obj.setRotation(R)
+            obj.setTranslation(p)
+        return obj
 
     def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject) -> bool:
         self._fcl_queries += 1
@@ -458,19 +498,26 @@ class CollisionWorld:
 
     def _states(self, qs: Array, threshold: float) -> list[_State]:
         """Poses and certified bounds for (N, 8) configurations."""
-        flat, c = self._evaluate(qs)
-        R, p, lengths = self._split(flat)
-        d1 = np.atleast_2d(qs)[:, chain.D1]
-        ok = np.all((c >= self._c_lo) & (c <= self._c_hi), axis=1)
+        qs = np.atleast_2d(qs)
+        if qs.shape[0] == 1:
+            flat, c = self._evaluate_one(qs[0])
+        else:
+            flat, c = self._evaluate(qs)
         out = []
         for i in range(flat.shape[0]):
-            cabin, pairs = _kernels.state_bounds(flat[i], *self._kernel_args, threshold)
-            if self._carriage_table is not None:
-                z0, dz, table = self._carriage_table
-                k = min(max(int(round((d1[i] - z0) / dz)), 0), len(table) - 1)
-                cabin[self._carriage] = max(cabin[self._carriage], table[k] - abs(d1[i] - (z0 + k * dz)))
-            out.append(_State(R[i], p[i], lengths[i], cabin, pairs, bool(ok[i])))
+            cabin, pairs, ok = _kernels.state_bounds(flat[i], *self._kernel_args, c[i], self._c_lo, self._c_hi, threshold)
+            out.append(_State(flat[i], cabin, pairs, ok))
         return out
+
+    def _evaluate_one(self, q: Array) -> tuple[Array, Array]:
+        """The single-configuration fast path of :meth:`_evaluate` (no wrapper allocations)."""
+        slot = self._pose_fast._slot()
+        if not getattr(slot, "bound", False):
+            slot.args[1][:] = self._T_tool_box.ravel(order="F")
+            slot.bound = True  # type: ignore[attr-defined]
+        slot.args[0][:] = q
+        slot.trigger()
+        return slot.res[0].reshape(1, self._n_bodies, 13).copy(), slot.res[1][None, :].copy()
 
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> _State:
         return self._states(q[None, :], threshold)[0]
@@ -514,12 +561,12 @@ class CollisionWorld:
 
     def _cabin_hit(self, st: _State, b: int, margin: float) -> bool:
         assert self._cabin_obj is not None
-        return self._collide(self._object(b, st.R[b], st.p[b], st.lengths[b], margin), self._cabin_obj)
+        return self._collide(self._object(b, st.R(b), st.p(b), st.length(b), margin), self._cabin_obj)
 
     def _pair_hit(self, st: _State, k: int, margin: float) -> bool:
         a, b = self.bodies.pairs[k]
-        oa = self._object(a, st.R[a], st.p[a], st.lengths[a], margin / 2)
-        ob = self._object(b, st.R[b], st.p[b], st.lengths[b], margin / 2)
+        oa = self._object(a, st.R(a), st.p(a), st.length(a), margin / 2)
+        ob = self._object(b, st.R(b), st.p(b), st.length(b), margin / 2)
         return self._collide(oa, ob)
 
     def _cabin_contact(self, b: int, margin: float) -> Contact:
@@ -673,18 +720,18 @@ class CollisionWorld:
             if kind == "cabin":
                 a, other = idx, "cabin"
                 first = self._cabin_obj
-                second = self._object(a, st.R[a], st.p[a], st.lengths[a], 0.0)
+                second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
             else:
                 a, b = self.bodies.pairs[idx]
                 other = self.names[b]
                 if self.bodies.shapes[a].kind == "box" and self.bodies.shapes[b].kind == "box":
                     first = fcl.CollisionObject(
-                        _box_bvh(self.bodies.shapes[b].size), fcl.Transform(st.R[b], st.p[b])
+                        _box_bvh(self.bodies.shapes[b].size), fcl.Transform(st.R(b), st.p(b))
                     )
-                    second = self._object(a, st.R[a], st.p[a], st.lengths[a], 0.0)
+                    second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
                 else:
-                    first = self._object(b, st.R[b], st.p[b], st.lengths[b], 0.0)
-                    second = self._object(a, st.R[a], st.p[a], st.lengths[a], 0.0)
+                    first = self._object(b, st.R(b), st.p(b), st.length(b), 0.0)
+                    second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
             res = fcl.DistanceResult()
             d = float(fcl.distance(first, second, req, res))
             if d < best.distance_m:
