@@ -45,6 +45,8 @@ Array = NDArray[np.float64]
 DEFAULT_CLEARANCE_M = 0.01
 DEFAULT_MOTION_MARGIN_M = 0.005
 DEFAULT_SELF_CLEARANCE_M = 0.005
+#: Joint-space spacing [m or rad] at which limits and singularity margins are checked along a motion.
+LIMIT_STEP = 0.005
 
 
 @dataclass(frozen=True)
@@ -595,8 +597,8 @@ class CollisionWorld:
         ``motion_margin``. With D the body's displacement bound for the whole segment, every t' with
         |t' - t| <= E / D is then clear, so the next check is at ``t + (E + motion_margin) / D`` and must
         prove at least ``motion_margin``. A check that cannot prove ``motion_margin`` is refused (it may be
-        a real contact). Limits and margins are checked on a schedule where no body moves more than
-        ``2 motion_margin`` between states.
+        a real contact). Limits and margins (smooth functions of q) are checked at every joint step of
+        at most ``LIMIT_STEP`` (5 mm / 5 mrad) along the segment.
         """
         _check_clearance(clearance)
         if not motion_margin > 0:
@@ -605,7 +607,7 @@ class CollisionWorld:
         dq = q_b - q_a
         rho, pair_rho = self._segment_reach(q_a, q_b)
         reach = rho @ np.abs(dq)
-        n_fine = int(min(10_000, max(1, np.ceil(float(reach.max()) / (2 * motion_margin)))))
+        n_fine = int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
         t_fine = np.linspace(0.0, 1.0, n_fine + 1)
         qs = q_a[None, :] + t_fine[:, None] * dq[None, :]
         c = self.robot.constraint_values_batch(qs)
@@ -631,8 +633,8 @@ class CollisionWorld:
         def state(i: int) -> _State:  # evaluated lazily: the walks visit few of the n + 1 states
             st = cache.get(i)
             if st is None:
-                # Exact pair distances up to 0.3 m: they set the steps of the pair walks.
-                st = cache[i] = self._state(q_a + t_grid[i] * dq, 0.3)
+                # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
+                st = cache[i] = self._state(q_a + t_grid[i] * dq, self.self_clearance + 0.06)
             return st
 
         for kind, idx, D in tasks:
