@@ -432,7 +432,9 @@ class CollisionWorld:
     def _object(self, b: int, R: Array, p: Array, length: float, margin: float) -> fcl.CollisionObject:
         """A posed FCL object of body b grown by ``margin``; objects are reused (per thread), only moved."""
         key = (b, margin, round(length, 9) if self.bodies.shapes[b].kind == "capsule" else 0.0)
-        objects: dict[tuple[int, float, float], fcl.CollisionObject] | None = getattr(self._local, "objects", None)
+        objects: dict[tuple[int, float, float], fcl.CollisionObject] | None = getattr(
+            self._local, "objects", None
+        )
         if objects is None:
             objects = self._local.objects = {}
         obj = objects.get(key)
@@ -507,7 +509,9 @@ class CollisionWorld:
             flat, c = self._evaluate(qs)
         out = []
         for i in range(flat.shape[0]):
-            cabin, pairs, ok = _kernels.state_bounds(flat[i], *self._kernel_args, c[i], self._c_lo, self._c_hi, threshold)
+            cabin, pairs, ok = _kernels.state_bounds(
+                flat[i], *self._kernel_args, c[i], self._c_lo, self._c_hi, threshold
+            )
             out.append(_State(flat[i], cabin, pairs, ok))
         return out
 
