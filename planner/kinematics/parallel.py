@@ -146,15 +146,7 @@ def inverse(g: StageGeometry, pose: Array) -> Array:
         "y_C < L3 (CD reaches the rail)": yc < g.L3,
         "y_B/2 < L4 (EF reaches the rail)": 0.5 * yb < g.L4,
     }
-    for condition, ok in checks.items():
-        if not np.all(ok):
-            i = int(np.argmin(ok))
-            raise OutsideWorkspace(
-                f"platform pose {p2[i].tolist()} outside the stage workspace: {condition} fails",
-                condition=condition,
-                index=i,
-                pose=p2[i].tolist(),
-            )
+    _raise_first_failure(checks, p2, "pose", "platform pose {} outside the stage workspace")
     pts = stage_points(g, x, y, gamma)
     u = np.stack([pts.A[0], pts.D[0], pts.F[0]], axis=-1)
     return u[0] if single else u
@@ -206,15 +198,20 @@ def forward(g: StageGeometry, sliders: Array) -> Array:
         "C above the rail": yc > 0,
         "D right of C": x2 > xc,
     }
+    _raise_first_failure(checks, u2, "sliders", "sliders {} do not assemble on the working branch")
+    pose = np.stack([0.5 * (xb + xc), 0.5 * (yb + yc), np.arctan2(yc - yb, xc - xb)], axis=-1)
+    return pose[0] if single else pose
+
+
+def _raise_first_failure(checks: dict[str, Any], rows: Array, what: str, message: str) -> None:
+    """Raise OutsideWorkspace for the first failing condition (in order) at its first failing row."""
     for condition, ok in checks.items():
         ok = np.asarray(ok)
         if not np.all(ok):
             i = int(np.argmin(ok))
             raise OutsideWorkspace(
-                f"sliders {u2[i].tolist()} do not assemble on the working branch: {condition} fails",
+                f"{message.format(rows[i].tolist())}: {condition} fails",
                 condition=condition,
                 index=i,
-                sliders=u2[i].tolist(),
+                **{what: rows[i].tolist()},
             )
-    pose = np.stack([0.5 * (xb + xc), 0.5 * (yb + yc), np.arctan2(yc - yb, xc - xb)], axis=-1)
-    return pose[0] if single else pose
