@@ -641,13 +641,21 @@ class CollisionWorld:
                 st = cache[i] = self._state(q_a + t_grid[i] * dq, self.self_clearance + 0.06)
             return st
 
+        # Both end states: a task whose spare clearance at the two ends covers the segment from both sides
+        # (free_0 / D + free_1 / D >= 1) needs nothing in between.
+        s0, s1 = state(0), state(n)
         for kind, idx, D in tasks:
+            base = clearance if kind == "cabin" else self.self_clearance
+            f0 = (s0.cabin_lb[idx] if kind == "cabin" else s0.pair_lb[idx]) - base
+            f1 = (s1.cabin_lb[idx] if kind == "cabin" else s1.pair_lb[idx]) - base
+            if f0 >= motion_margin and f1 >= motion_margin and f0 + f1 >= D:
+                continue
             if kind == "cabin" and idx == self._carriage and self._carriage_table is not None:
                 # The carriage moves with d1 only: its exact clearance table covers the whole segment.
                 if self._carriage_clearance(q_a[chain.D1], q_b[chain.D1]) > clearance:
                     continue
+            t_stop = 1.0 - f1 / D if f1 >= motion_margin and D > 0.0 else 1.0
             i, last = 0, motion_margin
-            base = clearance if kind == "cabin" else self.self_clearance
             while True:
                 st = state(i)
                 free = (st.cabin_lb[idx] if kind == "cabin" else st.pair_lb[idx]) - base
@@ -680,7 +688,8 @@ class CollisionWorld:
                     return MotionReport(
                         False, len(cache), self._fcl_queries - before, float(t_grid[i]), (contact,)
                     )
-                if i == n or D <= 0.0:
+                # Done when the proven interval reaches the end state's own certified interval.
+                if i == n or D <= 0.0 or t_grid[i] + E / D >= t_stop:
                     break
                 i = min(n, max(i + 1, int(np.floor((t_grid[i] + (E + motion_margin) / D) * n + 1e-9))))
         return MotionReport(True, len(cache), self._fcl_queries - before)
