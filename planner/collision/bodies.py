@@ -188,7 +188,6 @@ class BodySet:
 
 def cabin8_bodies(robot: Cabin8, payload: PayloadGeometry | None) -> BodySet:
     """Shapes, covers, self-collision pairs and reach bounds for cabin8 with an optional payload."""
-    links = robot.desc.serial_chain
     g = robot.geometry
     shapes: dict[str, Shape] = {
         "carriage": Shape("box", (1.70, 0.12, 0.40)),
@@ -196,13 +195,12 @@ def cabin8_bodies(robot: Cabin8, payload: PayloadGeometry | None) -> BodySet:
         "link_cd": Shape("capsule", radius=0.03, length=g.L3),
         "link_ef": Shape("capsule", radius=0.03, length=g.L4),
         "platform": Shape("box", (0.36, 0.08, 0.25)),
-        "column": Shape("capsule", radius=0.07, length=links[0].d),
-        "arm": Shape("capsule", radius=0.07, length=links[1].a),
+        "column": Shape("capsule", radius=0.07, length=_column_length(robot)),
+        "arm": Shape("capsule", radius=0.07, length=_arm_length(robot)),
     }
     # The slide spans frame 4 -> frame 6, whose length varies with d5: the capsule is posed per state with
     # its actual length; the cover and reach bounds use the longest extension.
-    d5_extent = max(abs(robot.limits.lower[6]), abs(robot.limits.upper[6]))
-    slide_max = float(np.hypot(links[2].a, d5_extent + links[3].d + links[2].d))
+    slide_max = _slide_length_max(robot)
     shapes["slide"] = Shape("capsule", radius=0.06, length=slide_max)
     names = [n for n in BODY_NAMES if n != "payload"]
     payload_reach = 0.0
@@ -284,13 +282,9 @@ def _reach_bounds(robot: Cabin8, names: list[str], shapes: dict[str, Shape], pay
     states.
     """
     g = robot.geometry
-    links = robot.desc.serial_chain
     h = 0.5 * g.L2
     k = link_slope_bound(0.99)  # |d x_slider / d y_joint| bound
-    column, arm = links[0].d, links[1].a
-    slide = float(
-        np.hypot(links[2].a, max(abs(robot.limits.lower[6]), abs(robot.limits.upper[6])) + links[3].d)
-    )
+    column, arm, slide = _column_length(robot), _arm_length(robot), _slide_length_max(robot)
     r = {n: (s.radius if s.kind == "capsule" else s.bounding_radius) for n, s in shapes.items()}
     platform_half = shapes["platform"].bounding_radius
     # Distance bounds from each axis to the far end of each body, radius included.
@@ -385,3 +379,24 @@ def _segment_frames(a: Array, b: Array) -> tuple[Array, Array, Array]:
     yax = np.cross(zax, xax)
     R = np.stack([xax, yax, zax], axis=2)
     return R, 0.5 * (a + b), length
+
+
+# Link lengths from the description (not from the reference numbers): the origin of MDH(alpha, a, theta, d)
+# lies at (a, -sin(alpha) d, cos(alpha) d) in the previous frame, at distance sqrt(a^2 + d^2) whatever theta.
+def _column_length(robot: Cabin8) -> float:
+    """|frame 3 - frame 2| [m] (constant)."""
+    link = robot.desc.serial_chain[0]
+    return float(np.hypot(link.a, link.d))
+
+
+def _arm_length(robot: Cabin8) -> float:
+    """|frame 4 - frame 3| [m] (constant)."""
+    link = robot.desc.serial_chain[1]
+    return float(np.hypot(link.a, link.d))
+
+
+def _slide_length_max(robot: Cabin8) -> float:
+    """Upper bound of |frame 6 - frame 4| [m] over the d5 range (triangle inequality through frame 5)."""
+    l2, l3 = robot.desc.serial_chain[2], robot.desc.serial_chain[3]
+    d_max = max(abs(l2.d + robot.limits.lower[6]), abs(l2.d + robot.limits.upper[6]))
+    return float(np.hypot(l2.a, d_max) + np.hypot(l3.a, l3.d))

@@ -47,6 +47,7 @@ DEFAULT_MOTION_MARGIN_M = 0.005
 DEFAULT_SELF_CLEARANCE_M = 0.005
 #: Joint-space spacing [m or rad] at which limits and singularity margins are checked along a motion.
 LIMIT_STEP = 0.005
+MIN_MOTION_MARGIN_M = 1e-4
 
 
 @dataclass(frozen=True)
@@ -605,8 +606,11 @@ class CollisionWorld:
         at most ``LIMIT_STEP`` (5 mm / 5 mrad) along the segment.
         """
         _check_clearance(clearance)
-        if not motion_margin > 0:
-            raise InvalidInput(f"motion_margin: must be positive, got {motion_margin}", field="motion_margin")
+        if not (np.isfinite(motion_margin) and MIN_MOTION_MARGIN_M <= motion_margin <= 0.1):
+            raise InvalidInput(
+                f"motion_margin: must be in [{MIN_MOTION_MARGIN_M}, 0.1] m, got {motion_margin}",
+                field="motion_margin",
+            )
         q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)
         dq = q_b - q_a
         rho, pair_rho = self._segment_reach(q_a, q_b)
@@ -630,15 +634,19 @@ class CollisionWorld:
         # neighbouring states; each task's next check is snapped down onto it (a shorter step stays
         # certified).
         d_max = max((d for _, _, d in tasks), default=0.0)
-        n = int(min(20_000, max(1, np.ceil(d_max / motion_margin))))
-        t_grid = np.linspace(0.0, 1.0, n + 1)
+        # Not capped: one schedule step must never exceed a proven step (at least 2 motion_margin of motion).
+        n = int(max(1, np.ceil(d_max / motion_margin)))
+
+        def t_of(i: int) -> float:
+            return i / n
+
         cache: dict[int, _State] = {}
 
         def state(i: int) -> _State:  # evaluated lazily: the walks visit few of the n + 1 states
             st = cache.get(i)
             if st is None:
                 # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
-                st = cache[i] = self._state(q_a + t_grid[i] * dq, self.self_clearance + 0.06)
+                st = cache[i] = self._state(q_a + t_of(i) * dq, self.self_clearance + 0.06)
             return st
 
         # Both end states: a task whose spare clearance at the two ends covers the segment from both sides
@@ -685,13 +693,11 @@ class CollisionWorld:
                         if kind == "cabin"
                         else self._pair_contact(idx, base + motion_margin)
                     )
-                    return MotionReport(
-                        False, len(cache), self._fcl_queries - before, float(t_grid[i]), (contact,)
-                    )
+                    return MotionReport(False, len(cache), self._fcl_queries - before, t_of(i), (contact,))
                 # Done when the proven interval reaches the end state's own certified interval.
-                if i == n or D <= 0.0 or t_grid[i] + E / D >= t_stop:
+                if i == n or D <= 0.0 or t_of(i) + E / D >= t_stop:
                     break
-                i = min(n, max(i + 1, int(np.floor((t_grid[i] + (E + motion_margin) / D) * n + 1e-9))))
+                i = min(n, max(i + 1, int(np.floor((t_of(i) + (E + motion_margin) / D) * n + 1e-9))))
         return MotionReport(True, len(cache), self._fcl_queries - before)
 
     def _segment_reach(self, q_a: Array, q_b: Array) -> tuple[Array, Array]:

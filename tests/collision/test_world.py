@@ -323,3 +323,40 @@ def test_segment_box_distance_known_answers() -> None:
         segment_distance(np.zeros(3), np.array([1.0, 0, 0]), np.array([2.0, 0, 0]), np.array([3.0, 0, 0]))
         == 1.0
     )
+
+
+def test_motion_margin_is_validated(robot: Cabin8, aisle: CollisionWorld) -> None:
+    q = home(robot, d1=1.0)
+    for bad in (0.0, 1e-5, float("nan"), 0.5):
+        with pytest.raises(InvalidInput):
+            aisle.check_motion(q, home(robot, d1=1.1), motion_margin=bad)
+
+
+def test_long_move_at_fine_margin_has_an_uncapped_schedule(robot: Cabin8, payload: PayloadGeometry) -> None:
+    """A 6 m rail move at the finest allowed margin: every proven step is at least one schedule step."""
+    world = CollisionWorld(robot, None, payload)
+    report = world.check_motion(home(robot, d1=0.0), home(robot, d1=6.0), motion_margin=1e-4)
+    assert report.valid
+
+
+def test_body_lengths_follow_the_description(tmp_path: Path) -> None:
+    """Column, arm and slide lengths come from the description's MDH numbers, not the reference ones."""
+    import yaml
+
+    from planner.robots.cabin8 import default_description_path
+
+    raw = yaml.safe_load(default_description_path().read_text())
+    raw["serial_chain"][0]["a"] = 0.15
+    raw["serial_chain"][3]["a"] = 0.20
+    path = tmp_path / "custom.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    custom = Cabin8(path)
+    world = CollisionWorld(custom, None, None)
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        q = custom.joints_from_drives(custom.home_drives)
+        q[6] = rng.uniform(custom.limits.lower[6], custom.limits.upper[6])
+        f = custom.frames(q[None, :])[0]
+        for name, (i, j) in {"column": (2, 3), "arm": (3, 4), "slide": (4, 6)}.items():
+            shape = world.bodies.shapes[world.names.index(name)]
+            assert np.linalg.norm(f[j, :3, 3] - f[i, :3, 3]) <= shape.length + 1e-12
