@@ -84,10 +84,9 @@ def comfort_margins(robot: Cabin8) -> Array:
     Drives: 5% of their range; platform y 0.02 m, gamma 0.05 rad; slider gaps 0.02 m; sin(CBD) 0.10
     above its bound; link-height ratios 0.05.
     """
-    n = robot.n_drives
     drive = 0.05 * (robot.limits.upper - robot.limits.lower)
     extra = np.array([0.02, 0.05, 0.02, 0.02, 0.10, 0.05, 0.05, 0.05])
-    return np.concatenate([drive, extra])[: len(robot.constraint_specs)] if n == 8 else drive
+    return np.concatenate([drive, extra])
 
 
 def normalised_margin(robot: Cabin8, q: Array) -> float:

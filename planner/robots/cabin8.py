@@ -82,7 +82,6 @@ class Cabin8Kinematics:
         self.jdot_udot = FastFunction(dense_function("jdot_udot", [q, qd], [jdud]))
         dc = ca.jacobian(c, q)
         self.constraints = FastFunction(dense_function("constraints", [q], [c, dc]))
-        self.constraint_vector = FastFunction(dense_function("constraint_vector", [q], [c]))
         # Everything one redundancy-resolution step needs, in one call.
         self.step = FastFunction(dense_function("step", [q], [T, Jq, Ju, c, dc], {"cse": True}))
 
@@ -254,10 +253,6 @@ class Cabin8(RobotModel):
         _, _, G_inv = self.kin.drive_map(q)
         return self.kin.jdot_udot(q, G_inv @ np.asarray(ud, dtype=float))[0]
 
-    def joint_velocity(self, q: Array, ud: Array) -> Array:
-        """Joint velocities q_dot = G^-1 u_dot."""
-        return self.drive_map_jacobian(q)[1] @ np.asarray(ud, dtype=float)
-
     # ---------------------------------------------------------- admissibility
     def constraint_values(self, q: Array) -> tuple[Array, Array]:
         """Admissibility vector and its Jacobian, (c(q), dc/dq), in :attr:`constraint_specs` order."""
@@ -274,11 +269,6 @@ class Cabin8(RobotModel):
         """Signed distance of each constraint to its nearest bound for (N, 8) joints, (N, m); NaN outside."""
         c = self.constraint_values_batch(q)
         return np.minimum(c - self.c_lower, self.c_upper - c)
-
-    def is_admissible(self, q: Array, tol: float = 1e-9) -> bool:
-        """True when every limit and margin holds at q (the fast form of ``not violations(q)``)."""
-        c = self.kin.constraint_vector(q)[0]
-        return bool(np.all(c >= self.c_lower - tol) and np.all(c <= self.c_upper + tol))
 
     def violations(self, q: Array, tol: float = 1e-9) -> list[dict[str, Any]]:
         """Every violated limit or margin at q (empty when admissible)."""
