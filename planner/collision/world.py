@@ -21,6 +21,7 @@ Every decision that something is *clear* is certified; nothing is sampled at a f
 
 from __future__ import annotations
 
+import hashlib
 import threading
 from dataclasses import dataclass, field
 from functools import cache
@@ -33,7 +34,7 @@ from numpy.typing import NDArray
 
 from planner.collision import _kernels
 from planner.collision.bodies import BodySet, PayloadGeometry, Shape, cabin8_bodies, segment_reach_bounds
-from planner.collision.clearance_grid import ClearanceGrid
+from planner.collision.clearance_grid import ClearanceGrid, cached_build
 from planner.collision.mesh_loader import LoadedMesh
 from planner.exceptions import InvalidInput
 from planner.kinematics import chain, parallel
@@ -79,6 +80,20 @@ class MotionReport:
     states_checked: int
     fcl_queries: int
     t_fail: float | None = None
+    contacts: tuple[Contact, ...] = ()
+
+
+@dataclass(frozen=True)
+class PathReport:
+    """Result of :meth:`CollisionWorld.check_path`.
+
+    ``first_bad`` is the index of the sample starting the first run that failed (None if valid).
+    """
+
+    valid: bool
+    motion_checks: int
+    last_checked: int
+    first_bad: int | None
     contacts: tuple[Contact, ...] = ()
 
 
@@ -182,7 +197,9 @@ def _cabin_bvh(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> fcl.BV
 def _cabin_grid(sha256: str, vertices_bytes: bytes, faces_bytes: bytes, step: float) -> ClearanceGrid:
     vertices = np.frombuffer(vertices_bytes).reshape(-1, 3)
     faces = np.frombuffer(faces_bytes, dtype=np.int64).reshape(-1, 3)
-    return ClearanceGrid.build(vertices, faces, step=step)
+    # sha256 holds the mesh's content hash and its pose; the vertices are in the base frame already.
+    key = hashlib.sha256(sha256.encode() + vertices_bytes + faces_bytes).hexdigest()
+    return cached_build(key, vertices, faces, step)
 
 
 @cache
@@ -593,6 +610,8 @@ class CollisionWorld:
         q_b: Array,
         clearance: float = DEFAULT_CLEARANCE_M,
         motion_margin: float = DEFAULT_MOTION_MARGIN_M,
+        self_clearance: float | None = None,
+        reach_ratio: float | None = None,
     ) -> MotionReport:
         """Certify that the straight joint-space motion q_a -> q_b keeps ``clearance`` everywhere.
 
@@ -604,8 +623,12 @@ class CollisionWorld:
         prove at least ``motion_margin``. A check that cannot prove ``motion_margin`` is refused (it may be
         a real contact). Limits and margins (smooth functions of q) are checked at every joint step of
         at most ``LIMIT_STEP`` (5 mm / 5 mrad) along the segment.
+
+        ``self_clearance`` overrides the world's self-clearance for this check and ``reach_ratio`` raises
+        the link-height ratio the reach bounds assume (both used by :meth:`check_path`).
         """
         _check_clearance(clearance)
+        own = self.self_clearance if self_clearance is None else float(self_clearance)
         if not (np.isfinite(motion_margin) and MIN_MOTION_MARGIN_M <= motion_margin <= 0.1):
             raise InvalidInput(
                 f"motion_margin: must be in [{MIN_MOTION_MARGIN_M}, 0.1] m, got {motion_margin}",
@@ -613,7 +636,7 @@ class CollisionWorld:
             )
         q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)
         dq = q_b - q_a
-        rho, pair_rho = self._segment_reach(q_a, q_b)
+        rho, pair_rho = self._segment_reach(q_a, q_b, reach_ratio)
         reach = rho @ np.abs(dq)
         n_fine = int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
         t_fine = np.linspace(0.0, 1.0, n_fine + 1)
@@ -646,14 +669,14 @@ class CollisionWorld:
             st = cache.get(i)
             if st is None:
                 # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
-                st = cache[i] = self._state(q_a + t_of(i) * dq, self.self_clearance + 0.06)
+                st = cache[i] = self._state(q_a + t_of(i) * dq, own + 0.06)
             return st
 
         # Both end states: a task whose spare clearance at the two ends covers the segment from both sides
         # (free_0 / D + free_1 / D >= 1) needs nothing in between.
         s0, s1 = state(0), state(n)
         for kind, idx, D in tasks:
-            base = clearance if kind == "cabin" else self.self_clearance
+            base = clearance if kind == "cabin" else own
             f0 = (s0.cabin_lb[idx] if kind == "cabin" else s0.pair_lb[idx]) - base
             f1 = (s1.cabin_lb[idx] if kind == "cabin" else s1.pair_lb[idx]) - base
             if f0 >= motion_margin and f1 >= motion_margin and f0 + f1 >= D:
@@ -700,7 +723,7 @@ class CollisionWorld:
                 i = min(n, max(i + 1, int(np.floor((t_of(i) + (E + motion_margin) / D) * n + 1e-9))))
         return MotionReport(True, len(cache), self._fcl_queries - before)
 
-    def _segment_reach(self, q_a: Array, q_b: Array) -> tuple[Array, Array]:
+    def _segment_reach(self, q_a: Array, q_b: Array, ratio: float | None = None) -> tuple[Array, Array]:
         """Reach bounds valid along the straight segment q_a -> q_b.
 
         The link-height ratios y_B/L1, y_C/L3, y_E/L4 are affine in y and in sin(gamma); along the segment
@@ -711,7 +734,65 @@ class CollisionWorld:
         g = self.robot.geometry
         end = float(np.nanmax(c[:, -3:])) if np.all(np.isfinite(c[:, -3:])) else 1.0
         dev = 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
+        if ratio is not None:
+            end = max(end, ratio)
         return segment_reach_bounds(self.robot, self.bodies, end + dev)
+
+    def check_path(
+        self,
+        qs: Array,
+        clearance: float = DEFAULT_CLEARANCE_M,
+        motion_margin: float = DEFAULT_MOTION_MARGIN_M,
+        max_run: int = 32,
+        max_extra_m: float = 0.002,
+    ) -> PathReport:
+        """Certify the polyline through (N, 8) configurations: every straight piece keeps ``clearance``.
+
+        Consecutive samples of a trajectory are close, so runs of them are certified together: for a run
+        q_i..q_j and its chord q_i -> q_j (parameterised alike), the polyline deviates from the chord by at
+        most e (componentwise, attained at the samples, since both are piecewise linear in the parameter).
+        Any body point of a polyline configuration is then within rho . e of the same point at the chord
+        configuration (rho the per-joint reach bounds), so the chord certified with ``clearance + rho . e``
+        (and self-clearance grown alike) certifies the whole run. Runs shrink until that extra is at most
+        ``max_extra_m``; a single piece is checked as it is.
+        """
+        _check_clearance(clearance)
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        n = len(qs)
+        if n == 1:
+            rep = self.check_state(qs[0], clearance)
+            return PathReport(rep.valid, 0, 0, None if rep.valid else 0, rep.contacts)
+        ratios = self.robot.constraint_values_batch(qs)[:, -3:]
+        ratio = float(np.nanmax(ratios)) if np.all(np.isfinite(ratios)) else 1.0
+        rho_all = segment_reach_bounds(self.robot, self.bodies, min(ratio + 0.02, 0.999))[0]
+        rho_joint = np.max(rho_all, axis=0)  # per joint, the largest reach of any body
+        i, checks = 0, 0
+        while i < n - 1:
+            j = min(n - 1, i + max_run)
+            while True:
+                if j == i + 1:
+                    extra = 0.0
+                    break
+                t = np.linspace(0.0, 1.0, j - i + 1)[:, None]
+                chord = qs[i] + t * (qs[j] - qs[i])
+                e = np.max(np.abs(qs[i : j + 1] - chord), axis=0)
+                extra = float(rho_joint @ e) * 2.0 + 1e-6  # both bodies of a self pair may move
+                if extra <= max_extra_m:
+                    break
+                j = i + max(1, (j - i) // 2)
+            motion = self.check_motion(
+                qs[i],
+                qs[j],
+                clearance + extra,
+                motion_margin,
+                self.self_clearance + extra,
+                min(ratio + 0.02, 0.999),
+            )
+            checks += 1
+            if not motion.valid:
+                return PathReport(False, checks, i, i, motion.contacts)
+            i = j
+        return PathReport(True, checks, n - 1, None, ())
 
     def motion_valid(self, q_a: Array, q_b: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
         """True when the straight motion q_a -> q_b is certified clear (see :meth:`check_motion`)."""

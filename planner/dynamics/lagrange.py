@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain, parallel
-from planner.kinematics.compiled import FastFunction, dense_function
+from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
 from planner.robots.cabin8 import Cabin8
 
 Array = NDArray[np.float64]
@@ -134,6 +134,7 @@ class Cabin8Dynamics:
         self._id = FastFunction(
             dense_function("inverse_dynamics", [q, qd, qdd, par], [tau, tau_u], {"cse": True})
         )
+        self._id_map = self._id.fn.map(CHUNK)
         lagrange_tau = ca.mtimes(M, qdd) + bias + grav
         self._id_lagrange = FastFunction(dense_function("id_lagrange", [q, qd, qdd, par], [lagrange_tau]))
 
@@ -150,6 +151,18 @@ class Cabin8Dynamics:
         """
         tq, tu = self._id(q, qd, qdd, _params(payload))
         return tq, tu
+
+    def drive_forces_batch(
+        self, q: Array, qd: Array, qdd: Array, payload: RigidPayload | None = None
+    ) -> Array:
+        """Drive forces/torques tau_u (N, 8) for joint states q, q_dot, q_ddot given as (N, 8) arrays."""
+        q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        qd2, qdd2 = np.atleast_2d(qd), np.atleast_2d(qdd)
+        p = _params(payload)
+        if q2.shape[0] <= SMALL_BATCH:  # a mapped call evaluates a whole chunk: cheaper one by one
+            return np.array([self._id(q2[i], qd2[i], qdd2[i], p)[1] for i in range(q2.shape[0])])
+        par = np.repeat(p[None, :], q2.shape[0], axis=0)
+        return evaluate_mapped(self._id_map, q2, qd2, qdd2, par)[1]
 
     def drive_efforts(self, u: Array, ud: Array, udd: Array, payload: RigidPayload | None = None) -> Array:
         """Drive forces/torques for drive trajectories, (N, 8) arrays -> (N, 8) [N, N m].
@@ -201,6 +214,10 @@ class Cabin8Dynamics:
         """(M(q) 8x8, bias C(q, q_dot) q_dot (8,), gravity dU/dq (8,)) in joint space."""
         M, b, g = self._terms(q, qd, _params(payload))
         return M, b, g
+
+
+#: Batches up to this size are evaluated row by row (compiled buffers), larger ones by the mapped function.
+SMALL_BATCH = 24
 
 
 def _params(payload: RigidPayload | None) -> Array:

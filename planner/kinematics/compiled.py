@@ -69,3 +69,21 @@ class FastFunction:
             flat[a:b] if n2 == 1 else flat[a:b].reshape((n1, n2), order="F")
             for (a, b), (n1, n2) in zip(self._spans, self._shapes, strict=True)
         )
+
+
+#: Grid points per call of the mapped CasADi functions (inputs are padded to a multiple).
+CHUNK = 256
+
+
+def evaluate_mapped(fn: ca.Function, *columns: Array) -> list[Array]:
+    """Evaluate a mapped function (``fn.map(CHUNK)``) on (N, k) row-stacked inputs; (N, m) outputs."""
+    n = columns[0].shape[0]
+    pad = (-n) % CHUNK
+    padded = [np.vstack([c, np.repeat(c[-1:], pad, axis=0)]).T if pad else c.T for c in columns]
+    outs: list[list[Array]] = [[] for _ in range(fn.n_out())]
+    for start in range(0, n + pad, CHUNK):
+        raw = fn(*[p[:, start : start + CHUNK] for p in padded])
+        results = raw if isinstance(raw, list | tuple) else [raw]
+        for k, r in enumerate(results):
+            outs[k].append(np.asarray(r))
+    return [np.hstack(o)[:, :n].T for o in outs]
