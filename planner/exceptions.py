@@ -83,3 +83,58 @@ class InvalidMesh(InvalidInput):
     """
 
     reason = "invalid_mesh"
+
+
+class PlanRefused(PlannerError):
+    """The scenario is well-formed but the planner returns no trajectory; ``reason`` says why.
+
+    Subclasses fix the reason; every refusal is a plain "no" to the caller (CLI exit 3, HTTP result with
+    status ``failed``), never a partial trajectory.
+    """
+
+    reason = "plan_refused"
+
+
+class StartInvalid(PlanRefused):
+    """The start configuration violates a limit or margin, or touches the cabin or itself.
+
+    ``details['contacts']`` lists what is wrong. ``reason`` is ``start_in_collision`` for contacts and
+    ``start_outside_limits`` for limit or margin violations.
+    """
+
+    reason = "start_in_collision"
+
+    def __init__(self, message: str, *, limits: bool = False, **details: Any) -> None:
+        super().__init__(message, **details)
+        if limits:
+            self.reason = "start_outside_limits"
+
+
+class GoalInCollision(PlanRefused):
+    """Every configuration reaching the goal touches the cabin or itself (or violates a margin)."""
+
+    reason = "goal_in_collision"
+
+
+class ApproachInfeasible(PlanRefused):
+    """The straight-line approach cannot be tracked within limits, margins and clearance."""
+
+    reason = "approach_infeasible"
+
+
+class NoPathFound(PlanRefused):
+    """The global planner found no certified path within the time limit."""
+
+    reason = "no_path_within_time_limit"
+
+
+class RetimingFailed(PlanRefused):
+    """Time-parameterisation found no profile within the drive limits (e.g. a force limit at rest)."""
+
+    reason = "retiming_failed"
+
+
+class ValidationFailed(PlanRefused):
+    """The validation gate rejected the trajectory; ``details['report']`` is the gate's full report."""
+
+    reason = "validation_failed"

@@ -165,20 +165,19 @@ def _level_rail(robot: Cabin8, q: Array, T_target: Array) -> Array:
 def random_admissible_joints(
     robot: Cabin8, rng: np.random.Generator, count: int, max_tries: int = 200
 ) -> Array:
-    """Up to ``count`` admissible joint vectors drawn uniformly over the joint box (rejection sampling)."""
+    """Up to ``count`` admissible joint vectors drawn uniformly over the joint box (rejection sampling).
+
+    At most ``max_tries`` vectors are drawn, in one vectorised batch.
+    """
     ps = robot.desc.parallel_stage
     lo = robot.limits.lower.copy()
     hi = robot.limits.upper.copy()
     lo[1:4] = [-0.25, ps.y_range[0], -ps.gamma_max]
     hi[1:4] = [0.25, ps.y_range[1], ps.gamma_max]
-    out: list[Array] = []
-    for _ in range(max_tries):
-        if len(out) >= count:
-            break
-        q = rng.uniform(lo, hi)
-        if not robot.violations(q):
-            out.append(q)
-    return np.array(out).reshape(-1, 8)
+    q = rng.uniform(lo, hi, size=(max(max_tries, 0), 8))
+    c = robot.constraint_values_batch(q)
+    ok = np.all((c >= robot.c_lower - 1e-9) & (c <= robot.c_upper + 1e-9), axis=1)
+    return q[ok][:count].reshape(-1, 8)
 
 
 @dataclass(frozen=True)
@@ -252,6 +251,23 @@ def _finish(
         return None
     u = robot.drives_from_joints(attempt.q)
     return IKSolution(attempt.q, u, pos, ori, attempt.iterations, normalised_margin(robot, attempt.q), k)
+
+
+def track_pose(
+    robot: Cabin8, q_seed: Array, T_target: Array, q_ref: Array, options: IKOptions | None = None
+) -> IKSolution | None:
+    """Exact IK near ``q_seed``, or ``None`` unless converged and admissible.
+
+    Refines along the self-motion manifold (posture towards ``q_ref``, margins) with the redundancy QP,
+    then polishes to the options' tolerance.
+
+    This is the differential-IK step of Cartesian tracking: called with consecutive targets along a line
+    and the previous solution as seed, it follows one continuous branch of the redundant family.
+    """
+    opts = options or IKOptions()
+    T_target = _validate_target(T_target)
+    refined = _refine(robot, np.asarray(q_seed, dtype=float), T_target, np.asarray(q_ref, dtype=float), opts)
+    return _finish(robot, refined, T_target, q_ref, opts, 0)
 
 
 def solve_pose_ik(

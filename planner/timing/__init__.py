@@ -1,0 +1,1 @@
+"""Geometric paths, time-parameterisation (TOPP-RA) and sampled drive profiles."""

@@ -1,0 +1,207 @@
+"""Geometric joint-space paths: straight segments, corner blends and interpolating splines.
+
+A path is a C1 curve q(s) in joint space over s in [0, length], built from pieces:
+
+- :class:`LinePiece`: the certified straight segments of the global planner;
+- :class:`BlendPiece`: a quadratic Bezier replacing the corner at a waypoint w between the points
+  a = w - lam * d_in and b = w + lam * d_out (d the segments' constant derivatives dq/ds). Its derivative
+  at its ends equals the neighbouring segments' derivatives, so the path is C1 there and a time-optimal
+  profile need not stop at the corner. The blend stays inside the triangle (a, w, b); it is certified by
+  the collision layer like every other motion before it is used;
+- :class:`SplinePiece`: a cubic spline through densely tracked configurations (the straight-line
+  insertion), C2.
+
+The parameter s is a *time-like* length: each straight segment's length is the time its slowest drive
+needs at its velocity limit (at the segment's start), so a uniform grid over s is a balanced grid for
+TOPP-RA.
+
+:class:`DriveGeometry` maps the joint path to the drive path u(s) = g(q(s)) with its derivatives
+u' = G q', u'' = G q'' + (dG/ds) q' (compiled CasADi, vectorised over grid points).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
+
+from planner.kinematics.compiled import CHUNK, evaluate_mapped
+from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
+
+Array = NDArray[np.float64]
+
+
+class Piece(ABC):
+    """One piece of a joint path over its local parameter s in [0, length]."""
+
+    length: float
+
+    @abstractmethod
+    def evaluate(self, s: Array) -> tuple[Array, Array, Array]:
+        """q, dq/ds, d2q/ds2 at local parameters s (N,), each (N, 8)."""
+
+
+@dataclass(frozen=True)
+class LinePiece(Piece):
+    """q(s) = q0 + (q1 - q0) s / length."""
+
+    q0: Array = field(repr=False)
+    q1: Array = field(repr=False)
+    length: float
+
+    def evaluate(self, s: Array) -> tuple[Array, Array, Array]:
+        """Straight segment: constant derivative, zero curvature."""
+        d = (self.q1 - self.q0) / self.length
+        q = self.q0[None, :] + s[:, None] * d[None, :]
+        return q, np.broadcast_to(d, q.shape).copy(), np.zeros_like(q)
+
+
+@dataclass(frozen=True)
+class BlendPiece(Piece):
+    """Quadratic Bezier a -> b with control point w, over s in [0, length] (tau = s / length)."""
+
+    a: Array = field(repr=False)
+    w: Array = field(repr=False)
+    b: Array = field(repr=False)
+    length: float
+
+    def evaluate(self, s: Array) -> tuple[Array, Array, Array]:
+        """Bezier point, tangent and (constant) curvature term."""
+        tau = (s / self.length)[:, None]
+        a, w, b = self.a[None, :], self.w[None, :], self.b[None, :]
+        q = (1 - tau) ** 2 * a + 2 * tau * (1 - tau) * w + tau**2 * b
+        dq = (2 * (1 - tau) * (w - a) + 2 * tau * (b - w)) / self.length
+        ddq = np.broadcast_to(2 * (a - 2 * w + b) / self.length**2, q.shape).copy()
+        return q, dq, ddq
+
+
+@dataclass(frozen=True)
+class SplinePiece(Piece):
+    """Cubic spline (not-a-knot) through configurations at increasing parameters."""
+
+    spline: CubicSpline = field(repr=False)
+    length: float
+
+    @classmethod
+    def through(cls, s: Array, qs: Array) -> SplinePiece:
+        """Spline through ``qs`` (K, 8) at parameters ``s`` (K,), re-based to start at 0."""
+        s = np.asarray(s, dtype=float) - float(s[0])
+        return cls(CubicSpline(s, np.asarray(qs, dtype=float), axis=0), float(s[-1]))
+
+    def evaluate(self, s: Array) -> tuple[Array, Array, Array]:
+        """Spline value and its first two derivatives."""
+        return self.spline(s), self.spline(s, 1), self.spline(s, 2)
+
+
+@dataclass(frozen=True)
+class JointPath:
+    """Pieces joined end to end; s runs over [0, length]."""
+
+    pieces: tuple[Piece, ...]
+
+    @property
+    def length(self) -> float:
+        """Total parameter length."""
+        return float(sum(p.length for p in self.pieces))
+
+    @property
+    def breaks(self) -> Array:
+        """Cumulative piece boundaries (n_pieces + 1,)."""
+        return np.concatenate([[0.0], np.cumsum([p.length for p in self.pieces])])
+
+    def evaluate(self, s: Array) -> tuple[Array, Array, Array]:
+        """q, q', q'' at path parameters s (N,) -> three (N, 8) arrays."""
+        s = np.clip(np.atleast_1d(np.asarray(s, dtype=float)), 0.0, self.length)
+        br = self.breaks
+        idx = np.clip(np.searchsorted(br, s, side="right") - 1, 0, len(self.pieces) - 1)
+        q = np.empty((len(s), 8))
+        dq = np.empty_like(q)
+        ddq = np.empty_like(q)
+        for k in np.unique(idx):
+            sel = idx == k
+            q[sel], dq[sel], ddq[sel] = self.pieces[k].evaluate(s[sel] - br[k])
+        return q, dq, ddq
+
+    @property
+    def start(self) -> Array:
+        """First configuration of the path."""
+        return self.evaluate(np.array([0.0]))[0][0]
+
+    @property
+    def end(self) -> Array:
+        """Last configuration of the path."""
+        return self.evaluate(np.array([self.length]))[0][0]
+
+
+def segment_time_length(robot: Cabin8, q0: Array, q1: Array) -> float:
+    """Time-like length of a straight joint segment: its slowest drive's time at v_max (>= 1e-6)."""
+    G, _ = robot.drive_map_jacobian(q0)
+    du = G @ (np.asarray(q1) - np.asarray(q0))
+    return float(max(1e-6, np.max(np.abs(du) / robot.limits.v_max)))
+
+
+def blended_polyline(
+    robot: Cabin8, waypoints: Array, blend_fraction: Array | float = 0.4
+) -> tuple[JointPath, list[int]]:
+    """A C1 path along a polyline with a quadratic blend at every interior waypoint.
+
+    Args:
+        robot: The robot (for time-like segment lengths).
+        waypoints: (N, 8) joint waypoints (N >= 2).
+        blend_fraction: Per interior waypoint (N - 2,) or one value: the blend's half-length as a fraction
+            of the shorter neighbouring segment, in [0, 0.5]; 0 keeps a sharp corner.
+
+    Returns:
+        The path and, for each interior waypoint, the index of its blend piece (-1 for a sharp corner).
+    """
+    W = np.asarray(waypoints, dtype=float)
+    n = len(W)
+    lengths = [segment_time_length(robot, W[i], W[i + 1]) for i in range(n - 1)]
+    frac = np.broadcast_to(np.asarray(blend_fraction, dtype=float), (max(n - 2, 0),))
+    lam = [float(frac[k - 1]) * min(lengths[k - 1], lengths[k]) if 0 < k < n - 1 else 0.0 for k in range(n)]
+    pieces: list[Piece] = []
+    blend_index: list[int] = []
+    for i in range(n - 1):
+        d = (W[i + 1] - W[i]) / lengths[i]
+        a = W[i] + lam[i] * d
+        b = W[i + 1] - lam[i + 1] * d
+        seg_len = lengths[i] - lam[i] - lam[i + 1]
+        if seg_len > 1e-9:
+            pieces.append(LinePiece(a, b, seg_len))
+        if i + 1 < n - 1:
+            if lam[i + 1] > 0:
+                d_out = (W[i + 2] - W[i + 1]) / lengths[i + 1]
+                pieces.append(BlendPiece(b, W[i + 1], W[i + 1] + lam[i + 1] * d_out, 2 * lam[i + 1]))
+                blend_index.append(len(pieces) - 1)
+            else:
+                blend_index.append(-1)
+    return JointPath(tuple(pieces)), blend_index
+
+
+@lru_cache(maxsize=8)
+def _drive_path_function(kin: Cabin8Kinematics) -> ca.Function:
+    q = ca.SX.sym("q", 8)
+    dq = ca.SX.sym("dq", 8)
+    ddq = ca.SX.sym("ddq", 8)
+    u = kin.drives_sx(q)
+    du = ca.jtimes(u, q, dq)
+    ddu = ca.jtimes(du, q, dq) + ca.jtimes(u, q, ddq)
+    return ca.Function("drive_path", [q, dq, ddq], [u, du, ddu])
+
+
+class DriveGeometry:
+    """Drive-space derivatives of a joint path: u(s), u'(s), u''(s) (vectorised)."""
+
+    def __init__(self, robot: Cabin8) -> None:
+        self.robot = robot
+        self._fn = _drive_path_function(robot.kin).map(CHUNK)
+
+    def __call__(self, q: Array, dq: Array, ddq: Array) -> tuple[Array, Array, Array]:
+        """(N, 8) joint path values and derivatives -> (N, 8) u, u', u''."""
+        u, du, ddu = evaluate_mapped(self._fn, q, dq, ddq)
+        return u, du, ddu

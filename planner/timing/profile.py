@@ -1,0 +1,177 @@
+"""Drive profiles: the product's output, sampled at the controller period.
+
+A profile holds, for N samples at t_k = k * period, the positions, velocities, accelerations and efforts
+(forces / torques) of the 8 drives, and the joint positions. It is built from one or more
+:class:`~planner.timing.stage.TimedPath` legs executed one after the other (each at rest at its ends);
+after the last leg ends the robot holds the goal at rest until the next sample.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.payload import RigidPayload
+from planner.exceptions import InvalidInput
+from planner.robots.cabin8 import Cabin8
+from planner.timing.path import DriveGeometry
+from planner.timing.stage import TimedPath
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DriveProfile:
+    """Sampled drive trajectory, arrays (N samples, 8 drives) in drive order, SI units."""
+
+    drive_names: tuple[str, ...]
+    drive_units: tuple[str, ...]
+    joint_names: tuple[str, ...]
+    sample_period_s: float
+    t: Array = field(repr=False)
+    position: Array = field(repr=False)
+    velocity: Array = field(repr=False)
+    acceleration: Array = field(repr=False)
+    effort: Array = field(repr=False)
+    joints: Array = field(repr=False)
+
+    @property
+    def duration_s(self) -> float:
+        """Time of the last sample [s]."""
+        return float(self.t[-1])
+
+    def to_dict(self) -> dict[str, Any]:
+        """The profile's fields of the JSON output contract."""
+        return {
+            "drives": list(self.drive_names),
+            "units": {
+                "t": "s",
+                "position": dict(zip(self.drive_names, self.drive_units, strict=True)),
+                "velocity": {n: f"{u}/s" for n, u in zip(self.drive_names, self.drive_units, strict=True)},
+                "acceleration": {
+                    n: f"{u}/s^2" for n, u in zip(self.drive_names, self.drive_units, strict=True)
+                },
+                "effort": {
+                    n: ("N" if u == "m" else "N m")
+                    for n, u in zip(self.drive_names, self.drive_units, strict=True)
+                },
+            },
+            "sample_period_s": self.sample_period_s,
+            "t": self.t.tolist(),
+            "position": self.position.tolist(),
+            "velocity": self.velocity.tolist(),
+            "acceleration": self.acceleration.tolist(),
+            "effort": self.effort.tolist(),
+            "joints": {"names": list(self.joint_names), "position": self.joints.tolist()},
+            "duration_s": self.duration_s,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], robot: Cabin8) -> DriveProfile:
+        """Read a profile written by :meth:`to_dict` (e.g. for ``cabinplan check``); validates shapes.
+
+        Joint positions are recomputed from the drive positions (the drives are what a controller runs).
+        """
+        try:
+            names = tuple(data["drives"])
+            period = float(data["sample_period_s"])
+            arrays = {
+                k: np.asarray(data[k], dtype=float)
+                for k in ("t", "position", "velocity", "acceleration", "effort")
+            }
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InvalidInput(f"profile: missing or malformed field ({exc})", field="profile") from exc
+        if names != robot.drive_names:
+            raise InvalidInput(
+                f"profile.drives: expected {list(robot.drive_names)}, got {list(names)}",
+                field="profile.drives",
+            )
+        n = arrays["t"].shape
+        if len(n) != 1 or n[0] < 2:
+            raise InvalidInput("profile.t: need a 1-D list of at least 2 times", field="profile.t")
+        for k in ("position", "velocity", "acceleration", "effort"):
+            if arrays[k].shape != (n[0], 8):
+                raise InvalidInput(
+                    f"profile.{k}: expected {n[0]} rows of 8 values, got shape {arrays[k].shape}",
+                    field=f"profile.{k}",
+                )
+        try:
+            joints = robot.joints_from_drives(arrays["position"])
+        except Exception:  # outside the stage workspace: the gate reports it sample by sample
+            joints = np.full((n[0], 8), np.nan)
+        return cls(robot.drive_names, robot.drive_units, robot.joint_names, period, joints=joints, **arrays)
+
+    def to_csv(self) -> str:
+        """One row per sample: t, then position, velocity, acceleration, effort of each drive."""
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        header = ["t_s"]
+        for kind, suffix in (("pos", ""), ("vel", "/s"), ("acc", "/s2")):
+            header += [
+                f"{n}_{kind}_{u}{suffix}" for n, u in zip(self.drive_names, self.drive_units, strict=True)
+            ]
+        header += [
+            f"{n}_effort_{'N' if u == 'm' else 'Nm'}"
+            for n, u in zip(self.drive_names, self.drive_units, strict=True)
+        ]
+        w.writerow(header)
+        data = np.column_stack([self.t, self.position, self.velocity, self.acceleration, self.effort])
+        for row in data:
+            w.writerow([f"{v:.9g}" for v in row])
+        return buf.getvalue()
+
+
+def sample_legs(
+    robot: Cabin8,
+    legs: list[TimedPath],
+    period_s: float,
+    payload: RigidPayload | None,
+    dynamics: Cabin8Dynamics | None = None,
+) -> tuple[DriveProfile, Array]:
+    """Sample consecutive legs at t_k = k * period; also returns each sample's leg index."""
+    geometry = DriveGeometry(robot)
+    dynamics = dynamics or Cabin8Dynamics(robot)
+    # Each leg is slowed uniformly (by at most one period) so that it lasts a whole number of periods:
+    # its boundaries fall on samples, the last sample is exactly the goal at rest, and velocities and
+    # accelerations only shrink (by k and k^2, k <= 1).
+    steps = [max(1, int(np.ceil(leg.duration / period_s - 1e-9))) for leg in legs]
+    first = np.concatenate([[0], np.cumsum(steps)])
+    n = int(first[-1]) + 1
+    t = np.arange(n, dtype=float) * period_s
+    leg_of = np.full(n, -1)
+    q = np.empty((n, 8))
+    qd = np.zeros_like(q)
+    qdd = np.zeros_like(q)
+    u = np.empty_like(q)
+    ud = np.zeros_like(q)
+    udd = np.zeros_like(q)
+    for k, leg in enumerate(legs):
+        idx = np.arange(first[k], first[k + 1] + 1)
+        scale = leg.duration / (steps[k] * period_s)
+        s, sd, sdd = leg.state((idx - first[k]) * period_s * scale)
+        sd, sdd = sd * scale, sdd * scale**2
+        sd[-1] = 0.0  # the leg ends at rest (the time law's last grid velocity is 0)
+        pq, pdq, pddq = leg.path.evaluate(s)
+        pu, pdu, pddu = geometry(pq, pdq, pddq)
+        q[idx], u[idx] = pq, pu
+        qd[idx] = pdq * sd[:, None]
+        qdd[idx] = pdq * sdd[:, None] + pddq * (sd**2)[:, None]
+        ud[idx] = pdu * sd[:, None]
+        udd[idx] = pdu * sdd[:, None] + pddu * (sd**2)[:, None]
+        leg_of[idx] = k
+    # Exact end points: the first sample is the path's start, the last the path's end, both at rest.
+    q[0], u[0] = legs[0].path.start, robot.drives_from_joints(legs[0].path.start)
+    q[-1], u[-1] = legs[-1].path.end, robot.drives_from_joints(legs[-1].path.end)
+    qd[[0, -1]] = ud[[0, -1]] = 0.0
+    qdd[-1] = udd[-1] = 0.0
+    effort = dynamics.drive_forces_batch(q, qd, qdd, payload)
+    profile = DriveProfile(
+        robot.drive_names, robot.drive_units, robot.joint_names, float(period_s), t, u, ud, udd, effort, q
+    )
+    return profile, leg_of
