@@ -1,0 +1,1 @@
+"""Path search: goal configurations, the straight-line approach, transit postures and the OMPL adapter."""

@@ -1,0 +1,221 @@
+"""Goal configurations and the straight-line approach, using the two redundant DOF.
+
+For a pose goal the redundancy of cabin8 is the explicit family q(gamma, d5)
+(:mod:`planner.kinematics.closed_form`). :func:`goal_configurations` grids that family, keeps the
+admissible points, polishes each to an exact solution, and keeps those that are collision-free with the
+requested clearance and can hold the payload statically within the drive force limits. Candidates are
+ranked by their normalised limit/singularity margin and diversified (distinct (gamma, d5)), so the global
+planner gets several good goals to connect to.
+
+With an approach, :func:`track_approach` follows the payload frame backwards along the line from each goal
+candidate with the differential IK of :func:`planner.redundancy.ik.track_pose` (posture continuity and
+margins as secondary objectives, exact pose at every step), certifies every step with the collision
+layer, and the candidate whose line keeps the largest clearance (measured at a few states along it) wins.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.collision.world import CollisionWorld
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.payload import RigidPayload
+from planner.kinematics.closed_form import redundant_family
+from planner.redundancy.ik import IKOptions, comfort_margins, family_candidates, normalised_margin, track_pose
+
+Array = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class StaticForceCheck:
+    """Static drive forces (holding the payload at rest) within ``fraction`` of the force limits.
+
+    A state the drives cannot hold is useless to plan through; the margin (1 - fraction) is left for the
+    dynamic forces, which TOPP-RA keeps within the limits along the path.
+    """
+
+    dynamics: Cabin8Dynamics
+    payload: RigidPayload | None
+    fraction: float = 0.95
+
+    def ratios(self, qs: Array) -> Array:
+        """Largest |static force| / limit of each configuration (N,) for (N, 8) joints."""
+        qs = np.atleast_2d(qs)
+        z = np.zeros_like(qs)
+        tau = self.dynamics.drive_forces_batch(qs, z, z, self.payload)
+        return np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max, axis=1)
+
+    def ok(self, q: Array) -> bool:
+        """True when the drives can hold the payload at q."""
+        return bool(self.ratios(q)[0] <= self.fraction)
+
+    def segment_ok(self, q_a: Array, q_b: Array, step: float = 0.02) -> bool:
+        """Checked at every ``step`` (m or rad, largest joint change) along the straight segment."""
+        n = int(max(1, np.ceil(float(np.max(np.abs(q_b - q_a))) / step)))
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        return bool(np.all(self.ratios(q_a + t * (q_b - q_a)) <= self.fraction))
+
+
+@dataclass(frozen=True)
+class GoalCandidate:
+    """A goal configuration (and, with an approach, its tracked line back to the pre-insertion state)."""
+
+    q: Array = field(repr=False)
+    min_margin: float
+    line: Array | None = field(default=None, repr=False)  # (K, 8) from pre-insertion to goal
+    line_s: Array | None = field(default=None, repr=False)  # (K,) distance along the line [m]
+    clearance_m: float = float("nan")
+
+
+def goal_configurations(
+    world: CollisionWorld,
+    T_base_tool: Array,
+    clearance: float,
+    forces: StaticForceCheck,
+    u_ref: Array,
+    max_candidates: int = 6,
+) -> tuple[list[GoalCandidate], dict[str, int]]:
+    """Valid, diverse exact IK solutions for a tool pose, best margin first.
+
+    Returns the candidates and counts of why the others were dropped (for a clear refusal).
+    """
+    robot = world.robot
+    opts = IKOptions(grid_gamma=15, grid_d5=15)
+    good, _ = family_candidates(robot, T_base_tool, u_ref, 0.3, opts)
+    stats = {"family_points": len(good), "not_converged": 0, "collision": 0, "force": 0}
+    out: list[GoalCandidate] = []
+    used: list[Array] = []
+    for cand in good:
+        if len(out) >= max_candidates:
+            break
+        key = cand.q[[3, 6]]
+        if any(np.all(np.abs(key - u) < np.array([0.05, 0.06])) for u in used):
+            continue
+        sol = track_pose(robot, cand.q, T_base_tool, cand.q, opts)
+        if sol is None:
+            stats["not_converged"] += 1
+            continue
+        used.append(key)
+        if not world.is_valid(sol.q, clearance):
+            stats["collision"] += 1
+            continue
+        if not forces.ok(sol.q):
+            stats["force"] += 1
+            continue
+        out.append(GoalCandidate(sol.q, normalised_margin(robot, sol.q)))
+    out.sort(key=lambda c: -c.min_margin)
+    return out, stats
+
+
+def approach_lines(
+    world: CollisionWorld,
+    T_base_tool_goal: Array,
+    direction: Array,
+    distance_m: float,
+    clearance: float,
+    motion_margin: float,
+    forces: StaticForceCheck,
+    max_lines: int = 3,
+    grid: int = 21,
+) -> tuple[list[GoalCandidate], dict[str, int]]:
+    """Straight approach lines with the redundancy fixed along each line, best margin first.
+
+    For a pure translation of the tool pose with fixed orientation, the closed-form family
+    q(gamma, d5) keeps theta3, theta4, theta6 (they depend on the orientation only) and shifts (d1, x, y)
+    by the translation: with (gamma, d5) held, the line of the payload frame is a *straight segment in
+    joint space*. Each (gamma, d5) of a grid is scored by its smallest normalised limit/singularity margin
+    over the whole line (vectorised), lines that cannot hold the payload statically are dropped, and the
+    best lines, diverse in (gamma, d5), are certified collision-free with the motion check of the
+    collision layer. The redundancy is thus chosen once for the whole insertion, exactly (the line is
+    followed to rounding error), rather than drifting step by step.
+    """
+    robot = world.robot
+    ps = robot.desc.parallel_stage
+    gammas = np.linspace(-ps.gamma_max, ps.gamma_max, grid)
+    d5s = np.linspace(robot.limits.lower[6], robot.limits.upper[6], grid)
+    gg, dd = np.meshgrid(gammas, d5s, indexing="ij")
+    Q = redundant_family(robot.desc.serial_chain, T_base_tool_goal, gg.ravel(), dd.ravel())
+    shift = np.zeros(8)
+    shift[[0, 1, 2]] = -distance_m * np.array([direction[2], direction[0], direction[1]])
+    n_along = 11
+    taus = np.linspace(0.0, 1.0, n_along)
+    along = Q[None, :, :] + taus[:, None, None] * shift[None, None, :]  # (n_along, K, 8)
+    c = robot.constraint_values_batch(along.reshape(-1, 8)).reshape(n_along, len(Q), -1)
+    margins = np.minimum(c - robot.c_lower, robot.c_upper - c) / comfort_margins(robot)
+    worst = np.min(np.where(np.isnan(margins), -np.inf, margins), axis=(0, 2))
+    stats = {"grid_points": len(Q), "admissible": int(np.sum(worst >= 0)), "force": 0, "collision": 0}
+    order = [int(i) for i in np.argsort(-worst) if worst[i] >= 0]
+    out: list[GoalCandidate] = []
+    used: list[Array] = []
+    for i in order:
+        if len(out) >= max_lines:
+            break
+        key = Q[i, [3, 6]]
+        if any(np.all(np.abs(key - u) < np.array([0.05, 0.06])) for u in used):
+            continue
+        used.append(key)
+        q_goal, q_pre = Q[i], Q[i] + shift
+        if not forces.segment_ok(q_pre, q_goal):
+            stats["force"] += 1
+            continue
+        if not (
+            world.is_valid(q_goal, clearance)
+            and world.check_motion(q_pre, q_goal, clearance, motion_margin).valid
+        ):
+            stats["collision"] += 1
+            continue
+        line = np.stack([q_pre, q_goal])
+        out.append(GoalCandidate(q_goal, float(worst[i]), line, np.array([0.0, distance_m])))
+    return out, stats
+
+
+def track_approach(
+    world: CollisionWorld,
+    goal: GoalCandidate,
+    T_base_tool_goal: Array,
+    direction: Array,
+    distance_m: float,
+    step_m: float,
+    clearance: float,
+    motion_margin: float,
+    forces: StaticForceCheck,
+    cancelled: Callable[[], bool] = lambda: False,
+) -> GoalCandidate | None:
+    """Track the straight approach backwards from the goal; None if any step fails.
+
+    The tool moves along ``-direction`` with fixed orientation; the payload frame moves the same way
+    (it is rigidly attached). Every step is an exact IK solution seeded by the previous one, admissible,
+    collision-free with ``clearance`` (certified motion between steps) and within the static force limits.
+    """
+    robot = world.robot
+    n = int(np.ceil(distance_m / step_m))
+    s = np.linspace(0.0, distance_m, n + 1)
+    qs = [goal.q]
+    opts = IKOptions(refine_iterations=3)
+    for k in range(1, n + 1):
+        if cancelled():
+            return None
+        T = T_base_tool_goal.copy()
+        T[:3, 3] -= s[k] * direction
+        sol = track_pose(robot, qs[-1], T, qs[-1], opts)
+        if sol is None:
+            return None
+        q = sol.q
+        # One continuous branch: a step of a few millimetres never moves a joint far.
+        if float(np.max(np.abs(q - qs[-1]))) > 20 * step_m + 0.05:
+            return None
+        if not world.check_motion(qs[-1], q, clearance, motion_margin).valid or not forces.segment_ok(
+            qs[-1], q
+        ):
+            return None
+        qs.append(q)
+    line = np.array(qs[::-1])
+    probe = line[:: max(1, len(line) // 6)]
+    c = float(np.min(world.clearance_profile(probe))) if world.cabin is not None else float("inf")
+    return GoalCandidate(goal.q, goal.min_margin, line, distance_m - s[::-1], c)

@@ -1,0 +1,103 @@
+"""Transit postures: how cabin8 passes narrow sections of the cabin (a bulkhead hatch) along its rail.
+
+A long move along the rail through a narrow opening is a narrow passage in the 8-D joint space: only a
+small set of compact postures fits through (about one random admissible posture in a thousand for the
+reference hatch), and a sampling planner rarely finds it. But the structure is simple: the rail (d1)
+moves everything rigidly, so the question is which *posture* (the other seven joints) can ride the rail
+from the start's d1 to the goal's d1. This module answers it directly:
+
+1. draw admissible postures (seeded), plus the start's and the goal's own;
+2. rank them by compactness: the lateral and vertical extent of the robot's sphere cover, the quantity a
+   hatch opening constrains (vectorised over all candidates);
+3. sweep the best ones along the rail with cheap state checks at a few d1 values, the d1 values that
+   rejected most earlier candidates first (a pinch is found after one or two checks);
+4. certify the survivors' rail motion with the motion check and the static force check.
+
+The planner then connects start -> transit at the start's d1 and transit at the goal's d1 -> goal
+(short, local problems), with the certified rail motion in between.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.collision.world import CollisionWorld
+from planner.kinematics import chain
+from planner.redundancy.ik import random_admissible_joints
+
+Array = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Transit:
+    """A posture that rides the rail between two d1 values: ``q_a`` at the first, ``q_b`` at the second."""
+
+    q_a: Array
+    q_b: Array
+    candidates_tried: int
+    state_checks: int
+
+
+def compactness(world: CollisionWorld, qs: Array) -> Array:
+    """Extent of the robot above the carriage: max |x| + max y of the fine sphere cover, per posture (N,)."""
+    centres = world.cover_centres(qs)  # (N, S, 3)
+    r = world._fine_r[None, :]
+    lateral = np.max(np.abs(centres[:, :, 0]) + r, axis=1)
+    height = np.max(centres[:, :, 1] + r, axis=1)
+    return lateral + 0.5 * height
+
+
+def find_transit(
+    world: CollisionWorld,
+    q_start: Array,
+    q_goal: Array,
+    clearance: float,
+    motion_margin: float,
+    state_ok: Callable[[Array], bool],
+    segment_ok: Callable[[Array, Array], bool],
+    seed: int,
+    n_candidates: int = 4000,
+    n_sweep: int = 400,
+    d1_step: float = 0.05,
+    deadline: Callable[[], bool] = lambda: False,
+) -> Transit | None:
+    """A posture that can ride the rail from ``q_start[0]`` to ``q_goal[0]`` (see the module docstring)."""
+    robot = world.robot
+    d1_a, d1_b = float(q_start[chain.D1]), float(q_goal[chain.D1])
+    rng = np.random.default_rng(seed)
+    pool = random_admissible_joints(robot, rng, n_candidates, max_tries=4 * n_candidates)
+    cands = np.vstack([q_start[None, :], q_goal[None, :], pool]) if len(pool) else np.stack([q_start, q_goal])
+    order = np.argsort(compactness(world, cands), kind="stable")
+    # The start's and goal's own postures first (no reconfiguration needed), then the most compact.
+    order = np.concatenate([[0, 1], order[~np.isin(order, [0, 1])]])[:n_sweep]
+    n_d1 = int(max(2, np.ceil(abs(d1_b - d1_a) / d1_step) + 1))
+    d1s = np.linspace(d1_a, d1_b, n_d1)
+    kills = np.zeros(n_d1)
+    checks = 0
+    for tried, i in enumerate(order, start=1):
+        if deadline():
+            return None
+        posture = cands[i]
+        ok = True
+        for k in np.argsort(-kills, kind="stable"):
+            q = posture.copy()
+            q[chain.D1] = d1s[k]
+            checks += 1
+            if not (world.is_valid(q, clearance) and state_ok(q)):
+                kills[k] += 1
+                ok = False
+                break
+        if not ok:
+            continue
+        q_a, q_b = posture.copy(), posture.copy()
+        q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
+        if world.check_motion(q_a, q_b, clearance, motion_margin).valid and segment_ok(q_a, q_b):
+            log.info("transit posture found after %d candidates, %d state checks", tried, checks)
+            return Transit(q_a, q_b, tried, checks)
+    return None

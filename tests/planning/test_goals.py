@@ -1,0 +1,169 @@
+"""Goal configurations and approach lines: exact IK, straight joint-space insertion lines, force limits."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.collision.world import CollisionWorld
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.planning.goals import GoalCandidate, StaticForceCheck, approach_lines, goal_configurations
+from planner.redundancy.ik import normalised_margin
+from planner.scenario import ResolvedScenario, load_scenario
+from tests.conftest import admissible_joints
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+#: The pipeline's planning clearance for the scenario (requested 0.01 m plus its 3 mm slack).
+CLEARANCE_M = 0.013
+MOTION_MARGIN_M = 0.005
+
+
+@pytest.fixture(scope="module")
+def scenario() -> ResolvedScenario:
+    return load_scenario(SCENARIOS / "aisle-bay-insert.yaml")
+
+
+@pytest.fixture(scope="module")
+def world(scenario: ResolvedScenario) -> CollisionWorld:
+    return CollisionWorld(scenario.robot, scenario.cabin, scenario.payload)
+
+
+@pytest.fixture(scope="module")
+def forces(scenario: ResolvedScenario) -> StaticForceCheck:
+    assert scenario.payload is not None
+    return StaticForceCheck(Cabin8Dynamics(scenario.robot), scenario.payload.rigid_payload())
+
+
+@pytest.fixture(scope="module")
+def lines(scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck) -> list[GoalCandidate]:
+    assert scenario.T_base_tool_goal is not None and scenario.approach_direction is not None
+    found, stats = approach_lines(
+        world,
+        scenario.T_base_tool_goal,
+        scenario.approach_direction,
+        scenario.approach_distance_m,
+        CLEARANCE_M,
+        MOTION_MARGIN_M,
+        forces,
+    )
+    assert found, stats
+    return found
+
+
+def _payload_frames(scenario: ResolvedScenario, qs: np.ndarray) -> np.ndarray:
+    assert scenario.payload is not None
+    return scenario.robot.fk_batch(np.atleast_2d(qs)) @ scenario.payload.T_tool_payload
+
+
+def test_approach_line_ends_are_the_goal_and_the_pre_insertion_pose(
+    scenario: ResolvedScenario, lines: list[GoalCandidate]
+) -> None:
+    T_goal = scenario.T_base_payload_goal
+    d, dist = scenario.approach_direction, scenario.approach_distance_m
+    assert T_goal is not None and d is not None
+    for cand in lines:
+        assert cand.line is not None and cand.line.shape == (2, 8)
+        assert cand.line_s is not None and np.array_equal(cand.line_s, [0.0, dist])
+        assert np.array_equal(cand.line[1], cand.q)
+        T_pre, T_end = _payload_frames(scenario, cand.line)
+        np.testing.assert_allclose(T_end, T_goal, atol=1e-9)
+        np.testing.assert_allclose(T_pre[:3, 3], T_goal[:3, 3] - dist * d, atol=1e-9)
+        np.testing.assert_allclose(T_pre[:3, :3], T_end[:3, :3], atol=1e-9)
+
+
+def test_approach_line_is_a_straight_joint_space_segment(
+    scenario: ResolvedScenario, lines: list[GoalCandidate]
+) -> None:
+    """A pure translation with (gamma, d5) held is a straight line in joint space.
+
+    Every interpolated configuration puts the payload on the Cartesian line, at the matching fraction,
+    with fixed orientation.
+    """
+    robot = scenario.robot
+    fixed = [robot.joint_names.index(n) for n in ("gamma", "theta3", "theta4", "d5", "theta6")]
+    for cand in lines:
+        assert cand.line is not None
+        q_pre, q_goal = cand.line
+        assert np.array_equal(q_pre[fixed], q_goal[fixed])
+        tau = np.linspace(0.0, 1.0, 10)
+        qs = q_pre + tau[:, None] * (q_goal - q_pre)
+        T = _payload_frames(scenario, qs)
+        T_pre, T_end = T[0], T[-1]
+        expected = T_pre[:3, 3] + tau[:, None] * (T_end[:3, 3] - T_pre[:3, 3])
+        np.testing.assert_allclose(T[:, :3, 3], expected, atol=1e-9)
+        np.testing.assert_allclose(T[:, :3, :3], np.broadcast_to(T_end[:3, :3], (10, 3, 3)), atol=1e-9)
+
+
+def test_approach_lines_are_best_margin_first_certified_and_holdable(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, lines: list[GoalCandidate]
+) -> None:
+    robot = scenario.robot
+    margins = [c.min_margin for c in lines]
+    assert margins == sorted(margins, reverse=True)
+    keys = [c.q[[3, 6]] for c in lines]
+    for cand in lines:
+        assert cand.line is not None
+        # The line's margin is the smallest along it (independent route: per-configuration margins).
+        tau = np.linspace(0.0, 1.0, 11)
+        qs = cand.line[0] + tau[:, None] * (cand.line[1] - cand.line[0])
+        assert cand.min_margin == pytest.approx(min(normalised_margin(robot, q) for q in qs), abs=1e-9)
+        assert cand.min_margin >= 0.0
+        assert world.is_valid(cand.q, CLEARANCE_M)
+        assert world.check_motion(cand.line[0], cand.line[1], CLEARANCE_M, MOTION_MARGIN_M).valid
+        dense = cand.line[0] + np.linspace(0, 1, 25)[:, None] * (cand.line[1] - cand.line[0])
+        assert np.all(forces.ratios(dense) <= forces.fraction)
+    for i in range(len(keys)):  # diverse redundancy: distinct (gamma, d5)
+        for j in range(i):
+            assert np.any(np.abs(keys[i] - keys[j]) >= np.array([0.05, 0.06]))
+
+
+def test_goal_configurations_are_exact_valid_and_holdable(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck
+) -> None:
+    assert scenario.T_base_tool_goal is not None
+    cands, stats = goal_configurations(
+        world, scenario.T_base_tool_goal, CLEARANCE_M, forces, np.array(scenario.start_u)
+    )
+    assert cands, stats
+    assert len(cands) <= 6
+    assert stats["family_points"] >= len(cands)
+    robot = scenario.robot
+    for cand in cands:
+        np.testing.assert_allclose(robot.fk(cand.q), scenario.T_base_tool_goal, atol=1e-9)
+        assert not robot.violations(cand.q)
+        assert world.is_valid(cand.q, CLEARANCE_M)
+        assert forces.ok(cand.q)
+        assert cand.min_margin == pytest.approx(normalised_margin(robot, cand.q), abs=1e-12)
+    margins = [c.min_margin for c in cands]
+    assert margins == sorted(margins, reverse=True)
+
+
+def test_static_force_ratios_equal_inverse_dynamics_at_rest(
+    scenario: ResolvedScenario, forces: StaticForceCheck
+) -> None:
+    """Static ratios equal the Lagrangian gravity torques mapped to the drives by virtual work.
+
+    Independent route: tau_q = G^T tau_u with G = du/dq. Both the row-by-row (small) and the mapped
+    (large) batch paths of the dynamics are exercised.
+    """
+    robot = scenario.robot
+    assert scenario.payload is not None
+    payload = scenario.payload.rigid_payload()
+    dyn = Cabin8Dynamics(robot)
+    qs = admissible_joints(robot, 30, seed=5)
+    expected = []
+    for q in qs:
+        tau_q = dyn.inverse_dynamics_lagrange(q, np.zeros(8), np.zeros(8), payload)
+        G, _ = robot.drive_map_jacobian(q)
+        tau_u = np.linalg.solve(G.T, np.ravel(tau_q))
+        expected.append(np.max(np.abs(tau_u) / robot.limits.effort_max))
+    expected_arr = np.array(expected)
+    np.testing.assert_allclose(forces.ratios(qs), expected_arr, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(forces.ratios(qs[:5]), expected_arr[:5], rtol=1e-9, atol=1e-12)
+    for q, r in zip(qs[:5], expected_arr[:5], strict=True):
+        assert forces.ok(q) == (r <= forces.fraction)
+    # The payload's weight shows: holding it changes the drive forces (the check is not the bare arm's).
+    bare = StaticForceCheck(dyn, None)
+    assert np.max(np.abs(forces.ratios(qs) - bare.ratios(qs))) > 0.01

@@ -1,0 +1,113 @@
+"""Transit postures: a compact posture rides the rail through the hatch where the start posture cannot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.collision.world import CollisionWorld
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.planning.goals import StaticForceCheck
+from planner.planning.transit import Transit, compactness, find_transit
+from planner.scenario import ResolvedScenario, load_scenario
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+#: The pipeline's planning clearance for the scenario (requested 0.01 m plus its 3 mm slack).
+CLEARANCE_M = 0.013
+MOTION_MARGIN_M = 0.005
+HATCH_Z_M = 2.0  # the bulkhead of cabin-hatch
+
+
+@pytest.fixture(scope="module")
+def scenario() -> ResolvedScenario:
+    return load_scenario(SCENARIOS / "hatch-pass.yaml")
+
+
+@pytest.fixture(scope="module")
+def world(scenario: ResolvedScenario) -> CollisionWorld:
+    return CollisionWorld(scenario.robot, scenario.cabin, scenario.payload)
+
+
+@pytest.fixture(scope="module")
+def forces(scenario: ResolvedScenario) -> StaticForceCheck:
+    assert scenario.payload is not None
+    return StaticForceCheck(Cabin8Dynamics(scenario.robot), scenario.payload.rigid_payload())
+
+
+def _transit(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, seed: int
+) -> Transit | None:
+    assert scenario.goal_q is not None
+    return find_transit(
+        world,
+        np.array(scenario.start_q),
+        np.array(scenario.goal_q),
+        CLEARANCE_M,
+        MOTION_MARGIN_M,
+        forces.ok,
+        forces.segment_ok,
+        seed,
+    )
+
+
+@pytest.fixture(scope="module")
+def transit(scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck) -> Transit:
+    found = _transit(scenario, world, forces, seed=1)
+    assert found is not None
+    return found
+
+
+def test_the_start_posture_cannot_ride_the_rail_through_the_hatch(
+    scenario: ResolvedScenario, world: CollisionWorld
+) -> None:
+    assert scenario.goal_q is not None
+    q_start = np.array(scenario.start_q)
+    at_goal_d1 = q_start.copy()
+    at_goal_d1[0] = scenario.goal_q[0]
+    assert q_start[0] < HATCH_Z_M < at_goal_d1[0]
+    assert not world.check_motion(q_start, at_goal_d1, CLEARANCE_M, MOTION_MARGIN_M).valid
+    # A real contact, not conservatism: some state on the way (every 5 cm) is itself invalid.
+    d1s = np.arange(q_start[0], at_goal_d1[0], 0.05)
+    on_rail = np.repeat(q_start[None, :], len(d1s), axis=0)
+    on_rail[:, 0] = d1s
+    assert not all(world.is_valid(q, CLEARANCE_M) for q in on_rail)
+
+
+def test_transit_posture_rides_the_rail_from_start_to_goal(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, transit: Transit
+) -> None:
+    assert scenario.goal_q is not None
+    q_a, q_b = transit.q_a, transit.q_b
+    assert q_a[0] == scenario.start_q[0] and q_b[0] == scenario.goal_q[0]
+    assert np.array_equal(q_a[1:], q_b[1:])  # one posture, only the rail moves
+    assert not scenario.robot.violations(q_a)
+    assert world.check_motion(q_a, q_b, CLEARANCE_M, MOTION_MARGIN_M).valid
+    assert forces.segment_ok(q_a, q_b)
+    # Independent route: exact distances along the rail (through the hatch) never below the clearance.
+    d1s = np.linspace(q_a[0], q_b[0], 23)
+    qs = np.repeat(q_a[None, :], len(d1s), axis=0)
+    qs[:, 0] = d1s
+    assert np.min(world.clearance_profile(qs)) >= CLEARANCE_M - 1e-9
+    assert transit.candidates_tried >= 3  # neither the start's nor the goal's own posture fits
+    assert transit.state_checks >= transit.candidates_tried
+
+
+def test_transit_posture_is_more_compact_than_the_start(
+    scenario: ResolvedScenario, world: CollisionWorld, transit: Transit
+) -> None:
+    c = compactness(world, np.stack([transit.q_a, np.array(scenario.start_q)]))
+    assert c.shape == (2,) and np.all(np.isfinite(c))
+    assert c[0] < c[1]
+    # Compactness ignores the rail: the same posture anywhere along it is equally compact.
+    np.testing.assert_allclose(compactness(world, transit.q_b[None, :]), c[:1], atol=1e-12)
+
+
+def test_seeded_transit_is_reproducible(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, transit: Transit
+) -> None:
+    again = _transit(scenario, world, forces, seed=1)
+    assert again is not None
+    assert np.array_equal(again.q_a, transit.q_a) and np.array_equal(again.q_b, transit.q_b)
+    assert (again.candidates_tried, again.state_checks) == (transit.candidates_tried, transit.state_checks)
