@@ -13,8 +13,10 @@ $(STAMP): requirements.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $(STAMP)
 
-run: $(STAMP)  ## the main job on embedded defaults
-	$(BIN)/cabinplan robot cabin8
+run: $(STAMP)  ## the main job on embedded defaults: plan the reference bay insertion into out/
+	mkdir -p out
+	$(BIN)/cabinplan plan tests/scenarios/aisle-bay-insert.yaml -o out/aisle-bay-insert.json \
+		--csv out/aisle-bay-insert.csv --plot out/aisle-bay-insert.png
 
 test: $(STAMP)  ## lint, type-check and the whole test suite
 	$(BIN)/ruff check planner api tests bench
@@ -31,6 +33,7 @@ typecheck: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m bench.kinematics
 	$(BIN)/python -m bench.collision
+	$(BIN)/python -m bench.planning
 
 lock:  ## re-pin requirements.lock from a fresh resolve of pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock

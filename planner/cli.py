@@ -7,9 +7,11 @@ kind: 2 invalid input, 3 no admissible answer (unreachable pose, outside the wor
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections.abc import Callable
 from functools import wraps
+from pathlib import Path
 from typing import Annotated, Any, NoReturn, ParamSpec, TypeVar
 
 import numpy as np
@@ -27,7 +29,12 @@ from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8
 from planner.schemas import Pose
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="cabinplan: cabin robot planning tools")
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="cabinplan: cabin robot planning tools",
+)
 
 EXIT_INVALID = 2
 EXIT_INFEASIBLE = 3
@@ -60,6 +67,10 @@ def handle_errors(fn: Callable[P, R]) -> Callable[P, R]:
             _fail(f"{exc.reason}: {exc.message}", EXIT_INVALID)
         except PlannerError as exc:
             _fail(f"{exc.reason}: {exc.message}", 1)
+        except (typer.Exit, typer.Abort):
+            raise
+        except Exception as exc:  # a bug, not the user's fault: one line, never a traceback
+            _fail(f"internal_error: {type(exc).__name__}: {exc}", 1)
 
     return wrapper
 
@@ -162,9 +173,167 @@ def ik(
     )
 
 
+ScenarioArg = Annotated[
+    Path, typer.Argument(help="scenario file (.yaml, .yml or .json)", exists=False, dir_okay=False)
+]
+
+
+def _load(scenario: Path) -> Any:
+    from planner.scenario import load_scenario
+
+    return load_scenario(scenario)
+
+
+def _write(path: Path, data: str | bytes, what: str) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(data, bytes):
+            path.write_bytes(data)
+        else:
+            path.write_text(data, encoding="utf-8")
+    except OSError as exc:
+        _fail(f"{what}: cannot write {path} ({exc.strerror})", 1)
+
+
+class _Progress:
+    """Stage progress on stderr when it is a terminal (rich), silent otherwise."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.bar: Any = None
+        if enabled:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(
+                TextColumn("{task.description:<12}"), BarColumn(), TimeElapsedColumn(), transient=True
+            )
+            self.task = self.bar.add_task("planning", total=1.0)
+
+    def __enter__(self) -> _Progress:
+        if self.bar is not None:
+            self.bar.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, completed=fraction, description=stage)
+
+
+@app.command()
+@handle_errors
+def plan(
+    scenario: ScenarioArg,
+    output: Annotated[Path, typer.Option("-o", "--output", help="drive profile / refusal JSON")],
+    csv: Annotated[Path | None, typer.Option("--csv", help="also write the profile as CSV")] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="also plot profiles and clearance (PNG)")
+    ] = None,
+) -> None:
+    """Plan a scenario: a validated drive profile (exit 0), or a refusal with its reason (exit 3).
+
+    The JSON written to --output is the profile on success and the refusal document otherwise.
+    """
+    from planner.exceptions import PlanRefused
+    from planner.output import refusal_document, result_document
+    from planner.pipeline import Planner
+
+    sc = _load(scenario)
+    try:
+        with _Progress(sys.stderr.isatty()) as progress:
+            planner = Planner(sc, progress)
+            result = planner.plan()
+    except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
+        _write(output, json.dumps(refusal_document(exc, sc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
+    doc = result_document(sc, result)
+    _write(output, json.dumps(doc) + "\n", "--output")
+    if csv is not None:
+        _write(csv, result.profile.to_csv(), "--csv")
+    if plot is not None:
+        from planner.plot import profile_png
+
+        q = result.profile.joints
+        idx = np.unique(np.concatenate([np.arange(0, len(q), max(1, len(q) // 200)), [len(q) - 1]]))
+        clearance = planner.world.clearance_profile(q[idx]) if sc.cabin is not None else None
+        png = profile_png(
+            result.profile,
+            sc.robot,
+            result.profile.t[idx],
+            clearance,
+            sc.options.clearance_m,
+            title=f"{sc.spec.name}: {result.profile.duration_s:.2f} s",
+        )
+        _write(plot, png, "--plot")
+    typer.echo(
+        f"cabinplan: {sc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, "
+        f"{len(result.profile.t)} samples, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm "
+        f"-> {output}",
+        err=True,
+    )
+
+
+@app.command()
+@handle_errors
+def check(
+    scenario: ScenarioArg,
+    profile: Annotated[
+        Path, typer.Argument(help="drive profile JSON (as written by `plan`)", dir_okay=False)
+    ],
+) -> None:
+    """Run the validation gate on a drive profile for a scenario; the report goes to stdout.
+
+    Exit 0 when every check passes, 3 when any fails.
+    """
+    from planner.collision.world import CollisionWorld
+    from planner.pipeline import gate_requirements
+    from planner.timing.profile import DriveProfile
+    from planner.validate import validate_profile
+
+    sc = _load(scenario)
+    try:
+        data = json.loads(profile.read_text(encoding="utf-8"))
+    except OSError as exc:
+        _fail(f"profile: cannot read {profile} ({exc.strerror})", EXIT_INVALID)
+    except json.JSONDecodeError as exc:
+        _fail(f"profile: not valid JSON ({exc.msg} at line {exc.lineno})", EXIT_INVALID)
+    if not isinstance(data, dict) or data.get("status", "succeeded") != "succeeded":
+        _fail("profile: not a drive profile (a refusal document or not a JSON object)", EXIT_INVALID)
+    prof = DriveProfile.from_dict(data, sc.robot)
+    payload = sc.payload.rigid_payload() if sc.payload is not None else None
+    world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
+    report = validate_profile(prof, sc.robot, world, gate_requirements(sc, payload))
+    _emit(report.to_dict())
+    if not report.passed:
+        _fail(f"validation_failed: {report.summary()}", EXIT_INFEASIBLE)
+
+
 def main() -> None:
-    """Console-script entry point."""
-    app()
+    """Console-script entry point.
+
+    OMPL's Python bindings print reference-leak warnings at interpreter exit; after a command that loaded
+    OMPL the process ends with ``os._exit`` once its output is flushed, so stderr keeps its one line.
+    """
+    import click
+
+    try:
+        rv = app(standalone_mode=False)
+        code = rv if isinstance(rv, int) else 0
+    except click.exceptions.Exit as exc:
+        code = exc.exit_code
+    except click.ClickException as exc:
+        exc.show()
+        code = exc.exit_code
+    except click.Abort:
+        typer.echo("cabinplan: aborted", err=True)
+        code = 1
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if "ompl" in sys.modules:
+        os._exit(code)
+    sys.exit(code)
 
 
 if __name__ == "__main__":

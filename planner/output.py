@@ -1,0 +1,86 @@
+"""The plan's output documents (JSON contract shared by the CLI and the HTTP API).
+
+Success::
+
+    {"robot", "scenario": {"name", "sha256"}, "status": "succeeded", "drives", "units", "sample_period_s",
+     "t", "position", "velocity", "acceleration", "effort", "joints": {"names", "position"}, "duration_s",
+     "min_clearance_m", "report": {...}, "provenance": {...}}
+
+Refusal::
+
+    {"robot", "scenario", "status": "failed", "reason", "message", "details", "provenance"}
+
+Arrays are (N samples, 8 drives) in drive order, SI units.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from planner.exceptions import PlannerError
+from planner.provenance import code_version
+
+if TYPE_CHECKING:
+    from planner.pipeline import PlanResult
+    from planner.scenario import ResolvedScenario
+
+
+def provenance(sc: ResolvedScenario) -> dict[str, Any]:
+    """Hashes of the scenario, robot description, cabin mesh and code that a plan depends on."""
+    return {
+        "scenario_sha256": sc.scenario_sha256,
+        "robot_description_sha256": sc.robot.description_sha256,
+        "cabin_mesh_sha256": sc.cabin.sha256 if sc.cabin is not None else None,
+        "cabin_source": sc.cabin_source,
+        "code": code_version(),
+    }
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.floating | float):
+        f = float(value)
+        return f if np.isfinite(f) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def result_document(sc: ResolvedScenario, result: PlanResult) -> dict[str, Any]:
+    """The success document of a validated plan."""
+    doc: dict[str, Any] = {
+        "robot": sc.robot.name,
+        "scenario": {"name": sc.spec.name, "sha256": sc.scenario_sha256},
+        "status": "succeeded",
+    }
+    doc.update(result.profile.to_dict())
+    doc["min_clearance_m"] = result.gate.min_clearance_m
+    doc["report"] = {**result.report, "gate": result.gate.to_dict()}
+    doc["provenance"] = provenance(sc)
+    return _jsonable(doc)
+
+
+def refusal_document(
+    exc: PlannerError, sc: ResolvedScenario | None = None, name: str | None = None
+) -> dict[str, Any]:
+    """The refusal document: status ``failed`` with the machine-readable reason and its evidence."""
+    doc: dict[str, Any] = {
+        "robot": sc.robot.name if sc is not None else None,
+        "scenario": {"name": sc.spec.name, "sha256": sc.scenario_sha256}
+        if sc is not None
+        else {"name": name},
+        "status": "failed",
+        **exc.to_dict(),
+    }
+    if sc is not None:
+        doc["provenance"] = provenance(sc)
+    return _jsonable(doc)

@@ -1,0 +1,554 @@
+"""The planning pipeline: resolved scenario in, validated drive profile out (or a clear refusal).
+
+Stages (each reported through the ``progress`` callback):
+
+1. ``check_start`` / ``goals``: the start must be admissible, collision-free with the requested clearance
+   and statically holdable within the drive force limits; a pose goal becomes several good exact goal
+   configurations (:mod:`planner.planning.goals`); with an approach each is tracked back along the
+   insertion line and the best line (largest clearance) gives the pre-insertion configurations.
+2. ``search``: the straight joint-space motion when it is certified clear, else OMPL
+   (:mod:`planner.planning.ompl_adapter`) to any of the pre-insertion / goal configurations, shortcut.
+3. ``smooth``: corners become certified quadratic blends (shrunk, or left sharp with a stop, where a
+   blend would not be clear).
+4. ``timing``: TOPP-RA per leg (rest to rest; legs split at sharp corners and before the approach).
+5. ``sample`` and ``validate``: sampled at the controller period and passed through the gate
+   (:mod:`planner.validate`); a gate failure on a limit re-times with tighter limits, any other failure
+   refuses.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.collision.world import CollisionWorld
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.payload import RigidPayload
+from planner.exceptions import (
+    ApproachInfeasible,
+    GoalInCollision,
+    GoalUnreachable,
+    NoPathFound,
+    PlannerError,
+    StartInvalid,
+    ValidationFailed,
+)
+from planner.planning.goals import (
+    GoalCandidate,
+    StaticForceCheck,
+    approach_lines,
+    goal_configurations,
+    track_approach,
+)
+from planner.planning.ompl_adapter import plan_joint_path, simplify_waypoints
+from planner.planning.transit import find_transit
+
+if TYPE_CHECKING:
+    from planner.scenario import ResolvedScenario
+from planner.timing.path import JointPath, LinePiece, SplinePiece, blended_polyline, segment_time_length
+from planner.timing.profile import DriveProfile, sample_legs
+from planner.timing.stage import TimedPath, TimingStage, ToppraStage
+from planner.validate import GateReport, GateRequirements, validate_profile
+
+Array = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+Progress = Callable[[str, float], None]
+
+#: Blend half-length as a fraction of the shorter neighbouring segment, then the shrink sequence.
+BLEND_FRACTIONS = (0.45, 0.2, 0.08, 0.0)
+#: Limit scalings tried when the gate finds a limit exceeded on the sampled profile.
+SAFETY_LEVELS = ((0.995, 0.97, 0.97), (0.98, 0.92, 0.92), (0.95, 0.85, 0.85))
+LIMIT_CHECKS = {"velocity", "acceleration", "effort", "consistency"}
+#: Motion checks of the first, reproducible planner attempt.
+QUICK_MOTION_CHECKS = 1500
+#: Motion-check budget of the full attempt (the time limit applies as well; when it stops the planner
+#: first, the result depends on the machine's speed).
+FULL_MOTION_CHECKS = 40_000
+#: Rail moves at least this long may use a transit posture [m].
+TRANSIT_MIN_RAIL_M = 0.5
+#: Planner step length in OMPL's scaled joint space (about seconds of motion at full drive speed):
+#: measured on the reference bay insertions, 1.0 halves the median search time against OMPL's default.
+PLANNER_RANGE = 1.0
+#: Certification margin of the gate's collision check [m].
+GATE_MOTION_MARGIN_M = 0.001
+#: Extra clearance the planner keeps beyond the requested one [m] (see Planner.__init__).
+GATE_SLACK_M = 0.003
+#: Fraction of the time limit kept for timing and validation.
+TIME_RESERVE = 0.15
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """A validated drive profile and everything that explains it."""
+
+    profile: DriveProfile
+    gate: GateReport
+    report: dict[str, Any] = field(repr=False)
+    waypoints: Array = field(repr=False)
+
+
+def single_drive_lower_bound(robot: Any, u0: Array, u1: Array) -> float:
+    """Rest-to-rest time of the slowest drive moving alone from u0 to u1 (v_max, a_max), a lower bound."""
+    d = np.abs(np.asarray(u1) - np.asarray(u0))
+    v, a = robot.limits.v_max, robot.limits.a_max
+    t = np.where(d > v * v / a, d / v + v / a, 2.0 * np.sqrt(d / a))
+    return float(np.max(t))
+
+
+def gate_requirements(sc: ResolvedScenario, payload: RigidPayload | None) -> GateRequirements:
+    """What the validation gate demands of any trajectory for this scenario."""
+    return GateRequirements(
+        start_u=sc.start_u,
+        clearance_m=sc.options.clearance_m,
+        motion_margin_m=GATE_MOTION_MARGIN_M,
+        goal_u=sc.goal_u,
+        T_base_payload_goal=sc.T_base_payload_goal,
+        T_tool_payload=sc.payload.T_tool_payload if sc.payload is not None else np.eye(4),
+        approach_direction=sc.approach_direction,
+        approach_distance_m=sc.approach_distance_m,
+        payload=payload,
+    )
+
+
+def _joint_box(world: CollisionWorld) -> tuple[Array, Array]:
+    robot = world.robot
+    ps = robot.desc.parallel_stage
+    lo, hi = robot.limits.lower.copy(), robot.limits.upper.copy()
+    g = robot.geometry
+    half = 0.5 * (max(robot.limits.upper[1:4]) - min(robot.limits.lower[1:4]))
+    lo[1:4] = [-half, ps.y_range[0], -ps.gamma_max]
+    hi[1:4] = [half, ps.y_range[1], ps.gamma_max]
+    del g
+    return lo, hi
+
+
+class Planner:
+    """Plans one resolved scenario (see the module docstring). Construct, then call :meth:`plan`.
+
+    Args:
+        scenario: The resolved scenario.
+        progress: Called with (stage name, fraction done) as the stages start.
+        timing: Factory of the timing stage, ``(robot, payload, safety) -> TimingStage`` (default:
+            :class:`~planner.timing.stage.ToppraStage`): the timing stage is pluggable.
+        naive: The benchmark's baseline: OMPL with OMPL's defaults, no straight-line, transit or
+            shortcut steps, no corner blends (the robot stops at every waypoint); the gate still decides.
+    """
+
+    def __init__(
+        self,
+        scenario: ResolvedScenario,
+        progress: Progress | None = None,
+        timing: Callable[[Any, Any, tuple[float, float, float]], TimingStage] | None = None,
+        naive: bool = False,
+    ) -> None:
+        self.sc = scenario
+        self.naive = naive
+        self.robot = scenario.robot
+        self.opts = scenario.options
+        self.progress = progress or (lambda stage, fraction: None)
+        self.payload = scenario.payload.rigid_payload() if scenario.payload is not None else None
+        self.world = CollisionWorld(self.robot, scenario.cabin, scenario.payload)
+        self.dynamics = Cabin8Dynamics(self.robot)
+        self.forces = StaticForceCheck(self.dynamics, self.payload)
+        # The planner keeps GATE_SLACK_M more than the requested clearance, so that the gate's own
+        # certification (which must prove a margin at the samples it starts from) passes on its path.
+        self.plan_clearance = self.opts.clearance_m + GATE_SLACK_M
+        self._timing_factory = timing or (lambda robot, payload, safety: ToppraStage(robot, payload, safety))
+        self.t0 = time.perf_counter()
+        self.report: dict[str, Any] = {"stages_s": {}}
+
+    # ----------------------------------------------------------------- helpers
+    def _elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def _stage(self, name: str, t_start: float) -> None:
+        self.report["stages_s"][name] = round(time.perf_counter() - t_start, 6)
+
+    def _state_ok(self, q: Array) -> bool:
+        return self.world.is_valid(q, self.plan_clearance) and self.forces.ok(q)
+
+    def _motion_ok(self, q_a: Array, q_b: Array) -> bool:
+        return self.world.check_motion(
+            q_a, q_b, self.plan_clearance, self.opts.motion_margin_m
+        ).valid and self.forces.segment_ok(q_a, q_b)
+
+    def _check_configuration(self, q: Array, what: str) -> None:
+        rep = self.world.check_state(q, self.opts.clearance_m, all_contacts=True)
+        limits = [c for c in rep.contacts if c.kind == "limit"]
+        contacts = [c.to_dict() for c in rep.contacts]
+        if what == "start":
+            if limits:
+                raise StartInvalid(
+                    f"start violates {', '.join(c.detail for c in limits)}", limits=True, contacts=contacts
+                )
+            if rep.contacts:
+                raise StartInvalid(f"start: {rep.contacts[0].detail}", contacts=contacts)
+        else:
+            if limits:
+                raise GoalUnreachable(
+                    f"goal violates {', '.join(c.detail for c in limits)}", contacts=contacts
+                )
+            if rep.contacts:
+                raise GoalInCollision(f"goal: {rep.contacts[0].detail}", contacts=contacts)
+        ratio = float(self.forces.ratios(q)[0])
+        if ratio > self.forces.fraction:
+            msg = (
+                f"{what}: holding the payload there needs {100 * ratio:.0f}% of a drive's force limit "
+                f"(at most {100 * self.forces.fraction:.0f}% allowed)"
+            )
+            if what == "start":
+                raise StartInvalid(msg, limits=True, static_force_ratio=ratio)
+            raise GoalUnreachable(msg, static_force_ratio=ratio)
+
+    # ------------------------------------------------------------------ stages
+    def goals(self) -> tuple[list[Array], list[GoalCandidate | None]]:
+        """Configurations the global search must reach, and for each its approach line (or None)."""
+        sc = self.sc
+        if sc.goal_q is not None:
+            self._check_configuration(sc.goal_q, "goal")
+            return [sc.goal_q], [None]
+        assert sc.T_base_tool_goal is not None
+        if sc.approach_direction is not None:
+            lines, line_stats = approach_lines(
+                self.world,
+                sc.T_base_tool_goal,
+                sc.approach_direction,
+                sc.approach_distance_m,
+                self.plan_clearance,
+                self.opts.motion_margin_m,
+                self.forces,
+            )
+            self.report["approach"] = {"method": "fixed_redundancy", "lines": len(lines), **line_stats}
+            if lines:
+                return [c.line[0] for c in lines if c.line is not None], list(lines)
+        cands, stats = goal_configurations(
+            self.world, sc.T_base_tool_goal, self.plan_clearance, self.forces, self.sc.start_u
+        )
+        self.report["goal_candidates"] = {"found": len(cands), **stats}
+        if not cands:
+            if stats["family_points"] == 0:
+                raise GoalUnreachable(
+                    "goal pose: no admissible configuration of the robot reaches it", **stats
+                )
+            if stats["collision"] >= max(stats["force"], 1):
+                raise GoalInCollision(
+                    "goal pose: every configuration reaching it comes within the clearance of the cabin "
+                    "or of itself",
+                    **stats,
+                )
+            raise GoalUnreachable(
+                "goal pose: no configuration reaching it can hold the payload within the drive force limits",
+                **stats,
+            )
+        if sc.approach_direction is None:
+            return [c.q for c in cands], [None] * len(cands)
+        # Fallback: let the redundancy vary along the line (QP differential IK, step by step).
+        tracked: list[GoalCandidate] = []
+        for cand in cands[:4]:
+            tr = track_approach(
+                self.world,
+                cand,
+                sc.T_base_tool_goal,
+                sc.approach_direction,
+                sc.approach_distance_m,
+                self.opts.approach_step_m,
+                self.plan_clearance,
+                self.opts.motion_margin_m,
+                self.forces,
+            )
+            if tr is not None:
+                tracked.append(tr)
+        if not tracked:
+            raise ApproachInfeasible(
+                f"approach: no goal configuration can be tracked {sc.approach_distance_m} m back along the "
+                "line within limits, margins, force limits and clearance",
+                candidates=len(cands[:4]),
+            )
+        tracked.sort(key=lambda c: -c.clearance_m)
+        self.report["approach"].update(
+            method="tracked",
+            candidates_tracked=len(tracked),
+            line_clearance_m=[round(c.clearance_m, 4) for c in tracked],
+        )
+        return [c.line[0] for c in tracked if c.line is not None], list(tracked)
+
+    def search(self, q_start: Array, targets: list[Array]) -> tuple[Array, int]:
+        """Certified waypoints from the start to one of the targets (and which)."""
+        for k, q in enumerate(targets):
+            if np.allclose(q, q_start, atol=1e-12):
+                return np.array([q_start, q]), k
+        if self.naive:  # the benchmark's baseline: the plain planner, its raw path
+            res = self._ompl(q_start, targets, max_checks=FULL_MOTION_CHECKS)
+            if res is None:
+                raise NoPathFound(
+                    f"no collision-free path found within the time limit ({self.opts.time_limit_s:g} s)",
+                    time_limit_s=self.opts.time_limit_s,
+                    planner=self.opts.planner,
+                )
+            return res
+        # The straight motion first: free when it is clear.
+        for k, q in enumerate(targets):
+            if self._motion_ok(q_start, q):
+                self.report["search"] = {"method": "straight"}
+                return np.array([q_start, q]), k
+        # A long rail move first tries a transit posture (cheap, and it solves narrow passages such as a
+        # hatch), then the sampling planner with a budget counted in motion checks (reproducible), then
+        # the planner again with the rest of the time.
+        if self.opts.simplify and abs(float(targets[0][0] - q_start[0])) >= TRANSIT_MIN_RAIL_M:
+            via = self._via_transit(q_start, targets)
+            if via is not None:
+                return via
+        res = self._ompl(q_start, targets, max_checks=QUICK_MOTION_CHECKS)
+        if res is not None:
+            return res
+        res = self._ompl(q_start, targets, max_checks=FULL_MOTION_CHECKS)
+        if res is not None:
+            return res
+        raise NoPathFound(
+            f"no collision-free path found within the time limit ({self.opts.time_limit_s:g} s, "
+            f"planner {self.opts.planner})",
+            time_limit_s=self.opts.time_limit_s,
+            planner=self.opts.planner,
+        )
+
+    def _remaining(self) -> float:
+        """Time left for search, keeping a reserve for timing and validation."""
+        return self.opts.time_limit_s * (1.0 - TIME_RESERVE) - self._elapsed()
+
+    def _ompl(self, q_start: Array, targets: list[Array], max_checks: int) -> tuple[Array, int] | None:
+        budget = self._remaining()
+        if budget <= 0:
+            return None
+        lo, hi = _joint_box(self.world)
+        res = plan_joint_path(
+            self.world,
+            q_start,
+            targets,
+            clearance=self.plan_clearance,
+            motion_margin=self.opts.motion_margin_m,
+            time_limit_s=budget,
+            seed=self.opts.seed,
+            planner=self.opts.planner,
+            simplify=self.opts.simplify and not self.naive,
+            joint_lower=lo,
+            joint_upper=hi,
+            state_ok=self.forces.ok,
+            motion_ok=self.forces.segment_ok,
+            max_motion_checks=max_checks,
+            planner_range=None if self.naive else PLANNER_RANGE,
+        )
+        if res is None:
+            self.report.setdefault("search_attempts", []).append({"method": "ompl", "max_checks": max_checks})
+            return None
+        self.report["search"] = {
+            "method": "ompl",
+            "planner": res.planner,
+            "planning_time_s": round(res.planning_time_s, 4),
+            "simplify_time_s": round(res.simplify_time_s, 4),
+            "raw_waypoints": res.raw_waypoints,
+            "waypoints": len(res.waypoints),
+            "motion_checks": res.motion_checks,
+        }
+        return res.waypoints, res.goal_index
+
+    def _connect(self, q_a: Array, targets: list[Array]) -> tuple[Array, int] | None:
+        for k, q in enumerate(targets):
+            if np.allclose(q, q_a, atol=1e-12):
+                return np.array([q_a, q]), k
+            if self._motion_ok(q_a, q):
+                return np.array([q_a, q]), k
+        res = self._ompl(q_a, targets, max_checks=FULL_MOTION_CHECKS)
+        return res
+
+    def _shortcut(self, waypoints: Array) -> Array:
+        """Greedy, deterministic shortcut.
+
+        From each kept waypoint, jump to the farthest one reachable by a certified straight motion.
+        """
+        keep = [0]
+        i = 0
+        n = len(waypoints)
+        while i < n - 1:
+            j = n - 1
+            while j > i + 1 and not self._motion_ok(waypoints[i], waypoints[j]):
+                j -= 1
+            keep.append(j)
+            i = j
+        return waypoints[keep]
+
+    def _via_transit(self, q_start: Array, targets: list[Array]) -> tuple[Array, int] | None:
+        transit = find_transit(
+            self.world,
+            q_start,
+            targets[0],
+            self.plan_clearance,
+            self.opts.motion_margin_m,
+            self.forces.ok,
+            self.forces.segment_ok,
+            self.opts.seed,
+            deadline=lambda: self._remaining() <= 0,
+        )
+        self.report.setdefault("search_attempts", []).append(
+            {"method": "transit", "found": transit is not None}
+        )
+        if transit is None:
+            return None
+        first = self._connect(q_start, [transit.q_a])
+        if first is None:
+            return None
+        second = self._connect(transit.q_b, targets)
+        if second is None:
+            return None
+        waypoints = self._shortcut(np.vstack([first[0], second[0]]))
+        if len(waypoints) > 2 and self._remaining() > 0:
+            lo, hi = _joint_box(self.world)
+            waypoints = simplify_waypoints(
+                self.world,
+                waypoints,
+                clearance=self.plan_clearance,
+                motion_margin=self.opts.motion_margin_m,
+                seed=self.opts.seed,
+                joint_lower=lo,
+                joint_upper=hi,
+                time_limit_s=self._remaining(),
+                state_ok=self.forces.ok,
+                motion_ok=self.forces.segment_ok,
+            )
+        self.report["search"] = {
+            "method": "transit",
+            "transit_candidates": transit.candidates_tried,
+            "transit_state_checks": transit.state_checks,
+            "waypoints": len(waypoints),
+        }
+        return waypoints, second[1]
+
+    def smooth(self, waypoints: Array) -> list[JointPath]:
+        """Blend corners where the blend is certified clear; split into legs at the remaining corners."""
+        n_corners = len(waypoints) - 2
+        if n_corners <= 0 or not self.opts.simplify or self.naive:
+            return [
+                JointPath((LinePiece(a, b, segment_time_length(self.robot, a, b)),))
+                for a, b in zip(waypoints[:-1], waypoints[1:], strict=True)
+            ]
+        level = np.zeros(n_corners, dtype=int)
+        while True:
+            frac = np.array([BLEND_FRACTIONS[k] for k in level])
+            path, blend_index = blended_polyline(self.robot, waypoints, frac)
+            failed = False
+            for c, idx in enumerate(blend_index):
+                if idx < 0:
+                    continue
+                piece = path.pieces[idx]
+                s = np.linspace(0.0, piece.length, 17)
+                qs = piece.evaluate(s)[0]
+                ok = self.world.check_path(qs, self.plan_clearance + 0.001, self.opts.motion_margin_m).valid
+                ok = ok and bool(np.all(self.forces.ratios(qs) <= self.forces.fraction))
+                ok = ok and all(not self.robot.violations(q) for q in qs)
+                if not ok:
+                    level[c] = min(level[c] + 1, len(BLEND_FRACTIONS) - 1)
+                    failed = True
+            if not failed:
+                break
+        self.report["smoothing"] = {
+            "corners": n_corners,
+            "blended": int(np.sum(frac > 0)),
+            "sharp": int(np.sum(frac == 0)),
+        }
+        # Split at sharp corners (the robot stops there): corner c is waypoint c + 1.
+        legs: list[JointPath] = []
+        start = 0
+        for c in range(n_corners):
+            if frac[c] == 0:
+                legs.append(blended_polyline(self.robot, waypoints[start : c + 2], frac[start:c])[0])
+                start = c + 1
+        legs.append(blended_polyline(self.robot, waypoints[start:], frac[start:])[0])
+        return legs
+
+    def time_and_validate(
+        self, legs: list[JointPath], req: GateRequirements
+    ) -> tuple[DriveProfile, GateReport, list[TimedPath]]:
+        """Time every leg, sample and gate; re-time with tighter limits when only a limit check fails."""
+        last: GateReport | None = None
+        for attempt, safety in enumerate(SAFETY_LEVELS):
+            stage = self._timing_factory(self.robot, self.payload, safety)
+            t1 = time.perf_counter()
+            timed = [stage.time_path(leg) for leg in legs]
+            self._stage(f"timing_{attempt}", t1)
+            self.progress("sample", 0.85)
+            profile, _ = sample_legs(
+                self.robot, timed, self.opts.sample_period_s, self.payload, self.dynamics
+            )
+            self.progress("validate", 0.9)
+            t2 = time.perf_counter()
+            gate = validate_profile(profile, self.robot, self.world, req, self.dynamics)
+            self._stage(f"validate_{attempt}", t2)
+            if gate.passed:
+                return profile, gate, timed
+            last = gate
+            if not {c.name for c in gate.failures} <= LIMIT_CHECKS:
+                break
+        assert last is not None
+        raise ValidationFailed(f"validation gate: {last.summary()}", report=last.to_dict())
+
+    # -------------------------------------------------------------------- main
+    def plan(self) -> PlanResult:
+        """Run every stage; returns the validated result or raises the refusal."""
+        sc = self.sc
+        t = time.perf_counter()
+        self.progress("check_start", 0.0)
+        self._check_configuration(sc.start_q, "start")
+        self._stage("check_start", t)
+        t = time.perf_counter()
+        self.progress("goals", 0.05)
+        targets, lines = self.goals()
+        self._stage("goals", t)
+        t = time.perf_counter()
+        self.progress("search", 0.15)
+        waypoints, k = self.search(sc.start_q, targets)
+        self._stage("search", t)
+        t = time.perf_counter()
+        self.progress("smooth", 0.7)
+        legs = self.smooth(waypoints)
+        line = lines[k]
+        if line is not None and line.line is not None and line.line_s is not None:
+            if len(line.line) == 2:
+                a, b = line.line
+                legs.append(JointPath((LinePiece(a, b, segment_time_length(self.robot, a, b)),)))
+            else:
+                legs.append(JointPath((SplinePiece.through(line.line_s, line.line),)))
+            waypoints = np.vstack([waypoints, line.line[1:]])
+        self._stage("smooth", t)
+        req = gate_requirements(sc, self.payload)
+        self.progress("timing", 0.75)
+        profile, gate, timed = self.time_and_validate(legs, req)
+        bound = single_drive_lower_bound(self.robot, profile.position[0], profile.position[-1])
+        self.report.update(
+            legs=len(legs),
+            leg_durations_s=[round(tp.duration, 4) for tp in timed],
+            duration_s=profile.duration_s,
+            single_drive_lower_bound_s=bound,
+            duration_ratio=profile.duration_s / bound if bound > 0 else 1.0,
+            planning_time_s=self._elapsed(),
+        )
+        self.progress("done", 1.0)
+        return PlanResult(profile, gate, self.report, waypoints)
+
+
+def plan(
+    scenario: ResolvedScenario,
+    progress: Progress | None = None,
+) -> PlanResult:
+    """Plan a resolved scenario; raises a :class:`~planner.exceptions.PlanRefused` (or GoalUnreachable)."""
+    return Planner(scenario, progress).plan()
+
+
+def refusal(exc: PlannerError) -> dict[str, Any]:
+    """The machine-readable refusal body: ``{"status": "failed", "reason", "message", "details"}``."""
+    return {"status": "failed", **exc.to_dict()}

@@ -1,0 +1,74 @@
+"""Plots of a drive profile against its limits, and of the clearance along the path (matplotlib, Agg).
+
+Kept at the edge: nothing in the planning core imports this module.
+"""
+
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+
+from planner.robots.cabin8 import Cabin8  # noqa: E402
+from planner.timing.profile import DriveProfile  # noqa: E402
+
+Array = NDArray[np.float64]
+
+
+def profile_png(
+    profile: DriveProfile,
+    robot: Cabin8,
+    clearance_t: Array | None = None,
+    clearance_m: Array | None = None,
+    required_clearance_m: float | None = None,
+    title: str = "",
+) -> bytes:
+    """PNG bytes of the profile against its limits.
+
+    Positions (fraction of travel), velocity / acceleration / effort as fractions of their limits per
+    drive, and the clearance to the cabin along the path (if given) with the required clearance.
+    """
+    lim = robot.limits
+    rows = 5 if clearance_m is not None else 4
+    fig, axes = plt.subplots(rows, 1, figsize=(11, 2.6 * rows), sharex=True)
+    t = profile.t
+    names = profile.drive_names
+    ax = axes[0]
+    span = np.maximum(lim.upper - lim.lower, 1e-9)
+    for j, n in enumerate(names):
+        ax.plot(t, (profile.position[:, j] - lim.lower[j]) / span[j], label=n, lw=1)
+    ax.set_ylabel("position\n(fraction of travel)")
+    ax.set_ylim(-0.05, 1.05)
+    ax.legend(ncol=8, fontsize=7, loc="upper center")
+    for ax, values, limit, label in (
+        (axes[1], profile.velocity, lim.v_max, "velocity / v_max"),
+        (axes[2], profile.acceleration, lim.a_max, "acceleration / a_max"),
+        (axes[3], profile.effort, lim.effort_max, "effort / effort_max"),
+    ):
+        for j, n in enumerate(names):
+            ax.plot(t, values[:, j] / limit[j], lw=1, label=n)
+        ax.axhline(1.0, color="red", lw=0.8, ls="--")
+        ax.axhline(-1.0, color="red", lw=0.8, ls="--")
+        ax.set_ylabel(label)
+        ax.set_ylim(-1.15, 1.15)
+    if clearance_m is not None and clearance_t is not None:
+        ax = axes[4]
+        ax.plot(clearance_t, 1e3 * np.asarray(clearance_m), color="black", lw=1)
+        if required_clearance_m is not None:
+            ax.axhline(1e3 * required_clearance_m, color="red", lw=0.8, ls="--", label="required")
+            ax.legend(fontsize=7)
+        ax.set_ylabel("clearance [mm]")
+        ax.set_ylim(bottom=0)
+    axes[-1].set_xlabel("t [s]")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    return buf.getvalue()

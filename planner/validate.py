@@ -1,0 +1,325 @@
+"""The validation gate: every trajectory passes it before it leaves the program.
+
+The gate trusts nothing the planner computed. From the sampled drive profile alone (plus the scenario) it
+re-derives and checks:
+
+``finite``          every value is a finite number, arrays have the right shapes;
+``time``            t starts at 0 and strictly increases with the sample period;
+``start``           the first sample is the scenario's start (1e-9), at rest;
+``end_at_rest``     the last sample is at rest;
+``goal``            the final pose is the goal (payload frame within 1 mm / 0.1 deg; drives goal: 1e-6);
+``position``        every drive within its travel (1e-9);
+``velocity``        |u_dot| <= v_max (1% tolerance);
+``acceleration``    |u_ddot| <= a_max (1%);
+``effort``          the forces recomputed here from the inverse dynamics (payload included) match the
+                    reported ones and are within effort_max (1%);
+``consistency``     the positions integrate the velocities and the velocities the accelerations
+                    (trapezoid rule, 1% of the limit per sample step), so the profile is executable;
+``workspace``       the parallel stage assembles on its working branch with every margin
+                    (limits, slider gaps, singularity margins) at every sample;
+``approach``        (with an approach) the payload frame stays within 1 mm of the insertion line, with
+                    the goal orientation (0.1 deg), from the pre-insertion pose to the goal;
+``collision``       the polyline through the samples is certified to keep the requested clearance from the
+                    cabin (and the self-clearance between bodies): between consecutive samples, not only
+                    at them (:meth:`CollisionWorld.check_path`).
+
+A failed check never stops the others: the report lists every failure with its worst value and where.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.collision.world import CollisionWorld
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.payload import RigidPayload
+from planner.exceptions import OutsideWorkspace
+from planner.kinematics.so3 import rotation_log
+from planner.robots.cabin8 import Cabin8
+from planner.timing.path import DriveGeometry
+from planner.timing.profile import DriveProfile
+
+Array = NDArray[np.float64]
+
+LIMIT_TOLERANCE = 0.01  # 1% above velocity / acceleration / force limits
+GOAL_POSITION_TOL_M = 1e-3
+GOAL_ANGLE_TOL_RAD = np.deg2rad(0.1)
+LINE_TOL_M = 1e-3
+START_TOL = 1e-9
+#: Largest extra clearance a run of samples may cost in the certified collision check [m].
+GATE_MAX_EXTRA_M = 0.0005
+#: The reported acceleration may differ from the step's mean acceleration dv/dt by this fraction of a_max
+#: (the time law's acceleration is piecewise constant and may switch within a step; the executed dv/dt
+#: itself is held to the 1% limit tolerance by the acceleration check).
+ACC_CONSISTENCY = 0.05
+
+
+@dataclass(frozen=True)
+class GateRequirements:
+    """What the trajectory must do, from the scenario."""
+
+    start_u: Array = field(repr=False)
+    clearance_m: float
+    motion_margin_m: float
+    goal_u: Array | None = field(default=None, repr=False)
+    T_base_payload_goal: Array | None = field(default=None, repr=False)
+    T_tool_payload: Array = field(default_factory=lambda: np.eye(4), repr=False)
+    approach_direction: Array | None = field(default=None, repr=False)
+    approach_distance_m: float = 0.0
+    payload: RigidPayload | None = None
+
+
+@dataclass(frozen=True)
+class Check:
+    """One check of the gate: its outcome, a readable detail, the worst value and where."""
+
+    name: str
+    passed: bool
+    detail: str
+    worst: float | None = None
+    sample: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {
+            "name": self.name,
+            "passed": bool(self.passed),
+            "detail": self.detail,
+            "worst": None if self.worst is None else float(self.worst),
+            "sample": None if self.sample is None else int(self.sample),
+        }
+
+
+@dataclass(frozen=True)
+class GateReport:
+    """Every check's outcome; ``passed`` only if all passed."""
+
+    checks: tuple[Check, ...]
+    samples: int
+    min_clearance_m: float
+    peak_ratios: dict[str, float]
+
+    @property
+    def passed(self) -> bool:
+        """True when every check passed."""
+        return all(c.passed for c in self.checks)
+
+    @property
+    def failures(self) -> list[Check]:
+        """The checks that failed."""
+        return [c for c in self.checks if not c.passed]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form of the whole report."""
+        return {
+            "passed": bool(self.passed),
+            "samples": self.samples,
+            "min_clearance_m": self.min_clearance_m,
+            "peak_ratios": self.peak_ratios,
+            "checks": [c.to_dict() for c in self.checks],
+        }
+
+    def summary(self) -> str:
+        """One line: every failure, or the number of passed checks."""
+        if self.passed:
+            return f"all {len(self.checks)} checks passed on {self.samples} samples"
+        return "; ".join(f"{c.name}: {c.detail}" for c in self.failures)
+
+
+def _ratio_check(
+    name: str, values: Array, limit: Array, robot: Cabin8, unit: str, n: int
+) -> tuple[Check, float]:
+    ratio = np.abs(values) / limit[None, :]
+    i, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+    i = i if i < n else i - n  # rows past n are per-step values (step i - n -> i - n + 1)
+    worst = float(ratio[i, j])
+    ok = worst <= 1.0 + LIMIT_TOLERANCE
+    where = f"{robot.drive_names[j]} at sample {i}, {values[i, j]:.4g} {unit}"
+    detail = f"peak {100 * worst:.1f}% of the limit ({where})"
+    return Check(name, ok, detail, worst, int(i)), worst
+
+
+def validate_profile(
+    profile: DriveProfile,
+    robot: Cabin8,
+    world: CollisionWorld,
+    req: GateRequirements,
+    dynamics: Cabin8Dynamics | None = None,
+) -> GateReport:
+    """Run every check of the gate on a sampled profile (see the module docstring)."""
+    checks: list[Check] = []
+    lim = robot.limits
+    t, u, ud, udd, eff = profile.t, profile.position, profile.velocity, profile.acceleration, profile.effort
+    n = len(t)
+    arrays_ok = all(a.shape == (n, 8) for a in (u, ud, udd, eff)) and t.ndim == 1 and n >= 2
+    finite = arrays_ok and all(np.all(np.isfinite(a)) for a in (t, u, ud, udd, eff))
+    checks.append(
+        Check("finite", bool(finite), "all values finite" if finite else "non-finite or mis-shaped arrays")
+    )
+    if not finite:
+        return GateReport(tuple(checks), n, float("nan"), {})
+    dt = np.diff(t)
+    period = profile.sample_period_s
+    time_ok = (
+        abs(t[0]) < 1e-12
+        and bool(np.all(dt > 0))
+        and bool(np.all(np.abs(dt - period) < 1e-9 * max(1.0, t[-1])))
+    )
+    checks.append(
+        Check(
+            "time",
+            time_ok,
+            f"{n} samples every {period} s" if time_ok else "t must start at 0 and step by the sample period",
+        )
+    )
+    err0 = float(np.max(np.abs(u[0] - req.start_u)))
+    checks.append(
+        Check(
+            "start",
+            err0 <= START_TOL and float(np.max(np.abs(ud[0]))) == 0.0,
+            f"start deviation {err0:.3g}",
+            err0,
+            0,
+        )
+    )
+    vend = float(np.max(np.abs(ud[-1])))
+    checks.append(Check("end_at_rest", vend == 0.0, f"final velocity {vend:.3g}", vend, n - 1))
+    # Workspace and margins at every sample.
+    try:
+        q = robot.joints_from_drives(u)
+        c = robot.constraint_values_batch(q)
+        bad = ~np.all((c >= robot.c_lower - 1e-9) & (c <= robot.c_upper + 1e-9), axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            names = ", ".join(v["name"] for v in robot.violations(q[i]))
+            checks.append(Check("workspace", False, f"sample {i} violates {names}", None, i))
+        else:
+            checks.append(
+                Check("workspace", True, "stage on its working branch with every margin at every sample")
+            )
+    except OutsideWorkspace as exc:
+        checks.append(Check("workspace", False, exc.message, None, exc.details.get("index")))
+        return GateReport(tuple(checks), n, float("nan"), {})
+    pos_lo = float(np.max(lim.lower[None, :] - u))
+    pos_hi = float(np.max(u - lim.upper[None, :]))
+    checks.append(
+        Check("position", max(pos_lo, pos_hi) <= 1e-9, f"worst excursion {max(pos_lo, pos_hi, 0.0):.3g}")
+    )
+    peaks: dict[str, float] = {}
+    # The acceleration a controller executes between samples is dv/dt: both it and the reported one count.
+    mean_acc = np.diff(ud, axis=0) / dt[:, None]
+    executed = np.vstack([udd, mean_acc])
+    for name, vals, limit, unit in (
+        ("velocity", ud, lim.v_max, "/s"),
+        ("acceleration", executed, lim.a_max, "/s^2"),
+    ):
+        chk, peaks[name] = _ratio_check(name, vals, limit, robot, unit, n)
+        checks.append(chk)
+    # Efforts: recomputed independently from the joint motion implied by the drive motion.
+    dyn = dynamics or Cabin8Dynamics(robot)
+    G_inv = np.array([robot.drive_map_jacobian(qi)[1] for qi in q])
+    qd = np.einsum("nij,nj->ni", G_inv, ud)
+    gdqd = DriveGeometry(robot)(q, qd, np.zeros_like(qd))[2]  # (dG/dt) q_dot, exact (CasADi AD)
+    qdd = np.einsum("nij,nj->ni", G_inv, udd - gdqd)
+    tau = dyn.drive_forces_batch(q, qd, qdd, req.payload)
+    mismatch = float(np.max(np.abs(tau - eff) / lim.effort_max[None, :]))
+    chk, peaks["effort"] = _ratio_check("effort", tau, lim.effort_max, robot, "N or N m", n)
+    checks.append(
+        Check(
+            "effort",
+            chk.passed and mismatch <= LIMIT_TOLERANCE,
+            chk.detail + f"; reported vs recomputed differ by {100 * mismatch:.2f}% of the limit",
+            chk.worst,
+            chk.sample,
+        )
+    )
+    # Kinematic consistency: positions integrate the velocities (trapezoid rule), and the mean
+    # acceleration of each step, dv/dt, lies between the reported accelerations at its ends (the time
+    # law's acceleration is piecewise constant, so it may switch within a step).
+    dpos = np.abs(np.diff(u, axis=0) - 0.5 * dt[:, None] * (ud[1:] + ud[:-1])) / (
+        lim.v_max[None, :] * dt[:, None]
+    )
+    lo_acc = np.minimum(udd[1:], udd[:-1])
+    hi_acc = np.maximum(udd[1:], udd[:-1])
+    dvel = np.maximum(lo_acc - mean_acc, mean_acc - hi_acc).clip(min=0.0) / lim.a_max[None, :]
+    worst_c = float(max(dpos.max(), dvel.max() / ACC_CONSISTENCY * LIMIT_TOLERANCE))
+    checks.append(
+        Check(
+            "consistency",
+            worst_c <= LIMIT_TOLERANCE,
+            f"positions integrate velocities and velocities accelerations to {100 * worst_c:.2f}% of a limit",
+            worst_c,
+        )
+    )
+    # Goal.
+    T_tool = robot.fk_batch(q)
+    T_pay = T_tool @ req.T_tool_payload
+    if req.T_base_payload_goal is not None:
+        Tg = req.T_base_payload_goal
+        dp = float(np.linalg.norm(T_pay[-1][:3, 3] - Tg[:3, 3]))
+        da = float(np.linalg.norm(rotation_log(Tg[:3, :3].T @ T_pay[-1][:3, :3])))
+        checks.append(
+            Check(
+                "goal",
+                dp <= GOAL_POSITION_TOL_M and da <= GOAL_ANGLE_TOL_RAD,
+                f"final payload pose off by {1e3 * dp:.3f} mm, {np.rad2deg(da):.4f} deg",
+                dp,
+                n - 1,
+            )
+        )
+    if req.goal_u is not None:
+        e = float(np.max(np.abs(u[-1] - req.goal_u)))
+        checks.append(Check("goal", e <= 1e-6, f"final drives off by {e:.3g}", e, n - 1))
+    # Approach line.
+    if req.approach_direction is not None and req.T_base_payload_goal is not None:
+        checks.append(_approach_check(T_pay, req))
+    # Collision: certified between consecutive samples.
+    rep = world.check_path(q, req.clearance_m, req.motion_margin_m, max_extra_m=GATE_MAX_EXTRA_M)
+    if rep.valid:
+        checks.append(
+            Check(
+                "collision", True, f"certified clearance >= {req.clearance_m} m over {rep.motion_checks} runs"
+            )
+        )
+    else:
+        what = "; ".join(c.detail for c in rep.contacts) or "not certified"
+        checks.append(
+            Check(
+                "collision", False, f"between samples {rep.first_bad} and later: {what}", None, rep.first_bad
+            )
+        )
+    probe = np.unique(np.concatenate([np.arange(0, n, max(1, n // 40)), [n - 1]]))
+    min_c = float(np.min(world.clearance_profile(q[probe]))) if world.cabin is not None else float("inf")
+    return GateReport(tuple(checks), n, min_c, peaks)
+
+
+def _approach_check(T_pay: Array, req: GateRequirements) -> Check:
+    assert req.approach_direction is not None and req.T_base_payload_goal is not None
+    d = req.approach_direction / np.linalg.norm(req.approach_direction)
+    goal_p = req.T_base_payload_goal[:3, 3]
+    rel = T_pay[:, :3, 3] - goal_p[None, :]
+    along = -(rel @ d)  # distance back from the goal along the line
+    reached = np.flatnonzero(along >= req.approach_distance_m - LINE_TOL_M)
+    if len(reached) == 0:
+        return Check(
+            "approach", False, "the payload never reaches the pre-insertion pose on the approach line"
+        )
+    k = int(reached[-1])
+    seg = rel[k:]
+    off = np.linalg.norm(seg - np.outer(seg @ d, d), axis=1)
+    Rg = req.T_base_payload_goal[:3, :3]
+    ang = np.array([np.linalg.norm(rotation_log(Rg.T @ T[:3, :3])) for T in T_pay[k:]])
+    worst_off, worst_ang = float(off.max()), float(ang.max())
+    ok = worst_off <= LINE_TOL_M and worst_ang <= GOAL_ANGLE_TOL_RAD
+    return Check(
+        "approach",
+        ok,
+        f"from sample {k}: {1e3 * worst_off:.3f} mm off the line, "
+        f"{np.rad2deg(worst_ang):.4f} deg off the goal orientation",
+        worst_off,
+        k,
+    )

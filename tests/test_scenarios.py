@@ -1,0 +1,115 @@
+"""The scenario suite: every reference cabin, plus the refusals a user must get instead of a trajectory.
+
+Each feasible scenario's profile is checked here *independently of the gate*: limits on every sample,
+at rest at both ends, start and goal, the insertion line, the parallel stage's margins, and the certified
+collision check of the sampled polyline, recomputed from the profile's drive positions.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from planner.collision.world import CollisionWorld
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.exceptions import PlannerError
+from planner.pipeline import Planner, PlanResult
+from planner.scenario import ResolvedScenario, load_scenario
+
+HERE = Path(__file__).parent / "scenarios"
+EXPECTED = yaml.safe_load((HERE / "expected.yaml").read_text())
+FEASIBLE = sorted(k for k, v in EXPECTED.items() if v["status"] == "succeeded")
+REFUSED = sorted(k for k, v in EXPECTED.items() if v["status"] == "failed")
+
+
+def test_every_scenario_file_has_an_expectation() -> None:
+    files = {p.stem for p in HERE.glob("*.yaml")} - {"expected"}
+    assert files == set(EXPECTED)
+
+
+_cache: dict[str, tuple[ResolvedScenario, PlanResult]] = {}
+
+
+def _plan(name: str) -> tuple[ResolvedScenario, PlanResult]:
+    if name not in _cache:
+        sc = load_scenario(HERE / f"{name}.yaml")
+        _cache[name] = (sc, Planner(sc).plan())
+    return _cache[name]
+
+
+@pytest.mark.parametrize("name", FEASIBLE)
+def test_feasible_scenario_gives_a_profile_that_respects_every_limit(name: str) -> None:
+    sc, res = _plan(name)
+    robot, prof = sc.robot, res.profile
+    lim = robot.limits
+    tol = 1.01
+    u, ud, udd = prof.position, prof.velocity, prof.acceleration
+    assert res.gate.passed, res.gate.summary()
+    assert np.all(np.isfinite(u)) and np.all(np.isfinite(prof.effort))
+    assert np.allclose(np.diff(prof.t), sc.options.sample_period_s, atol=1e-9)
+    assert np.all(u >= lim.lower - 1e-9) and np.all(u <= lim.upper + 1e-9)
+    assert np.all(np.abs(ud) <= tol * lim.v_max)
+    assert np.all(np.abs(udd) <= tol * lim.a_max)
+    assert np.all(np.abs(np.diff(ud, axis=0)) / sc.options.sample_period_s <= tol * lim.a_max)
+    # Efforts recomputed from the joint motion (an independent route: finite differences of the joints).
+    dyn = Cabin8Dynamics(robot)
+    q = robot.joints_from_drives(u)
+    dt = sc.options.sample_period_s
+    qd = np.gradient(q, dt, axis=0)
+    qdd = np.gradient(qd, dt, axis=0)
+    tau = dyn.drive_forces_batch(
+        q[1:-1], qd[1:-1], qdd[1:-1], sc.payload.rigid_payload() if sc.payload else None
+    )
+    assert np.all(np.abs(tau) <= 1.02 * lim.effort_max)
+    assert np.all(np.abs(prof.effort) <= tol * lim.effort_max)
+    # At rest at both ends, starting exactly at the start.
+    assert np.array_equal(ud[0], np.zeros(8)) and np.array_equal(ud[-1], np.zeros(8))
+    assert np.max(np.abs(u[0] - sc.start_u)) <= 1e-9
+    # Margins at every sample.
+    assert not any(robot.violations(qi) for qi in q[:: max(1, len(q) // 400)])
+    # Goal.
+    T_tool_payload = sc.payload.T_tool_payload if sc.payload is not None else np.eye(4)
+    T_pay = robot.fk_batch(q) @ T_tool_payload
+    if sc.T_base_payload_goal is not None:
+        assert np.linalg.norm(T_pay[-1][:3, 3] - sc.T_base_payload_goal[:3, 3]) <= 1e-3
+        R_err = sc.T_base_payload_goal[:3, :3].T @ T_pay[-1][:3, :3]
+        assert np.arccos(np.clip((np.trace(R_err) - 1) / 2, -1, 1)) <= np.deg2rad(0.1)
+    else:
+        assert np.max(np.abs(u[-1] - sc.goal_u)) <= 1e-6
+    # The insertion: from the last sample at the pre-insertion distance on, within 1 mm of the line.
+    if sc.approach_direction is not None:
+        assert sc.T_base_payload_goal is not None
+        d = sc.approach_direction
+        rel = T_pay[:, :3, 3] - sc.T_base_payload_goal[:3, 3]
+        back = -(rel @ d)
+        k = int(np.flatnonzero(back >= sc.approach_distance_m - 1e-3)[-1])
+        off = np.linalg.norm(rel[k:] - np.outer(rel[k:] @ d, d), axis=1)
+        assert off.max() <= 1e-3
+        assert k < len(q) - 10  # the insertion takes many samples
+    # Certified clearance between consecutive samples, with a fresh world.
+    world = CollisionWorld(robot, sc.cabin, sc.payload)
+    rep = world.check_path(q, sc.options.clearance_m, sc.options.motion_margin_m)
+    assert rep.valid, rep.contacts
+    assert res.gate.min_clearance_m >= sc.options.clearance_m
+    # Near time-optimal: never faster than the slowest drive alone allows.
+    assert prof.duration_s >= res.report["single_drive_lower_bound_s"] - 1e-9
+
+
+@pytest.mark.parametrize("name", REFUSED)
+def test_infeasible_scenario_is_refused_with_its_reason(name: str) -> None:
+    sc = load_scenario(HERE / f"{name}.yaml")
+    with pytest.raises(PlannerError) as info:
+        Planner(sc).plan()
+    assert info.value.reason == EXPECTED[name]["reason"]
+    assert info.value.message
+
+
+def test_a_seeded_plan_is_reproducible() -> None:
+    sc = load_scenario(HERE / "aisle-bay-insert.yaml")
+    a = Planner(sc).plan()
+    b = Planner(sc).plan()
+    assert np.array_equal(a.profile.position, b.profile.position)
+    assert np.array_equal(a.waypoints, b.waypoints)
