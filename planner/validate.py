@@ -133,14 +133,22 @@ class GateReport:
 def _ratio_check(
     name: str, values: Array, limit: Array, robot: Cabin8, unit: str, n: int
 ) -> tuple[Check, float]:
+    """Peak of |values| / limit over every row; rows past ``n`` are per-step values (step k = row - n)."""
     ratio = np.abs(values) / limit[None, :]
-    i, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-    i = i if i < n else i - n  # rows past n are per-step values (step i - n -> i - n + 1)
-    worst = float(ratio[i, j])
+    row, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+    worst = float(ratio[row, j])
     ok = worst <= 1.0 + LIMIT_TOLERANCE
-    where = f"{robot.drive_names[j]} at sample {i}, {values[i, j]:.4g} {unit}"
+    if row < n:
+        where = f"{robot.drive_names[j]} at sample {row}, {values[row, j]:.4g} {unit}"
+        sample = int(row)
+    else:
+        sample = int(row - n)
+        where = (
+            f"{robot.drive_names[j]} executed between samples {sample} and {sample + 1}, "
+            f"{values[row, j]:.4g} {unit}"
+        )
     detail = f"peak {100 * worst:.1f}% of the limit ({where})"
-    return Check(name, ok, detail, worst, int(i)), worst
+    return Check(name, ok, detail, worst, sample), worst
 
 
 def validate_profile(
@@ -188,9 +196,14 @@ def validate_profile(
     )
     vend = float(np.max(np.abs(ud[-1])))
     checks.append(Check("end_at_rest", vend == 0.0, f"final velocity {vend:.3g}", vend, n - 1))
-    # Workspace and margins at every sample.
+    # Workspace and margins at every sample. A sample that does not assemble leaves no joint trajectory:
+    # the checks that need one fail as not evaluated, the drive-space checks still run.
+    q: Array | None = None
     try:
         q = robot.joints_from_drives(u)
+    except OutsideWorkspace as exc:
+        checks.append(Check("workspace", False, exc.message, None, exc.details.get("index")))
+    if q is not None:
         c = robot.constraint_values_batch(q)
         bad = ~np.all((c >= robot.c_lower - 1e-9) & (c <= robot.c_upper + 1e-9), axis=1)
         if bad.any():
@@ -201,9 +214,6 @@ def validate_profile(
             checks.append(
                 Check("workspace", True, "stage on its working branch with every margin at every sample")
             )
-    except OutsideWorkspace as exc:
-        checks.append(Check("workspace", False, exc.message, None, exc.details.get("index")))
-        return GateReport(tuple(checks), n, float("nan"), {})
     pos_lo = float(np.max(lim.lower[None, :] - u))
     pos_hi = float(np.max(u - lim.upper[None, :]))
     checks.append(
@@ -219,24 +229,6 @@ def validate_profile(
     ):
         chk, peaks[name] = _ratio_check(name, vals, limit, robot, unit, n)
         checks.append(chk)
-    # Efforts: recomputed independently from the joint motion implied by the drive motion.
-    dyn = dynamics or Cabin8Dynamics(robot)
-    G_inv = np.array([robot.drive_map_jacobian(qi)[1] for qi in q])
-    qd = np.einsum("nij,nj->ni", G_inv, ud)
-    gdqd = DriveGeometry(robot)(q, qd, np.zeros_like(qd))[2]  # (dG/dt) q_dot, exact (CasADi AD)
-    qdd = np.einsum("nij,nj->ni", G_inv, udd - gdqd)
-    tau = dyn.drive_forces_batch(q, qd, qdd, req.payload)
-    mismatch = float(np.max(np.abs(tau - eff) / lim.effort_max[None, :]))
-    chk, peaks["effort"] = _ratio_check("effort", tau, lim.effort_max, robot, "N or N m", n)
-    checks.append(
-        Check(
-            "effort",
-            chk.passed and mismatch <= LIMIT_TOLERANCE,
-            chk.detail + f"; reported vs recomputed differ by {100 * mismatch:.2f}% of the limit",
-            chk.worst,
-            chk.sample,
-        )
-    )
     # Kinematic consistency: positions integrate the velocities (trapezoid rule), and the mean
     # acceleration of each step, dv/dt, lies between the reported accelerations at its ends (the time
     # law's acceleration is piecewise constant, so it may switch within a step).
@@ -253,6 +245,31 @@ def validate_profile(
             worst_c <= LIMIT_TOLERANCE,
             f"positions integrate velocities and velocities accelerations to {100 * worst_c:.2f}% of a limit",
             worst_c,
+        )
+    )
+    if q is None:
+        names = ["effort", "goal", "collision"]
+        if req.approach_direction is not None and req.T_base_payload_goal is not None:
+            names.insert(2, "approach")
+        for name in names:
+            checks.append(Check(name, False, "not evaluated: the parallel stage does not assemble"))
+        return GateReport(tuple(checks), n, float("nan"), peaks)
+    # Efforts: recomputed independently from the joint motion implied by the drive motion.
+    dyn = dynamics or Cabin8Dynamics(robot)
+    G_inv = np.array([robot.drive_map_jacobian(qi)[1] for qi in q])
+    qd = np.einsum("nij,nj->ni", G_inv, ud)
+    gdqd = DriveGeometry(robot)(q, qd, np.zeros_like(qd))[2]  # (dG/dt) q_dot, exact (CasADi AD)
+    qdd = np.einsum("nij,nj->ni", G_inv, udd - gdqd)
+    tau = dyn.drive_forces_batch(q, qd, qdd, req.payload)
+    mismatch = float(np.max(np.abs(tau - eff) / lim.effort_max[None, :]))
+    chk, peaks["effort"] = _ratio_check("effort", tau, lim.effort_max, robot, "N or N m", n)
+    checks.append(
+        Check(
+            "effort",
+            chk.passed and mismatch <= LIMIT_TOLERANCE,
+            chk.detail + f"; reported vs recomputed differ by {100 * mismatch:.2f}% of the limit",
+            chk.worst,
+            chk.sample,
         )
     )
     # Goal.

@@ -175,11 +175,6 @@ def test_check_refuses_a_tampered_profile(
     assert checks["consistency"]["passed"] is False
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="validate._ratio_check reads the peak of the per-step (dv/dt) rows from the reported-acceleration "
-    "rows: an executed acceleration far above a_max passes the acceleration check with 'peak 0.0%'",
-)
 def test_check_reports_the_executed_acceleration_of_a_tampered_step(tampered: tuple[Any, int]) -> None:
     """Doubling one sample's velocity makes dv/dt about 62 m/s^2 on the rail (a_max 0.5) on its two steps."""
     result, k = tampered
@@ -248,11 +243,6 @@ def test_check_on_a_profile_that_is_not_json_exits_2(tmp_path: Path) -> None:
     assert one_line(result.stderr).startswith("cabinplan: profile: not valid JSON")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="cli.check catches OSError and JSONDecodeError but not UnicodeDecodeError: a binary file "
-    "as the profile is reported as internal_error with exit 1",
-)
 def test_check_on_a_binary_profile_exits_2(planned: tuple[Any, Path]) -> None:
     _, out = planned
     result = invoke("check", TRANSFER, out / "out.png")  # the plot: not text, not JSON

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.exceptions import InvalidInput
+from planner.exceptions import InvalidInput, OutsideWorkspace
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import DriveGeometry
 from planner.timing.stage import TimedPath
@@ -78,15 +78,30 @@ class DriveProfile:
 
         Joint positions are recomputed from the drive positions (the drives are what a controller runs).
         """
+        arrays: dict[str, Array] = {}
+        for key in ("drives", "sample_period_s", "t", "position", "velocity", "acceleration", "effort"):
+            if key not in data:
+                raise InvalidInput(f"profile.{key}: missing", field=f"profile.{key}")
         try:
             names = tuple(data["drives"])
+        except TypeError:
+            msg = "profile.drives: must be a list of drive names"
+            raise InvalidInput(msg, field="profile.drives") from None
+        try:
             period = float(data["sample_period_s"])
-            arrays = {
-                k: np.asarray(data[k], dtype=float)
-                for k in ("t", "position", "velocity", "acceleration", "effort")
-            }
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InvalidInput(f"profile: missing or malformed field ({exc})", field="profile") from exc
+        except (TypeError, ValueError):
+            raise InvalidInput(
+                "profile.sample_period_s: must be a number [s]", field="profile.sample_period_s"
+            ) from None
+        for key in ("t", "position", "velocity", "acceleration", "effort"):
+            try:
+                arrays[key] = np.asarray(data[key], dtype=float)
+            except (TypeError, ValueError):
+                shape = "list of numbers" if key == "t" else "list of rows of 8 numbers"
+                raise InvalidInput(
+                    f"profile.{key}: must be a {shape} (ragged or non-numeric)",
+                    field=f"profile.{key}",
+                ) from None
         if names != robot.drive_names:
             raise InvalidInput(
                 f"profile.drives: expected {list(robot.drive_names)}, got {list(names)}",
@@ -103,7 +118,7 @@ class DriveProfile:
                 )
         try:
             joints = robot.joints_from_drives(arrays["position"])
-        except Exception:  # outside the stage workspace: the gate reports it sample by sample
+        except OutsideWorkspace:  # off the stage workspace: the gate reports it sample by sample
             joints = np.full((n[0], 8), np.nan)
         return cls(robot.drive_names, robot.drive_units, robot.joint_names, period, joints=joints, **arrays)
 

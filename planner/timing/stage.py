@@ -187,32 +187,47 @@ class ToppraStage:
             _DriveForceConstraint(self.dynamics, self.payload, sf * lim.effort_max),
         ]
         grid = _grid(path, self.grid_step, self.min_points, self.max_points)
+        # A drive that cannot even hold the payload somewhere makes the problem infeasible at any speed
+        # (and gives toppra's LP a row 0 * x <= negative, which it divides by): refuse it first, by name.
+        overload = self._static_overload(path, grid)
+        if overload is not None:
+            raise overload
         algo = toppra.algorithm.TOPPRA(constraints, adapter, gridpoints=grid, solver_wrapper="seidel")
-        _, sd, _ = algo.compute_parameterization(0.0, 0.0)
+        try:
+            _, sd, _ = algo.compute_parameterization(0.0, 0.0)
+        except (ZeroDivisionError, FloatingPointError, ValueError) as exc:
+            raise RetimingFailed(
+                f"no time law satisfies the drive limits along the path (TOPP-RA failed: {exc})",
+                grid_points=len(grid),
+            ) from None
         if sd is None or not np.all(np.isfinite(sd)):
-            # Find the first grid point whose forces at rest exceed a limit: the usual cause.
-            q = path.evaluate(grid)[0]
-            z = np.zeros_like(q)
-            tau = self.dynamics.drive_forces_batch(q, z, z, self.payload)
-            over = np.abs(tau) > sf * lim.effort_max
-            detail: dict[str, Any] = {"grid_points": len(grid)}
-            if over.any():
-                i, j = np.argwhere(over)[0]
-                detail.update(
-                    drive=self.robot.drive_names[j],
-                    static_force=float(tau[i, j]),
-                    limit=float(lim.effort_max[j]),
-                    path_fraction=float(grid[i] / path.length),
-                )
-                msg = (
-                    f"drive {self.robot.drive_names[j]} would need {abs(tau[i, j]):.0f} "
-                    f"(limit {lim.effort_max[j]:.0f}) just to hold the payload at "
-                    f"{100 * grid[i] / path.length:.0f}% of the path"
-                )
-            else:
-                msg = "no time law satisfies the drive limits along the path (TOPP-RA: not controllable)"
-            raise RetimingFailed(msg, **detail)
+            raise RetimingFailed(
+                "no time law satisfies the drive limits along the path (TOPP-RA: not controllable)",
+                grid_points=len(grid),
+            )
         sd = np.maximum(np.asarray(sd, dtype=float), 0.0)
         ss = np.asarray(algo.gridpoints, dtype=float)
         dt = 2.0 * np.diff(ss) / np.maximum(sd[:-1] + sd[1:], 1e-12)
         return TimedPath(path, ss, sd, np.concatenate([[0.0], np.cumsum(dt)]))
+
+    def _static_overload(self, path: JointPath, grid: Array) -> RetimingFailed | None:
+        """The refusal for the first grid point whose forces at rest exceed a (scaled) limit, if any."""
+        lim = self.robot.limits
+        sf = self.safety[2]
+        q = path.evaluate(grid)[0]
+        z = np.zeros_like(q)
+        tau = self.dynamics.drive_forces_batch(q, z, z, self.payload)
+        over = np.abs(tau) > sf * lim.effort_max
+        if not over.any():
+            return None
+        i, j = np.argwhere(over)[0]
+        frac = float(grid[i] / path.length) if path.length > 0 else 0.0
+        return RetimingFailed(
+            f"drive {self.robot.drive_names[j]} would need {abs(tau[i, j]):.0f} "
+            f"(limit {lim.effort_max[j]:.0f}) just to hold the payload at {100 * frac:.0f}% of the path",
+            grid_points=len(grid),
+            drive=self.robot.drive_names[j],
+            static_force=float(tau[i, j]),
+            limit=float(lim.effort_max[j]),
+            path_fraction=frac,
+        )

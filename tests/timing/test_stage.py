@@ -293,12 +293,6 @@ def test_overload_on_a_moving_drive_raises_retiming_failed_naming_the_drive(
     assert abs(tau[j]) > robot.limits.effort_max[j] == exc.details["limit"]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ZeroDivisionError,
-    reason="stage.py: toppra's seidel LP divides by zero on a force row with a = b = 0 and c > F_max "
-    "(an overloaded drive that does not move); ToppraStage.time_path lets it escape",
-)
 def test_overload_on_a_standing_drive_raises_retiming_failed(
     robot: Cabin8, dyn: Cabin8Dynamics, rail_path: JointPath
 ) -> None:
