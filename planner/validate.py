@@ -248,10 +248,10 @@ def validate_profile(
         )
     )
     if q is None:
-        names = ["effort", "goal", "collision"]
+        missing = ["effort", "goal", "collision"]
         if req.approach_direction is not None and req.T_base_payload_goal is not None:
-            names.insert(2, "approach")
-        for name in names:
+            missing.insert(2, "approach")
+        for name in missing:
             checks.append(Check(name, False, "not evaluated: the parallel stage does not assemble"))
         return GateReport(tuple(checks), n, float("nan"), peaks)
     # Efforts: recomputed independently from the joint motion implied by the drive motion.
