@@ -299,6 +299,8 @@ def check(
         _fail(f"profile: cannot read {profile} ({exc.strerror})", EXIT_INVALID)
     except json.JSONDecodeError as exc:
         _fail(f"profile: not valid JSON ({exc.msg} at line {exc.lineno})", EXIT_INVALID)
+    except UnicodeDecodeError:
+        _fail(f"profile: {profile} is not UTF-8 text (expected the JSON written by plan)", EXIT_INVALID)
     if not isinstance(data, dict) or data.get("status", "succeeded") != "succeeded":
         _fail("profile: not a drive profile (a refusal document or not a JSON object)", EXIT_INVALID)
     prof = DriveProfile.from_dict(data, sc.robot)
