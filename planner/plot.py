@@ -6,6 +6,7 @@ Kept at the edge: nothing in the planning core imports this module.
 from __future__ import annotations
 
 import io
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -16,6 +17,11 @@ from numpy.typing import NDArray  # noqa: E402
 
 from planner.robots.cabin8 import Cabin8  # noqa: E402
 from planner.timing.profile import DriveProfile  # noqa: E402
+
+if TYPE_CHECKING:
+    from planner.collision.world import CollisionWorld
+    from planner.pipeline import PlanResult
+    from planner.scenario import ResolvedScenario
 
 Array = NDArray[np.float64]
 
@@ -72,3 +78,27 @@ def profile_png(
     fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
     return buf.getvalue()
+
+
+def plan_png(sc: ResolvedScenario, result: PlanResult, world: CollisionWorld) -> bytes:
+    """PNG bytes of a validated plan: :func:`profile_png` with the clearance along the path.
+
+    The clearance (exact distances, :meth:`CollisionWorld.clearance_profile`) is measured at about 200
+    samples (every ``N // 200``-th and the last) when the scenario has a cabin.
+
+    Args:
+        sc: The resolved scenario that was planned.
+        result: Its validated result.
+        world: The collision world the plan was made in (robot, cabin, payload).
+    """
+    q = result.profile.joints
+    idx = np.unique(np.concatenate([np.arange(0, len(q), max(1, len(q) // 200)), [len(q) - 1]]))
+    clearance = world.clearance_profile(q[idx]) if sc.cabin is not None else None
+    return profile_png(
+        result.profile,
+        sc.robot,
+        result.profile.t[idx],
+        clearance,
+        sc.options.clearance_m,
+        title=f"{sc.spec.name}: {result.profile.duration_s:.2f} s",
+    )
