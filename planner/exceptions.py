@@ -138,3 +138,13 @@ class ValidationFailed(PlanRefused):
     """The validation gate rejected the trajectory; ``details['report']`` is the gate's full report."""
 
     reason = "validation_failed"
+
+
+class DeflectionNotCompensated(PlanRefused):
+    """Goal compensation did not bring the predicted deflected pose within tolerance of the request.
+
+    ``details['iterations']`` is the residual log (m, rad); ``details['violations']`` lists the limits the
+    commanded configuration would violate, when that is why.
+    """
+
+    reason = "compensation_failed"

@@ -95,6 +95,68 @@ class Masses(_Frozen):
     tool: float = Field(ge=0)
 
 
+#: Drive order of a hybrid8 description (also the keys of its drive stiffnesses).
+HYBRID8_DRIVES = ("d1", "x1", "x2", "x3", "theta3", "theta4", "d5", "theta6")
+
+
+class Section(_Frozen):
+    """Solid rectangular cross-section b x h [m], b >= h (b along the link's local z axis)."""
+
+    b: float = Field(gt=0, description="width along the link's local z axis [m]")
+    h: float = Field(gt=0, description="depth in the link's bending plane (local y) [m]")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_pair(cls, value: object) -> object:
+        if isinstance(value, list | tuple):
+            if len(value) != 2:
+                raise ValueError(f"a section is [b, h] in m, got {value}")
+            return {"b": value[0], "h": value[1]}
+        return value
+
+    @model_validator(mode="after")
+    def _wide(self) -> Section:
+        if self.b < self.h:
+            raise ValueError(f"section [b, h] = [{self.b}, {self.h}] needs b >= h (paper eq. 54's I_p)")
+        return self
+
+
+class LinkSections(_Frozen):
+    """Cross-sections of every flexible link (paper section 4: rectangular flexible beams)."""
+
+    link_ab: Section
+    link_cd: Section
+    link_ef: Section
+    platform: Section
+    column: Section
+    arm: Section
+    slide: Section
+
+
+class StiffnessSpec(_Frozen):
+    """Material, link sections and drive stiffnesses of the stiffness model (issue 7 data)."""
+
+    E_Pa: float = Field(gt=0, description="Young's modulus [Pa]")
+    G_Pa: float = Field(gt=0, description="shear modulus [Pa]")
+    sections: LinkSections
+    drives: dict[str, float] = Field(description="drive stiffness [N/m] or [N m/rad] by drive name")
+
+    @model_validator(mode="after")
+    def _drives(self) -> StiffnessSpec:
+        if set(self.drives) != set(HYBRID8_DRIVES):
+            raise ValueError(
+                f"drives must give every drive {list(HYBRID8_DRIVES)}, got {sorted(self.drives)}"
+            )
+        bad = {k: v for k, v in self.drives.items() if not (math.isfinite(v) and v > 0)}
+        if bad:
+            raise ValueError(f"drive stiffnesses must be finite and > 0, got {bad}")
+        return self
+
+    def drive_stiffness(self) -> Array:
+        """Drive stiffnesses in drive order, shape (8,) [N/m] or [N m/rad]."""
+        return np.array([self.drives[n] for n in HYBRID8_DRIVES])
+
+
 class Hybrid8Description(_Frozen):
     """Description of a hybrid rail + planar parallel stage + serial arm robot (``kind: hybrid8``)."""
 
@@ -108,6 +170,7 @@ class Hybrid8Description(_Frozen):
     serial_chain: tuple[MDHSpec, ...]
     masses: Masses
     home: dict[str, float]
+    stiffness: StiffnessSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> Hybrid8Description:
