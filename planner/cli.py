@@ -173,6 +173,38 @@ def ik(
     )
 
 
+@app.command()
+@handle_errors
+def stiffness(
+    robot: RobotArg,
+    drives: Annotated[str | None, typer.Option(help="JSON object: drive name -> position [m, rad]")] = None,
+    joints: Annotated[str | None, typer.Option(help="JSON object: joint name -> value [m, rad]")] = None,
+    wrench: Annotated[
+        str | None,
+        typer.Option(help='JSON wrench at the frame origin: [fx,fy,fz,mx,my,mz] or {"force","moment"}'),
+    ] = None,
+    payload: Annotated[
+        str | None, typer.Option(help='JSON payload: {"mass", "com"?, "inertia"? or "box"?, "grasp"?}')
+    ] = None,
+    frame: Annotated[str, typer.Option(help="tool | payload: where K, C and deflections are given")] = "tool",
+) -> None:
+    """Cartesian stiffness K, compliance C and static deflection (gravity, a wrench) at a configuration."""
+    from planner.dynamics.stiffness import stiffness_document
+
+    if (drives is None) == (joints is None):
+        _fail("stiffness: give exactly one of --drives or --joints", EXIT_INVALID)
+    _emit(
+        stiffness_document(
+            robot,
+            drives=None if drives is None else _json_arg(drives, "--drives"),
+            joints=None if joints is None else _json_arg(joints, "--joints"),
+            wrench=None if wrench is None else _json_arg(wrench, "--wrench"),
+            payload=None if payload is None else _json_arg(payload, "--payload"),
+            frame=frame,
+        )
+    )
+
+
 ScenarioArg = Annotated[
     Path, typer.Argument(help="scenario file (.yaml, .yml or .json)", exists=False, dir_okay=False)
 ]
