@@ -1,0 +1,65 @@
+"""``python -m api``: serve the HTTP API with uvicorn on the embedded defaults (127.0.0.1:8000).
+
+On a loopback host a local-only default API key (tenant ``local``) is created on first start, kept in
+``<data_dir>/local-api-key`` (mode 0600) and printed at every start-up, so ``make serve`` works at once.
+Settings come from ``CABINPLAN_*`` environment variables (see :class:`api.settings.Settings`).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import os
+import sys
+
+import uvicorn
+
+from api.app import create_app
+from api.auth import ensure_key, new_key
+from api.settings import Settings
+
+LOCAL_TENANT = "local"
+
+
+def _loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def local_key(settings: Settings) -> str:
+    """The local default key (created once, file mode 0600)."""
+    path = settings.data_dir / "local-api-key"
+    if path.is_file():
+        return path.read_text(encoding="utf-8").strip()
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    key = new_key()
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(key + "\n")
+    return key
+
+
+def main() -> None:
+    """Start uvicorn; on loopback print the local default key first."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    settings = Settings()
+    app = create_app(settings)
+    if _loopback(settings.host):
+        key = local_key(settings)
+        ctx = app.state.ctx
+        ctx.db.create_all()
+        ensure_key(ctx, LOCAL_TENANT, key, "local default key")
+        sys.stdout.write(
+            f"cabinplan: local API key (tenant {LOCAL_TENANT!r}, loopback only): {key}\n"
+            f"cabinplan: try: curl -H 'X-API-Key: {key}' http://{settings.host}:{settings.port}/api/v1/robots\n"
+        )
+        sys.stdout.flush()
+    uvicorn.run(app, host=settings.host, port=settings.port, log_level="info", access_log=False)
+
+
+if __name__ == "__main__":
+    main()

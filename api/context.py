@@ -1,0 +1,35 @@
+"""The application context: settings, database, mesh store and job runner of one app instance."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from fastapi import Request
+
+from api.db import Database
+from api.settings import Settings
+
+if TYPE_CHECKING:
+    from api.jobs import JobRunner
+    from api.store import MeshStore
+
+
+@dataclass
+class AppContext:
+    """Everything a route needs, created by :func:`api.app.create_app` and held in ``app.state.ctx``."""
+
+    settings: Settings
+    db: Database
+    store: MeshStore
+    runner: JobRunner
+
+
+def get_context(request: Request) -> AppContext:
+    """The context of the app serving ``request``."""
+    ctx = request.app.state.ctx
+    assert isinstance(ctx, AppContext)
+    return ctx
+
+
+__all__ = ["AppContext", "get_context"]

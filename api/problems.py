@@ -1,0 +1,202 @@
+"""RFC 9457 problem details: every error of the service is ``application/problem+json``.
+
+A body has ``type`` (a URN naming the problem, ``urn:cabinplan:problem:<code>``), ``title``, ``status``,
+``detail`` and, for 422, ``errors: [{field, reason}]`` with dotted field paths
+(``options.time_limit_s``). Planner errors add ``reason`` (the planner's machine-readable code) and
+``details`` (its evidence). Unexpected exceptions become a 500 problem with the exception's type only:
+never a stack trace.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from http import HTTPStatus
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import ValidationError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from planner.exceptions import PlannerError
+
+_LOG = logging.getLogger(__name__)
+
+PROBLEM_JSON = "application/problem+json"
+
+
+def problem_type(code: str) -> str:
+    """The ``type`` URI of a problem code."""
+    return f"urn:cabinplan:problem:{code}"
+
+
+class Problem(Exception):
+    """An HTTP error answered as problem+json.
+
+    Args:
+        status: HTTP status code.
+        code: Short snake_case code; the body's ``type`` is ``urn:cabinplan:problem:<code>``.
+        detail: Human-readable explanation of this occurrence.
+        errors: For 422: ``[{"field": dotted.path, "reason": text}]``.
+        headers: Extra response headers (e.g. ``Retry-After``).
+        extra: Extension members added to the body.
+    """
+
+    def __init__(
+        self,
+        status: int,
+        code: str,
+        detail: str,
+        *,
+        errors: Sequence[Mapping[str, str]] | None = None,
+        headers: Mapping[str, str] | None = None,
+        **extra: Any,
+    ) -> None:
+        super().__init__(detail)
+        self.status = status
+        self.code = code
+        self.detail = detail
+        self.errors = [dict(e) for e in errors] if errors is not None else None
+        self.headers = dict(headers or {})
+        self.extra = extra
+
+    def body(self) -> dict[str, Any]:
+        """The problem document."""
+        out: dict[str, Any] = {
+            "type": problem_type(self.code),
+            "title": _title(self.status),
+            "status": self.status,
+            "detail": self.detail,
+        }
+        if self.errors is not None:
+            out["errors"] = self.errors
+        out.update(self.extra)
+        return out
+
+    def response(self) -> JSONResponse:
+        """The problem as a response."""
+        return JSONResponse(
+            self.body(), status_code=self.status, headers=self.headers, media_type=PROBLEM_JSON
+        )
+
+
+def _title(status: int) -> str:
+    try:
+        return HTTPStatus(status).phrase
+    except ValueError:
+        return "Error"
+
+
+def _field(loc: Sequence[Any]) -> str:
+    return ".".join(str(p) for p in loc)
+
+
+def pydantic_errors(errors: Sequence[Mapping[str, Any]], drop_prefix: int = 0) -> list[dict[str, str]]:
+    """``[{field, reason}]`` of pydantic error dicts, field paths dotted (after dropping a prefix)."""
+    return [
+        {"field": _field(list(e.get("loc", ()))[drop_prefix:]), "reason": str(e.get("msg", ""))}
+        for e in errors
+    ]
+
+
+def from_planner_error(exc: PlannerError, status: int = 422) -> Problem:
+    """A planner exception as a problem (422 by default) with ``reason``, ``details`` and ``errors``.
+
+    ``errors`` lists every schema error the planner reported (``details['errors']``), else the one field
+    it names (``details['field']``).
+    """
+    listed = exc.details.get("errors")
+    if isinstance(listed, list) and listed:
+        errors = [
+            {"field": str(e.get("field", "")), "reason": str(e.get("message", e.get("reason", "")))}
+            for e in listed
+            if isinstance(e, Mapping)
+        ]
+    else:
+        field = exc.details.get("field")
+        errors = [{"field": str(field) if field else "", "reason": exc.message}]
+    details = {k: v for k, v in exc.details.items() if k != "errors"}
+    return Problem(
+        status, exc.reason, exc.message, errors=errors, reason=exc.reason, details=_jsonable(details)
+    )
+
+
+def from_validation_error(exc: ValidationError, what: str) -> Problem:
+    """A pydantic validation error of a named input (e.g. ``pose``) as a 422 problem."""
+    errors = [
+        {"field": ".".join(p for p in (what, _field(e["loc"])) if p), "reason": e["msg"]}
+        for e in exc.errors()
+    ]
+    first = errors[0]
+    return Problem(422, "invalid_input", f"{first['field']}: {first['reason']}", errors=errors)
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, str | int | float | bool) or value is None:
+        return value
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def install(app: FastAPI) -> None:
+    """Register the exception handlers that turn every error into problem+json."""
+
+    async def on_problem(_request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, Problem)
+        return exc.response()
+
+    async def on_request_validation(_request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, RequestValidationError)
+        raw = list(exc.errors())
+        errors = []
+        for e in raw:
+            loc = list(e.get("loc", ()))
+            if loc and loc[0] in ("body", "query", "path", "header"):
+                loc = loc[1:] if loc[0] == "body" else loc
+            errors.append({"field": _field(loc), "reason": str(e.get("msg", ""))})
+        first = errors[0] if errors else {"field": "", "reason": "invalid request"}
+        detail = f"{first['field']}: {first['reason']}" if first["field"] else first["reason"]
+        return Problem(422, "invalid_input", detail, errors=errors).response()
+
+    async def on_planner_error(_request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, PlannerError)
+        return from_planner_error(exc).response()
+
+    async def on_http(_request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, StarletteHTTPException)
+        code = {404: "not_found", 405: "method_not_allowed", 401: "unauthorized", 403: "forbidden"}.get(
+            exc.status_code, "http_error"
+        )
+        detail = exc.detail if isinstance(exc.detail, str) else _title(exc.status_code)
+        if exc.status_code == 404 and detail == "Not Found":
+            detail = "no such resource"
+        return Problem(exc.status_code, code, detail, headers=exc.headers or {}).response()
+
+    async def on_unexpected(_request: Request, exc: Exception) -> JSONResponse:
+        _LOG.exception("unexpected error")
+        return Problem(500, "internal_error", f"internal error ({type(exc).__name__})").response()
+
+    app.add_exception_handler(Problem, on_problem)
+    app.add_exception_handler(RequestValidationError, on_request_validation)
+    app.add_exception_handler(PlannerError, on_planner_error)
+    app.add_exception_handler(StarletteHTTPException, on_http)
+    app.add_exception_handler(Exception, on_unexpected)
+
+
+__all__ = [
+    "PROBLEM_JSON",
+    "Problem",
+    "from_planner_error",
+    "from_validation_error",
+    "install",
+    "problem_type",
+    "pydantic_errors",
+]

@@ -1,0 +1,372 @@
+"""Planning jobs: submit a scenario (202 + job id), poll, fetch profile / plot, cancel, list; the gate.
+
+``POST /plans`` validates and resolves the scenario (same schema as the CLI; ``cabin.mesh`` is a
+reference cabin name or the id of one of the tenant's uploaded cabins), checks the planning time limit
+ceiling and the tenant's quota, and commits the job (``queued``) *before* answering 202 with its id and
+``Location``. An ``Idempotency-Key`` header makes a retry return the same job instead of planning twice.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+import uuid
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Body, Header, Query, Response
+from sqlalchemy import func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import undefer
+
+from api.auth import CurrentPrincipal
+from api.context import AppContext
+from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
+from api.jobs import rows_matched
+from api.problems import Problem
+from api.routes.deps import Ctx
+from api.store import scenario_mesh_resolver
+from meshes import reference_cabin_path, reference_cabins
+from planner.exceptions import InvalidInput
+from planner.scenario import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
+
+router = APIRouter(tags=["plans"])
+
+JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+
+_SCENARIO_BODY = Body(
+    description="A scenario (the CLI's schema, see the README): robot, cabin (reference name or uploaded "
+    "cabin id), payload, start, goal, options.",
+    examples=[
+        {
+            "name": "transfer",
+            "robot": "cabin8",
+            "start": {
+                "drives": {
+                    "d1": 1.0,
+                    "x1": -0.46,
+                    "x2": 0.46,
+                    "x3": -0.09,
+                    "theta3": 1.2,
+                    "theta4": -0.8,
+                    "d5": -0.25,
+                    "theta6": 0,
+                }
+            },
+            "goal": {
+                "drives": {
+                    "d1": 2.0,
+                    "x1": -0.46,
+                    "x2": 0.46,
+                    "x3": -0.09,
+                    "theta3": 1.2,
+                    "theta4": -0.8,
+                    "d5": -0.25,
+                    "theta6": 0,
+                }
+            },
+        }
+    ],
+)
+
+
+def _canonical_sha256(data: Any) -> str:
+    return hashlib.sha256(json.dumps(data, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def job_document(row: Job, with_result: bool = False) -> dict[str, Any]:
+    """The public job document; with ``with_result`` the plan's result or refusal document too."""
+    base = f"/api/v1/plans/{row.id}"
+    doc: dict[str, Any] = {
+        "id": row.id,
+        "status": row.status,
+        "stage": row.stage,
+        "progress": row.progress,
+        "scenario": {"name": row.scenario_name, "sha256": row.provenance.get("scenario_sha256")},
+        "time_limit_s": row.time_limit_s,
+        "attempts": row.attempts,
+        "created_at": row.created_at,
+        "started_at": row.started_at,
+        "finished_at": row.finished_at,
+        "reason": row.reason,
+        "message": row.message,
+        "provenance": row.provenance,
+        "links": {"self": base},
+    }
+    if row.status == "succeeded":
+        doc["links"].update(profile_csv=f"{base}/profile.csv", plot_png=f"{base}/plot.png")
+    if with_result:
+        doc["result"] = json.loads(row.result_json) if row.result_json else None
+    return doc
+
+
+def _tenant_job(ctx: AppContext, tenant: str, job_id: str, *columns: Any) -> Job:
+    with ctx.db.session() as s:
+        row = s.scalar(select(Job).options(*columns).where(Job.id == job_id, Job.tenant == tenant))
+    if row is None:
+        raise Problem(404, "not_found", f"no plan {job_id!r}")
+    return row
+
+
+def _mesh_map(ctx: AppContext, tenant: str, spec: Scenario) -> dict[str, str]:
+    """Stored files of the tenant's meshes the scenario names; 422 for any other mesh name."""
+    meshes: dict[str, str] = {}
+    names: list[tuple[str, str, str, bool]] = []
+    if spec.cabin is not None:
+        names.append(("cabin.mesh", spec.cabin.mesh, spec.cabin.units, True))
+    if spec.payload is not None and spec.payload.mesh is not None:
+        names.append(("payload.mesh", spec.payload.mesh, spec.payload.units, False))
+    for field, name, units, cabin in names:
+        if cabin and reference_cabin_path(name) is not None:
+            continue
+        row = ctx.store.get(tenant, name)
+        if row is None:
+            hint = f" nor a reference cabin ({', '.join(reference_cabins())})" if cabin else ""
+            raise Problem(
+                422,
+                "invalid_input",
+                f"{field}: {name!r} is neither the id of an uploaded cabin{hint}",
+                errors=[{"field": field, "reason": "unknown mesh"}],
+            )
+        if row.units != units:
+            units_field = field.replace(".mesh", ".units")
+            raise Problem(
+                422,
+                "invalid_input",
+                f"{units_field}: the mesh {name[:12]}... was uploaded in {row.units!r}, "
+                f"the scenario says {units!r}",
+                errors=[{"field": units_field, "reason": f"must be {row.units!r} for this mesh"}],
+            )
+        meshes[name] = str(ctx.store.path_of(row))
+    return meshes
+
+
+def _resolve(ctx: AppContext, tenant: str, body: Any) -> tuple[Scenario, ResolvedScenario, dict[str, str]]:
+    spec = scenario_from_dict(body, source="request")
+    ceiling = ctx.settings.time_limit_ceiling_s
+    if spec.options.time_limit_s > ceiling:
+        raise Problem(
+            422,
+            "invalid_input",
+            f"options.time_limit_s: {spec.options.time_limit_s} s exceeds the service's ceiling of "
+            f"{ceiling} s",
+            errors=[{"field": "options.time_limit_s", "reason": f"must be at most {ceiling}"}],
+        )
+    meshes = _mesh_map(ctx, tenant, spec)
+    empty = ctx.settings.data_dir / "empty"
+    empty.mkdir(parents=True, exist_ok=True)
+    resolved = resolve_scenario(spec, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes))
+    return spec, resolved, meshes
+
+
+def _replay(
+    ctx: AppContext, tenant: str, key: str, request_sha256: str, response: Response
+) -> dict[str, Any] | None:
+    with ctx.db.session() as s:
+        row = s.scalar(select(Job).where(Job.tenant == tenant, Job.idempotency_key == key))
+    if row is None:
+        return None
+    if row.request_sha256 != request_sha256:
+        raise Problem(
+            422,
+            "idempotency_key_reused",
+            "this Idempotency-Key was already used with a different request body",
+            errors=[{"field": "Idempotency-Key", "reason": "reused with a different body"}],
+            plan_id=row.id,
+        )
+    response.status_code = 200
+    response.headers["Location"] = f"/api/v1/plans/{row.id}"
+    response.headers["Idempotent-Replayed"] = "true"
+    return job_document(row)
+
+
+@router.post("/plans", status_code=202, summary="Submit a scenario for planning")
+def submit(
+    ctx: Ctx,
+    principal: CurrentPrincipal,
+    response: Response,
+    body: Annotated[dict[str, Any], _SCENARIO_BODY],
+    idempotency_key: Annotated[
+        str | None,
+        Header(alias="Idempotency-Key", max_length=200, description="Same key + same body = same job."),
+    ] = None,
+) -> dict[str, Any]:
+    """Queue a planning job: 202 with the job document and ``Location``.
+
+    Invalid scenarios give 422 naming the field; a ``time_limit_s`` above the ceiling gives 422 naming
+    ``options.time_limit_s``; a tenant with too many queued + running jobs gets 429 with ``Retry-After``.
+    """
+    tenant = principal.tenant
+    request_sha256 = _canonical_sha256(body)
+    if idempotency_key is not None:
+        replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
+        if replay is not None:
+            return replay
+    spec, resolved, meshes = _resolve(ctx, tenant, body)
+    from planner.output import provenance
+
+    with ctx.db.session() as s:
+        active = s.scalar(
+            select(func.count()).select_from(Job).where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
+        )
+    limit = ctx.settings.tenant_max_active_jobs
+    if (active or 0) >= limit:
+        raise Problem(
+            429,
+            "quota_exceeded",
+            f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
+            headers={"Retry-After": str(ctx.settings.retry_after_s)},
+            active_jobs=int(active or 0),
+            limit=limit,
+        )
+    row = Job(
+        id=uuid.uuid4().hex,
+        tenant=tenant,
+        status="queued",
+        progress=0.0,
+        scenario=spec.model_dump(mode="json"),
+        scenario_name=spec.name,
+        request_sha256=request_sha256,
+        idempotency_key=idempotency_key,
+        meshes=meshes,
+        provenance=provenance(resolved),
+        time_limit_s=float(spec.options.time_limit_s),
+        attempts=0,
+        created_at=now_s(),
+    )
+    try:
+        with ctx.db.session() as s:
+            s.add(row)
+    except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
+        if idempotency_key is None:
+            raise
+        replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
+        if replay is None:
+            raise
+        return replay
+    ctx.runner.wake()
+    response.headers["Location"] = f"/api/v1/plans/{row.id}"
+    return job_document(row)
+
+
+@router.get("/plans", summary="List the tenant's plans (paged, newest first)")
+def list_plans(
+    ctx: Ctx,
+    principal: CurrentPrincipal,
+    status: Annotated[JobStatus | None, Query(description="Only plans in this state.")] = None,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 20,
+    offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
+) -> dict[str, Any]:
+    """``{"items": [job, ...], "total", "limit", "offset"}`` without results."""
+    limit = min(limit, ctx.settings.page_size_max)
+    where = [Job.tenant == principal.tenant]
+    if status is not None:
+        where.append(Job.status == status)
+    with ctx.db.session() as s:
+        rows = s.scalars(
+            select(Job).where(*where).order_by(Job.created_at.desc(), Job.id).limit(limit).offset(offset)
+        ).all()
+        total = s.scalar(select(func.count()).select_from(Job).where(*where)) or 0
+    return {"items": [job_document(r) for r in rows], "total": int(total), "limit": limit, "offset": offset}
+
+
+@router.get("/plans/{plan_id}", summary="A plan's status, progress, provenance and result")
+def get_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str, Any]:
+    """The job document; once finished, ``result`` is the drive profile or the refusal document."""
+    row = _tenant_job(ctx, principal.tenant, plan_id, undefer(Job.result_json))
+    return job_document(row, with_result=True)
+
+
+def _finished_file(ctx: AppContext, tenant: str, plan_id: str, column: Any, what: str) -> Any:
+    row = _tenant_job(ctx, tenant, plan_id, undefer(column))
+    if row.status in ACTIVE_STATES:
+        raise Problem(
+            409, "not_finished", f"plan {plan_id} is {row.status}; the {what} exists once it succeeds"
+        )
+    value = getattr(row, column.key)
+    if row.status != "succeeded" or value is None:
+        raise Problem(404, "not_found", f"plan {plan_id} {row.status}: it has no {what}")
+    return value
+
+
+@router.get(
+    "/plans/{plan_id}/profile.csv",
+    summary="The drive profile as CSV",
+    response_class=Response,
+    responses={200: {"content": {"text/csv": {}}}},
+)
+def get_profile_csv(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
+    """One row per sample: ``t_s``, then position, velocity, acceleration, effort of each drive."""
+    csv = _finished_file(ctx, principal.tenant, plan_id, Job.profile_csv, "profile")
+    return Response(csv, media_type="text/csv; charset=utf-8")
+
+
+@router.get(
+    "/plans/{plan_id}/plot.png",
+    summary="Plot of the profile against the limits and of the clearance",
+    response_class=Response,
+    responses={200: {"content": {"image/png": {}}}},
+)
+def get_plot_png(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
+    """The plot made by the worker when the job finished."""
+    png = _finished_file(ctx, principal.tenant, plan_id, Job.plot_png, "plot")
+    return Response(png, media_type="image/png")
+
+
+@router.delete("/plans/{plan_id}", summary="Cancel a plan")
+def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str, Any]:
+    """Queued -> cancelled; running -> its worker is killed, cancelled. Finished plans give 409."""
+    row = _tenant_job(ctx, principal.tenant, plan_id)
+    if row.status == "cancelled":
+        return job_document(row)
+    if row.status in TERMINAL_STATES:
+        raise Problem(409, "already_finished", f"plan {plan_id} already {row.status}")
+    with ctx.db.session() as s:
+        cancelled = rows_matched(
+            s.execute(
+                update(Job)
+                .where(Job.id == plan_id, Job.status == "queued")
+                .values(
+                    status="cancelled",
+                    reason="cancelled",
+                    message="cancelled by the client",
+                    finished_at=now_s(),
+                )
+            )
+        )
+    if not cancelled:
+        ctx.runner.cancel(plan_id)
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            row = _tenant_job(ctx, principal.tenant, plan_id)
+            if row.status in TERMINAL_STATES:
+                break
+            time.sleep(0.05)
+    row = _tenant_job(ctx, principal.tenant, plan_id)
+    if row.status != "cancelled":
+        raise Problem(409, "already_finished", f"plan {plan_id} {row.status} before it could be cancelled")
+    return job_document(row)
+
+
+@router.post("/plans:validate", summary="Run the validation gate on a caller's drive profile")
+def validate(
+    ctx: Ctx,
+    principal: CurrentPrincipal,
+    scenario: Annotated[dict[str, Any], Body(description="The scenario the profile claims to solve.")],
+    profile: Annotated[dict[str, Any], Body(description="A drive profile document (as GET /plans/{id}).")],
+) -> dict[str, Any]:
+    """The gate's report (``passed`` and every check); a profile that fails the gate is a 200 answer."""
+    from planner.collision.world import CollisionWorld
+    from planner.pipeline import gate_requirements
+    from planner.timing.profile import DriveProfile
+    from planner.validate import validate_profile
+
+    _, sc, _ = _resolve(ctx, principal.tenant, scenario)
+    if profile.get("status", "succeeded") != "succeeded":
+        raise InvalidInput("profile: not a drive profile (a refusal document)", field="profile.status")
+    prof = DriveProfile.from_dict(profile, sc.robot)
+    payload = sc.payload.rigid_payload() if sc.payload is not None else None
+    world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
+    report = validate_profile(prof, sc.robot, world, gate_requirements(sc, payload))
+    out: dict[str, Any] = report.to_dict()
+    return out

@@ -1,0 +1,69 @@
+"""Service settings, read from the environment (prefix ``CABINPLAN_``) with embedded defaults.
+
+Every field can be set as ``CABINPLAN_<FIELD>`` (e.g. ``CABINPLAN_DATABASE_URL``, ``CABINPLAN_WORKERS``).
+Sizes are in bytes, times in seconds. The defaults serve one machine on 127.0.0.1 with SQLite in
+``./var/cabinplan``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Configuration of the HTTP service (see the README's settings table)."""
+
+    model_config = SettingsConfigDict(env_prefix="CABINPLAN_", extra="ignore", frozen=True)
+
+    host: str = Field("127.0.0.1", description="Interface uvicorn binds to.")
+    port: int = Field(8000, ge=1, le=65535, description="TCP port.")
+    data_dir: Path = Field(
+        Path("var/cabinplan"), description="Folder of the SQLite file and uploaded meshes."
+    )
+    database_url: str | None = Field(
+        None,
+        description="SQLAlchemy URL; default sqlite:///<data_dir>/cabinplan.db. PostgreSQL: "
+        "postgresql+psycopg://user@host:5432/db.",
+    )
+    database_schema: str | None = Field(
+        None, pattern=r"^[a-z_][a-z0-9_]{0,62}$", description="PostgreSQL schema of the tables (created)."
+    )
+    workers: int = Field(2, ge=1, le=64, description="Planning jobs run at the same time (one process each).")
+    job_grace_s: float = Field(
+        15.0,
+        ge=0.0,
+        le=600.0,
+        description="Wall-clock grace beyond a job's time_limit_s before it is killed.",
+    )
+    max_body_bytes: int = Field(
+        16 << 20, ge=1024, description="Largest request body except mesh uploads (a profile is ~3 MB)."
+    )
+    max_upload_bytes: int = Field(50 << 20, ge=1024, description="Largest mesh upload (multipart body).")
+    max_mesh_faces: int = Field(500_000, ge=1, description="Largest accepted face count of an uploaded mesh.")
+    time_limit_ceiling_s: float = Field(
+        120.0, gt=0.0, le=600.0, description="Largest options.time_limit_s a scenario may ask for."
+    )
+    tenant_max_active_jobs: int = Field(4, ge=1, description="Queued + running jobs allowed per tenant.")
+    retry_after_s: int = Field(5, ge=1, description="Retry-After of a 429 (quota) answer.")
+    admin_key: SecretStr | None = Field(None, description="API key of the administrator (manages keys).")
+    page_size_max: int = Field(100, ge=1, le=1000, description="Largest page of GET /plans and /cabins.")
+    forkserver_preload: bool = Field(
+        True, description="Import the planner once in the forkserver so that each job forks warm."
+    )
+
+    def resolved_database_url(self) -> str:
+        """The database URL, defaulting to the SQLite file in the data directory."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'cabinplan.db').resolve()}"
+
+    @property
+    def mesh_dir(self) -> Path:
+        """Folder of the uploaded mesh files, named by their SHA-256."""
+        return self.data_dir / "meshes"
+
+
+__all__ = ["Settings"]

@@ -1,0 +1,208 @@
+"""The cabin mesh store: uploaded bytes on disk by content hash, metadata per tenant in the database.
+
+A mesh's id is the SHA-256 of its bytes. The file is written once (atomically, fsynced) as
+``<data_dir>/meshes/<sha256>.<ext>``, shared by tenants who upload the same bytes; each tenant has its
+own metadata row, so one tenant never sees another's meshes. Uploads are parsed and validated with
+:func:`planner.collision.mesh_loader.load_mesh` before anything is stored.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Literal
+
+from sqlalchemy import func, select
+
+from api.db import Database, Mesh, now_s
+from api.problems import Problem
+from meshes import reference_cabin_path
+from planner.collision.mesh_loader import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
+from planner.exceptions import InvalidInput, InvalidMesh
+from planner.scenario import MeshResolver
+
+_LOG = logging.getLogger(__name__)
+
+
+def scenario_mesh_resolver(meshes: dict[str, str]) -> MeshResolver:
+    """A scenario mesh resolver mapping a tenant's mesh ids to their files, refusing any other file.
+
+    Reference cabin names pass through (``None``: :func:`~planner.scenario.resolve_scenario` finds them);
+    any other name raises, so a scenario sent over HTTP never reads a file of the server.
+
+    Args:
+        meshes: Mesh id -> stored file path.
+    """
+
+    def resolve(name: str) -> Path | bytes | None:
+        if name in meshes:
+            return Path(meshes[name])
+        if reference_cabin_path(name) is not None:
+            return None
+        raise InvalidInput(f"mesh {name!r}: not an uploaded mesh id of this tenant", field="cabin.mesh")
+
+    return resolve
+
+
+def mesh_document(row: Mesh) -> dict[str, Any]:
+    """The public description of a stored mesh."""
+    return {
+        "id": row.sha256,
+        "name": row.name,
+        "filename": row.filename,
+        "units": row.units,
+        "byte_size": row.byte_size,
+        "n_faces": row.n_faces,
+        "n_vertices": row.n_vertices,
+        "bounds_min_m": row.report.get("bounds_min_m"),
+        "bounds_max_m": row.report.get("bounds_max_m"),
+        "is_closed": row.report.get("is_closed"),
+        "reference": False,
+        "created_at": row.created_at,
+    }
+
+
+class MeshStore:
+    """Uploaded meshes of every tenant.
+
+    Args:
+        db: The database holding the metadata rows.
+        root: Folder of the mesh files (created).
+        limits: Caps applied when an upload is parsed.
+    """
+
+    def __init__(self, db: Database, root: Path, limits: MeshLimits) -> None:
+        self.db = db
+        self.root = root
+        self.limits = limits
+        root.mkdir(parents=True, exist_ok=True)
+
+    def path_of(self, row: Mesh) -> Path:
+        """File of a stored mesh."""
+        return self.root / f"{row.sha256}{Path(row.filename).suffix.lower()}"
+
+    def add(
+        self, tenant: str, data: bytes, filename: str, units: Literal["m", "mm"], name: str
+    ) -> tuple[Mesh, bool]:
+        """Validate and store an upload; returns (metadata row, created) (``False`` when already stored).
+
+        Raises:
+            Problem: 422 with the loader's reason (``details.check``) when the mesh cannot be used; 409 when
+                the same bytes are already stored for this tenant with other units.
+        """
+        ext = Path(filename).suffix.lower().lstrip(".")
+        if ext not in SUPPORTED_EXTENSIONS:
+            raise Problem(
+                422,
+                "invalid_mesh",
+                f"file: extension {('.' + ext) if ext else '(none)'!r} is not one of "
+                f"{', '.join('.' + e for e in SUPPORTED_EXTENSIONS)}",
+                errors=[{"field": "file", "reason": "unsupported extension"}],
+                reason="invalid_mesh",
+                details={"check": "name", "file": filename},
+            )
+        try:
+            mesh = load_mesh(data, units=units, name=filename, limits=self.limits)
+        except InvalidMesh as exc:
+            raise Problem(
+                422,
+                "invalid_mesh",
+                exc.message,
+                errors=[{"field": "file", "reason": exc.message}],
+                reason=exc.reason,
+                details={k: _plain(v) for k, v in exc.details.items()},
+            ) from None
+        with self.db.session() as s:
+            found = s.scalar(select(Mesh).where(Mesh.tenant == tenant, Mesh.sha256 == mesh.sha256))
+            if found is not None:
+                if found.units != units:
+                    raise Problem(
+                        409,
+                        "mesh_units_conflict",
+                        f"this mesh is already stored (id {found.sha256}) with units {found.units!r}",
+                        id=found.sha256,
+                    )
+                return found, False
+        row = Mesh(
+            tenant=tenant,
+            sha256=mesh.sha256,
+            name=name,
+            filename=Path(filename).name[:255],
+            units=units,
+            byte_size=len(data),
+            n_faces=mesh.report.n_faces,
+            n_vertices=mesh.report.n_vertices,
+            report={k: _plain(v) for k, v in mesh.report.to_dict().items()},
+            created_at=now_s(),
+        )
+        self._write(self.path_of(row), data)
+        with self.db.session() as s:
+            s.add(row)
+        return row, True
+
+    def get(self, tenant: str, mesh_id: str) -> Mesh | None:
+        """The tenant's mesh of that id, or ``None``."""
+        with self.db.session() as s:
+            return s.scalar(select(Mesh).where(Mesh.tenant == tenant, Mesh.sha256 == mesh_id))
+
+    def list(self, tenant: str, limit: int, offset: int) -> tuple[list[Mesh], int]:
+        """A page of the tenant's meshes (newest first) and their total count."""
+        with self.db.session() as s:
+            rows = s.scalars(
+                select(Mesh)
+                .where(Mesh.tenant == tenant)
+                .order_by(Mesh.created_at.desc(), Mesh.pk.desc())
+                .limit(limit)
+                .offset(offset)
+            ).all()
+            total = s.scalar(select(func.count()).select_from(Mesh).where(Mesh.tenant == tenant)) or 0
+        return list(rows), int(total)
+
+    def delete(self, tenant: str, mesh_id: str) -> bool:
+        """Forget the tenant's mesh; the file goes when no tenant refers to it. ``False`` if unknown."""
+        with self.db.session() as s:
+            row = s.scalar(select(Mesh).where(Mesh.tenant == tenant, Mesh.sha256 == mesh_id))
+            if row is None:
+                return False
+            path = self.path_of(row)
+            s.delete(row)
+            s.flush()
+            others = s.scalar(select(func.count()).select_from(Mesh).where(Mesh.sha256 == mesh_id)) or 0
+        if not others:
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                pass
+        return True
+
+    @staticmethod
+    def _write(path: Path, data: bytes) -> None:
+        """Write ``data`` to ``path`` atomically (temp file, fsync, rename), unless it already exists."""
+        if path.is_file() and path.stat().st_size == len(data):
+            return
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".upload-")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+
+def _plain(value: Any) -> Any:
+    """JSON-friendly copy of report values (tuples become lists)."""
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, str | int | float | bool) or value is None:
+        return value
+    return str(value)
+
+
+__all__ = ["MeshStore", "mesh_document", "scenario_mesh_resolver"]

@@ -1,0 +1,80 @@
+"""The child side of a planning job: runs in its own process, talks to the parent through a pipe.
+
+The parent (:mod:`api.jobs`) sends nothing after start: the job description (scenario as submitted and
+the tenant's mesh files it names) is the process argument. The child sends ``("progress", stage,
+fraction)`` messages while planning and one ``("done", outcome)`` at the end; the parent writes
+everything to the database. Plot and CSV are made here, never in the server's event loop.
+
+Importing this module imports the planner, so the forkserver can preload it once and every job forks
+warm.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from api.store import scenario_mesh_resolver
+from planner.exceptions import PlannerError
+from planner.output import refusal_document, result_document
+from planner.pipeline import Planner
+from planner.plot import plan_png
+from planner.scenario import ResolvedScenario, resolve_scenario, scenario_from_dict
+
+_LOG = logging.getLogger(__name__)
+
+
+def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
+    """Plan one job; returns the outcome ``{"status", "reason", "message", "document", "csv", "png"}``.
+
+    Args:
+        job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}``.
+        send: Called with ``(stage, fraction)`` as the planner's stages start.
+    """
+    sc: ResolvedScenario | None = None
+    try:
+        spec = scenario_from_dict(job["scenario"], source="scenario")
+        sc = resolve_scenario(
+            spec, base_dir=Path(job["empty_dir"]), mesh_resolver=scenario_mesh_resolver(job["meshes"])
+        )
+        planner = Planner(sc, send)
+        result = planner.plan()
+    except PlannerError as exc:
+        name = job["scenario"].get("name") if isinstance(job["scenario"], dict) else None
+        doc = refusal_document(exc, sc, name=name)
+        return {"status": "failed", "reason": exc.reason, "message": exc.message, "document": json.dumps(doc)}
+    doc = result_document(sc, result)
+    return {
+        "status": "succeeded",
+        "reason": None,
+        "message": f"{sc.spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
+        "document": json.dumps(doc),
+        "csv": result.profile.to_csv(),
+        "png": plan_png(sc, result, planner.world),
+    }
+
+
+def run_job(job: dict[str, Any], conn: Connection) -> None:
+    """Process entry point: plan ``job`` and send progress and the outcome through ``conn``."""
+
+    def progress(stage: str, fraction: float) -> None:
+        conn.send(("progress", str(stage), float(fraction)))
+
+    try:
+        outcome = plan_job(job, progress)
+    except Exception as exc:  # a bug in the planner: report it as a failed job, never hang
+        _LOG.exception("job %s crashed", job.get("id"))
+        outcome = {
+            "status": "failed",
+            "reason": "internal_error",
+            "message": f"internal error: {type(exc).__name__}: {exc}",
+            "document": None,
+        }
+    conn.send(("done", outcome))
+    conn.close()
+
+
+__all__ = ["plan_job", "run_job"]

@@ -1,0 +1,132 @@
+"""Fixtures of the HTTP service tests: the real app on a real SQLite file in tmp_path."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from fastapi.testclient import TestClient
+
+from api.app import create_app
+from api.auth import create_key
+from api.settings import Settings
+
+ADMIN_KEY = "cpk_test-admin-key-0123456789"
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def scenario(name: str, **options: Any) -> dict[str, Any]:
+    """A scenario of the suite as a dict (the HTTP body), with options overridden."""
+    data: dict[str, Any] = yaml.safe_load((SCENARIOS / f"{name}.yaml").read_text(encoding="utf-8"))
+    data.setdefault("options", {}).update(options)
+    return data
+
+
+def free_transfer(d1_goal: float = 1.6, **options: Any) -> dict[str, Any]:
+    """A short free-space rail move without payload: plans in well under a second."""
+    home = {"d1": 1.0, "x1": -0.46, "x2": 0.46, "x3": -0.09, "theta3": 1.2, "theta4": -0.8, "d5": -0.25}
+    return {
+        "name": "free-transfer",
+        "robot": "cabin8",
+        "start": {"drives": {**home, "theta6": 0.0}},
+        "goal": {"drives": {**home, "d1": d1_goal, "theta6": 0.0}},
+        "options": {"seed": 1, "time_limit_s": 20, **options},
+    }
+
+
+def make_settings(tmp_path: Path, **overrides: Any) -> Settings:
+    values: dict[str, Any] = {
+        "data_dir": tmp_path / "data",
+        "admin_key": ADMIN_KEY,
+        "workers": 2,
+        "job_grace_s": 20.0,
+        "tenant_max_active_jobs": 4,
+        **overrides,
+    }
+    return Settings(**values)
+
+
+class Service:
+    """A running app (TestClient with lifespan) and one key per tenant."""
+
+    def __init__(self, client: TestClient, keys: dict[str, str]) -> None:
+        self.client = client
+        self.keys = keys
+
+    def h(self, tenant: str = "alpha") -> dict[str, str]:
+        return {"X-API-Key": self.keys[tenant]}
+
+
+def start_service(settings: Settings) -> Iterator[Service]:
+    app = create_app(settings)
+    with TestClient(app, raise_server_exceptions=False) as client:
+        ctx = app.state.ctx
+        keys = {t: create_key(ctx, t, f"{t} test key")[1] for t in ("alpha", "beta")}
+        keys["admin"] = ADMIN_KEY
+        yield Service(client, keys)
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
+    yield from start_service(make_settings(tmp_path_factory.mktemp("svc")))
+
+
+class IdleRunner:
+    """A job runner that never runs anything: jobs stay queued (quota, cancel-queued, fuzzing tests)."""
+
+    def __init__(self) -> None:
+        self.woken = 0
+        self.cancelled: list[str] = []
+        self.started = False
+
+    def start(self) -> None:
+        self.started = True
+
+    def stop(self) -> None:
+        self.started = False
+
+    def wake(self) -> None:
+        self.woken += 1
+
+    def cancel(self, job_id: str) -> None:
+        self.cancelled.append(job_id)
+
+    def alive(self) -> bool:
+        return self.started
+
+    def busy(self) -> int:
+        return 0
+
+
+def start_idle_service(settings: Settings) -> Iterator[Service]:
+    app = create_app(settings, runner=IdleRunner())
+    with TestClient(app, raise_server_exceptions=False) as client:
+        ctx = app.state.ctx
+        keys = {t: create_key(ctx, t, f"{t} test key")[1] for t in ("alpha", "beta")}
+        keys["admin"] = ADMIN_KEY
+        yield Service(client, keys)
+
+
+def box_stl(extents: tuple[float, float, float] = (2.0, 2.0, 6.0)) -> bytes:
+    """A closed box as binary STL bytes (metres)."""
+    import trimesh
+
+    data: bytes = trimesh.creation.box(extents=extents).export(file_type="stl")
+    return data
+
+
+def wait_for(
+    client: TestClient, headers: dict[str, str], job_id: str, timeout_s: float = 60.0
+) -> dict[str, Any]:
+    """Poll a job until it is finished; returns its document."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        doc: dict[str, Any] = client.get(f"/api/v1/plans/{job_id}", headers=headers).json()
+        if doc["status"] not in ("queued", "running") or time.monotonic() > deadline:
+            return doc
+        time.sleep(0.1)
