@@ -116,6 +116,13 @@ def fk(
     joints: Annotated[str | None, typer.Option(help="JSON object: joint name -> value [m, rad]")] = None,
 ) -> None:
     """Forward kinematics: drives (or joints) -> joints, drives and T_base_tool (row-major 4x4)."""
+    if robot == "pprs6":
+        from planner.robots import pprs6_tools
+
+        if drives is None or joints is not None:
+            _fail("fk pprs6: give --drives (w1, w2, beta, s1, s2, s3)", EXIT_INVALID)
+        _emit(pprs6_tools.fk_document(_json_arg(drives, "--drives")))
+        return
     model = _cabin8(robot)
     if (drives is None) == (joints is None):
         _fail("fk: give exactly one of --drives or --joints", EXIT_INVALID)
@@ -149,6 +156,11 @@ def ik(
     seed: Annotated[int, typer.Option(help="seed of the random restarts")] = 0,
 ) -> None:
     """Inverse kinematics of a tool pose (base frame): one admissible solution, or exit 3 if unreachable."""
+    if robot == "pprs6":  # pose {"x","y","z","phi","theta","psi"} of the platform centre
+        from planner.robots import pprs6_tools
+
+        _emit(pprs6_tools.ik_document(_json_arg(pose, "--pose")))
+        return
     from planner.redundancy.ik import IKOptions, solve_pose_ik
 
     model = _cabin8(robot)
@@ -342,6 +354,81 @@ def check(
     _emit(report.to_dict())
     if not report.passed:
         _fail(f"validation_failed: {report.summary()}", EXIT_INFEASIBLE)
+
+
+@app.command()
+@handle_errors
+def workspace(
+    robot: RobotArg,
+    orientation: Annotated[
+        str | None, typer.Option(help='JSON {"phi","theta","psi"} [rad] (default: level)')
+    ] = None,
+    step: Annotated[float, typer.Option("--step", help="grid step [m]")] = 0.005,
+    png: Annotated[Path | None, typer.Option("--png", help="also write the three views (PNG)")] = None,
+) -> None:
+    """Reachable platform positions at a fixed orientation (boundary search): volume, extents, views."""
+    if robot != "pprs6":
+        load_robot(robot)
+        _fail(f"workspace: not available for robot {robot!r} (pprs6 only)", EXIT_INVALID)
+    from planner.robots import pprs6_tools
+
+    doc, image = pprs6_tools.workspace_document(
+        None if orientation is None else _json_arg(orientation, "--orientation"),
+        step_m=step,
+        png=png is not None,
+    )
+    if png is not None:
+        _write(png, image, "--png")
+    _emit(doc)
+
+
+@app.command()
+@handle_errors
+def profile(
+    robot: RobotArg,
+    path: Annotated[
+        Path | None, typer.Argument(help="pose-path file (YAML/JSON); default: the paper's path")
+    ] = None,
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="drive profile JSON")] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="also plot the drive displacements (PNG)")
+    ] = None,
+) -> None:
+    """Pose path -> validated drive profile (TOPP-RA under the drive limits), or exit 3 with the reason."""
+    if robot != "pprs6":
+        load_robot(robot)
+        _fail(
+            f"profile: not available for robot {robot!r} (pprs6 only; cabin8 plans scenarios)", EXIT_INVALID
+        )
+    import yaml
+
+    from planner.exceptions import PlanRefused
+    from planner.robots import pprs6_tools
+
+    spec = None
+    if path is not None:
+        try:
+            spec = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            _fail(f"path: cannot read {path} ({exc.strerror})", EXIT_INVALID)
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            _fail(f"path: {path} is not YAML/JSON ({type(exc).__name__})", EXIT_INVALID)
+    try:
+        doc = pprs6_tools.profile_document(spec)
+    except PlanRefused as exc:
+        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
+    text = json.dumps(doc) + "\n"
+    if output is None:
+        sys.stdout.write(text)
+    else:
+        _write(output, text, "--output")
+    if plot is not None:
+        _write(plot, pprs6_tools.profile_png(doc), "--plot")
+    typer.echo(
+        f"cabinplan: pprs6 {doc['path']['name']}: succeeded, {doc['duration_s']:.3f} s, "
+        f"{len(doc['t'])} samples",
+        err=True,
+    )
 
 
 def main() -> None:

@@ -58,6 +58,15 @@ class OutsideWorkspace(PlannerError):
     reason = "outside_workspace"
 
 
+class ForwardKinematicsFailed(OutsideWorkspace):
+    """Numerical forward kinematics did not converge to the working assembly mode (no such assembly).
+
+    ``details`` carries the failing sample ``index``, its closure ``residual_m`` and the ``drives``.
+    """
+
+    reason = "fk_not_converged"
+
+
 class LimitViolation(PlannerError):
     """A configuration violates a joint/drive limit or a singularity margin (``details['violations']``)."""
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import lru_cache
 
-from planner.exceptions import UnknownRobot
+from planner.exceptions import InvalidInput, UnknownRobot
 from planner.robots.base import DriveLimits, RobotModel
 
 
@@ -19,7 +19,15 @@ def _cabin8(rail_length: float | None) -> RobotModel:
     return Cabin8(rail_length=rail_length)
 
 
-_FACTORIES: dict[str, Callable[[float | None], RobotModel]] = {"cabin8": _cabin8}
+def _pprs6(rail_length: float | None) -> RobotModel:
+    from planner.robots.pprs6 import Pprs6
+
+    if rail_length is not None:
+        raise InvalidInput("rail_length: the pprs6 platform has no rail", field="rail_length")
+    return Pprs6()
+
+
+_FACTORIES: dict[str, Callable[[float | None], RobotModel]] = {"cabin8": _cabin8, "pprs6": _pprs6}
 
 
 def available_robots() -> tuple[str, ...]:
