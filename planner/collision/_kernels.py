@@ -301,3 +301,694 @@ def capsule_box_distances(
             a0[i] = poses[b, 3 * i] * p0[0] + poses[b, 3 * i + 1] * p0[1] + poses[b, 3 * i + 2] * p0[2]
             a1[i] = poses[b, 3 * i] * p1[0] + poses[b, 3 * i + 1] * p1[1] + poses[b, 3 * i + 2] * p1[2]
         out[k] = segment_box_distance(a0, a1, half[b]) - radius[c]
+
+
+# ----------------------------------------------------------------------------------------------- poses
+#: Body kinds of :func:`body_poses` (the order of :data:`planner.collision.bodies.BODY_NAMES`).
+KIND_CODES = {
+    "carriage": 0,
+    "link_ab": 1,
+    "link_cd": 2,
+    "link_ef": 3,
+    "platform": 4,
+    "column": 5,
+    "arm": 6,
+    "slide": 7,
+    "payload": 8,
+}
+#: Length of the admissibility vector c(q) (:meth:`planner.robots.cabin8.Cabin8.constraint_specs`).
+N_CONSTRAINTS = 16
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _root(v: float) -> float:
+    """sqrt(v), NaN below 0 (as numpy: a link that cannot reach the rail gives NaN, never an exception)."""
+    return math.sqrt(v) if v >= 0.0 else math.nan
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _segment_pose(a: np.ndarray, b: np.ndarray, row: np.ndarray) -> None:
+    """Capsule frame from a to b into ``row`` (13): z along b - a, centred at the midpoint, length |b - a|.
+
+    The same construction as the CasADi pose function: x = helper x z normalised, y = z x x, with the
+    helper (1, 0, 0) unless z is within ~26 degrees of it, then (0, 1, 0).
+    """
+    dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    zx, zy, zz = dx / length, dy / length, dz / length
+    if abs(zx) < 0.9:
+        hx, hy, hz = 1.0, 0.0, 0.0
+    else:
+        hx, hy, hz = 0.0, 1.0, 0.0
+    xx, xy, xz = hy * zz - hz * zy, hz * zx - hx * zz, hx * zy - hy * zx
+    n = math.sqrt(xx * xx + xy * xy + xz * xz)
+    xx, xy, xz = xx / n, xy / n, xz / n
+    yx, yy, yz = zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx
+    row[0], row[1], row[2] = xx, xy, xz
+    row[3], row[4], row[5] = yx, yy, yz
+    row[6], row[7], row[8] = zx, zy, zz
+    row[9], row[10], row[11] = 0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])
+    row[12] = length
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def constraints(
+    q: np.ndarray, stage: np.ndarray, c: np.ndarray
+) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """The admissibility vector c(q) into ``c`` (16); returns the stage points (x1, x2, x3, B, C, E).
+
+    Stage (paper eq. 4): B, C = (x, y) -/+ L2/2 (cos g, sin g); x1 = x_B - sqrt(L1^2 - y_B^2),
+    x2 = x_C + sqrt(L3^2 - y_C^2), E = (A + B)/2, x3 = x_E + sqrt(L4^2 - y_E^2); then the values of
+    ``planner.robots.cabin8.constraint_terms`` in its order (NaN where a link cannot reach the rail).
+    """
+    L1, L2, L3, L4 = stage[0], stage[1], stage[2], stage[3]
+    d1, x, y, g = q[0], q[1], q[2], q[3]
+    h = 0.5 * L2
+    cg, sg = math.cos(g), math.sin(g)
+    xb, yb = x - h * cg, y - h * sg
+    xc, yc = x + h * cg, y + h * sg
+    x1 = xb - _root(L1 * L1 - yb * yb)
+    x2 = xc + _root(L3 * L3 - yc * yc)
+    xe, ye = 0.5 * (x1 + xb), 0.5 * yb
+    x3 = xe + _root(L4 * L4 - ye * ye)
+    c[0], c[1], c[2], c[3] = d1, x1, x2, x3
+    for i in range(4, 8):
+        c[i] = q[i]
+    c[8], c[9], c[10], c[11] = y, g, x3 - x1, x2 - x3
+    bd_x, bd_y = x2 - xb, -yb
+    cross = (xc - xb) * bd_y - (yc - yb) * bd_x
+    c[12] = -cross / (L2 * math.sqrt(bd_x * bd_x + bd_y * bd_y))
+    c[13], c[14], c[15] = yb / L1, yc / L3, ye / L4
+    return x1, x2, x3, xb, yb, xc, yc, xe, ye
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def body_poses(
+    q: np.ndarray,  # (8,) joints (d1, x, y, gamma, theta3, theta4, d5, theta6)
+    T_tool_box: np.ndarray,  # (4, 4) payload box frame in the tool frame
+    mdh: np.ndarray,  # (4, 6) per MDH link: alpha, a, theta offset, d offset, joint index, revolute (1/0)
+    stage: np.ndarray,  # (4,) L1, L2, L3, L4
+    kinds: np.ndarray,  # (B,) body kind codes (KIND_CODES)
+    poses: np.ndarray,  # (B, 13) out: R column-major, p, capsule length
+    c: np.ndarray,  # (16,) out: admissibility values c(q)
+) -> None:
+    """Body poses and the admissibility vector at one configuration, closed form (no CasADi call).
+
+    Stage points and c(q) from :func:`constraints`. Chain (eq. 10-12):
+    T_2 = Trans(x, y, d1) RotZ(gamma), then T_i = T_(i-1) RotX(alpha) TransX(a) RotZ(theta) TransZ(d).
+    The same quantities, in the same order, as the CasADi pose function and ``constraint_terms``; the
+    tests check both agree to 1e-12.
+    """
+    x1, x2, x3, xb, yb, xc, yc, xe, ye = constraints(q, stage, c)
+    d1, x, y, g = q[0], q[1], q[2], q[3]
+    cg, sg = math.cos(g), math.sin(g)
+    # Serial chain: R (3, 3) and p (3,) of frames 2..6; origins kept for the capsules.
+    R = np.empty((3, 3))
+    R[0, 0], R[0, 1], R[0, 2] = cg, -sg, 0.0
+    R[1, 0], R[1, 1], R[1, 2] = sg, cg, 0.0
+    R[2, 0], R[2, 1], R[2, 2] = 0.0, 0.0, 1.0
+    p = np.empty(3)
+    p[0], p[1], p[2] = x, y, d1
+    R2 = R.copy()
+    origins = np.empty((5, 3))  # frames 2, 3, 4, 5, 6
+    origins[0] = p
+    M = np.empty((3, 3))
+    Rn = np.empty((3, 3))
+    for i in range(4):
+        alpha, a, th0, dd0 = mdh[i, 0], mdh[i, 1], mdh[i, 2], mdh[i, 3]
+        j = int(mdh[i, 4])
+        if mdh[i, 5] > 0.5:
+            theta, d = q[j] + th0, dd0
+        else:
+            theta, d = th0, q[j] + dd0
+        ct, st = math.cos(theta), math.sin(theta)
+        cal, sal = math.cos(alpha), math.sin(alpha)
+        M[0, 0], M[0, 1], M[0, 2] = ct, -st, 0.0
+        M[1, 0], M[1, 1], M[1, 2] = st * cal, ct * cal, -sal
+        M[2, 0], M[2, 1], M[2, 2] = st * sal, ct * sal, cal
+        mp0, mp1, mp2 = a, -sal * d, cal * d
+        for r in range(3):
+            p[r] = p[r] + R[r, 0] * mp0 + R[r, 1] * mp1 + R[r, 2] * mp2
+            for k in range(3):
+                Rn[r, k] = R[r, 0] * M[0, k] + R[r, 1] * M[1, k] + R[r, 2] * M[2, k]
+        R[:, :] = Rn
+        origins[i + 1] = p
+    pa = np.empty(3)
+    pb = np.empty(3)
+    for b in range(kinds.shape[0]):
+        kind = kinds[b]
+        row = poses[b]
+        if kind == 0:  # carriage: axis-aligned at (0, -0.06, d1)
+            for i in range(9):
+                row[i] = 0.0
+            row[0] = row[4] = row[8] = 1.0
+            row[9], row[10], row[11], row[12] = 0.0, -0.06, d1, 0.0
+        elif kind == 4:  # platform: frame 2
+            for jj in range(3):
+                for i in range(3):
+                    row[3 * jj + i] = R2[i, jj]
+            row[9], row[10], row[11], row[12] = origins[0, 0], origins[0, 1], origins[0, 2], 0.0
+        elif kind == 8:  # payload: T_6 T_tool_box
+            for jj in range(3):
+                for i in range(3):
+                    row[3 * jj + i] = (
+                        R[i, 0] * T_tool_box[0, jj]
+                        + R[i, 1] * T_tool_box[1, jj]
+                        + R[i, 2] * T_tool_box[2, jj]
+                    )
+            for i in range(3):
+                row[9 + i] = (
+                    R[i, 0] * T_tool_box[0, 3]
+                    + R[i, 1] * T_tool_box[1, 3]
+                    + R[i, 2] * T_tool_box[2, 3]
+                    + p[i]
+                )
+            row[12] = 0.0
+        else:
+            if kind == 1:  # A -> B
+                pa[0], pa[1], pa[2] = x1, 0.0, d1
+                pb[0], pb[1], pb[2] = xb, yb, d1
+            elif kind == 2:  # C -> D
+                pa[0], pa[1], pa[2] = xc, yc, d1
+                pb[0], pb[1], pb[2] = x2, 0.0, d1
+            elif kind == 3:  # E -> F
+                pa[0], pa[1], pa[2] = xe, ye, d1
+                pb[0], pb[1], pb[2] = x3, 0.0, d1
+            else:  # column 2 -> 3, arm 3 -> 4, slide 4 -> 6
+                first = 0 if kind == 5 else 1 if kind == 6 else 2
+                last = 1 if kind == 5 else 2 if kind == 6 else 4
+                pa[:] = origins[first]
+                pb[:] = origins[last]
+            _segment_pose(pa, pb, row)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def admissible(c: np.ndarray, c_lo: np.ndarray, c_hi: np.ndarray) -> bool:
+    """Every admissibility value within its (already tolerance-widened) bounds; NaN is not."""
+    for i in range(c.shape[0]):
+        if not (c[i] >= c_lo[i] and c[i] <= c_hi[i]):
+            return False
+    return True
+
+
+# ------------------------------------------------------------------------------------- packed world
+# A world's constant kernel data travels in two flat buffers (float64, int64) plus the grid: a Python call
+# into a compiled function costs ~0.1 us per argument, so four arguments instead of thirty-odd matter on
+# a 20 us hot path. ``pack`` lays them out, ``_unpack`` takes views (no copies) in the same order.
+_HEADER = 10
+
+
+def pack(
+    T_tool_box: np.ndarray,
+    mdh: np.ndarray,
+    stage: np.ndarray,
+    kinds: np.ndarray,
+    fine: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],  # body, local, frac, r, bounds
+    origin: np.ndarray,
+    inv_step: float,
+    shape: np.ndarray,
+    has_grid: bool,
+    coarse: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    pair_a: np.ndarray,
+    pair_b: np.ndarray,
+    radius: np.ndarray,
+    capsule_pair: np.ndarray,
+    half: np.ndarray,
+    capsule_box: np.ndarray,
+    carriage: int,
+    table: np.ndarray,
+    table_z0: float,
+    table_dz: float,
+    c_lo: np.ndarray,
+    c_hi: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(fbuf, ibuf) of a world's kernel data, in the layout :func:`_unpack` reads."""
+    n_b, n_s, n_c, n_p, n_t = len(kinds), len(fine[3]), len(coarse[3]), len(pair_a), len(table)
+    header = [n_b, n_s, n_c, n_p, n_t, int(has_grid), int(carriage), *(int(x) for x in shape)]
+    ints = [
+        np.array(header + [0] * (_HEADER - len(header))),
+        kinds,
+        fine[0],
+        fine[4],
+        coarse[0],
+        coarse[4],
+        pair_a,
+        pair_b,
+        np.asarray(capsule_pair, dtype=np.int64),
+        capsule_box,
+    ]
+    floats = [
+        T_tool_box.ravel(),
+        mdh.ravel(),
+        stage,
+        fine[1].ravel(),
+        fine[2],
+        fine[3],
+        origin,
+        np.array([inv_step]),
+        coarse[1].ravel(),
+        coarse[2],
+        coarse[3],
+        radius,
+        half.ravel(),
+        table,
+        np.array([table_z0, table_dz]),
+        c_lo,
+        c_hi,
+    ]
+    fbuf = np.ascontiguousarray(np.concatenate([np.asarray(f, dtype=np.float64).ravel() for f in floats]))
+    ibuf = np.ascontiguousarray(np.concatenate([np.asarray(i, dtype=np.int64).ravel() for i in ints]))
+    return fbuf, ibuf
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _unpack(fbuf: np.ndarray, ibuf: np.ndarray):  # type: ignore[no-untyped-def]
+    """Views of the packed world data, in the order :func:`state_bounds` takes them (grid excluded)."""
+    n_b, n_s, n_c, n_p, n_t = ibuf[0], ibuf[1], ibuf[2], ibuf[3], ibuf[4]
+    has_grid, carriage = ibuf[5] != 0, ibuf[6]
+    shape = ibuf[7:10]
+    o = _HEADER
+    kinds = ibuf[o : o + n_b]
+    o += n_b
+    fine_body = ibuf[o : o + n_s]
+    o += n_s
+    fine_bounds = ibuf[o : o + n_b + 1]
+    o += n_b + 1
+    coarse_body = ibuf[o : o + n_c]
+    o += n_c
+    coarse_bounds = ibuf[o : o + n_b + 1]
+    o += n_b + 1
+    pair_a = ibuf[o : o + n_p]
+    o += n_p
+    pair_b = ibuf[o : o + n_p]
+    o += n_p
+    capsule_pair = ibuf[o : o + n_p]
+    o += n_p
+    capsule_box = ibuf[o : o + n_p]
+    f = 0
+    T = fbuf[f : f + 16].reshape((4, 4))
+    f += 16
+    mdh = fbuf[f : f + 24].reshape((4, 6))
+    f += 24
+    stage = fbuf[f : f + 4]
+    f += 4
+    fine_local = fbuf[f : f + 3 * n_s].reshape((n_s, 3))
+    f += 3 * n_s
+    fine_frac = fbuf[f : f + n_s]
+    f += n_s
+    fine_r = fbuf[f : f + n_s]
+    f += n_s
+    origin = fbuf[f : f + 3]
+    f += 3
+    inv_step = fbuf[f]
+    f += 1
+    coarse_local = fbuf[f : f + 3 * n_c].reshape((n_c, 3))
+    f += 3 * n_c
+    coarse_frac = fbuf[f : f + n_c]
+    f += n_c
+    coarse_r = fbuf[f : f + n_c]
+    f += n_c
+    radius = fbuf[f : f + n_b]
+    f += n_b
+    half = fbuf[f : f + 3 * n_b].reshape((n_b, 3))
+    f += 3 * n_b
+    table = fbuf[f : f + n_t]
+    f += n_t
+    z0, dz = fbuf[f], fbuf[f + 1]
+    f += 2
+    c_lo = fbuf[f : f + N_CONSTRAINTS]
+    f += N_CONSTRAINTS
+    c_hi = fbuf[f : f + N_CONSTRAINTS]
+    return (
+        T,
+        mdh,
+        stage,
+        kinds,
+        fine_body,
+        fine_local,
+        fine_frac,
+        fine_r,
+        fine_bounds,
+        origin,
+        inv_step,
+        shape,
+        has_grid,
+        coarse_body,
+        coarse_local,
+        coarse_frac,
+        coarse_r,
+        coarse_bounds,
+        pair_a,
+        pair_b,
+        radius,
+        capsule_pair,
+        half,
+        capsule_box,
+        carriage,
+        table,
+        z0,
+        dz,
+        c_lo,
+        c_hi,
+    )
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _packed_state(
+    q: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, grid: np.ndarray, threshold: float, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Poses into ``poses`` and (cabin bounds, pair bounds, admissible) at q, from the packed data."""
+    (
+        T,
+        mdh,
+        stage,
+        kinds,
+        fine_body,
+        fine_local,
+        fine_frac,
+        fine_r,
+        fine_bounds,
+        origin,
+        inv_step,
+        shape,
+        has_grid,
+        coarse_body,
+        coarse_local,
+        coarse_frac,
+        coarse_r,
+        coarse_bounds,
+        pair_a,
+        pair_b,
+        radius,
+        capsule_pair,
+        half,
+        capsule_box,
+        carriage,
+        table,
+        z0,
+        dz,
+        c_lo,
+        c_hi,
+    ) = _unpack(fbuf, ibuf)
+    c = np.empty(N_CONSTRAINTS)
+    body_poses(q, T, mdh, stage, kinds, poses, c)
+    return state_bounds(
+        poses,
+        fine_body,
+        fine_local,
+        fine_frac,
+        fine_r,
+        fine_bounds,
+        grid,
+        origin,
+        inv_step,
+        shape,
+        has_grid,
+        coarse_body,
+        coarse_local,
+        coarse_frac,
+        coarse_r,
+        coarse_bounds,
+        pair_a,
+        pair_b,
+        radius,
+        capsule_pair,
+        half,
+        capsule_box,
+        carriage,
+        table,
+        z0,
+        dz,
+        c,
+        c_lo,
+        c_hi,
+        threshold,
+    )
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def packed_state(
+    q: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, grid: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """(poses, cabin bounds, pair bounds, admissible) at q: :func:`state_full` on the packed data."""
+    poses = np.empty((ibuf[0], 13))
+    cabin, pairs, ok = _packed_state(q, fbuf, ibuf, grid, threshold, poses)
+    return poses, cabin, pairs, ok
+
+
+#: Codes of :func:`packed_check`.
+CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE = 0, 1, 2, 3
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def packed_check(
+    q: np.ndarray,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
+    grid: np.ndarray,
+    clearance: float,
+    self_clearance: float,
+) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """The compiled part of a state check: (code, poses, cabin bounds, pair bounds).
+
+    ``CLEAR``: admissible and the bounds prove every body ``clearance`` from the cabin and every pair
+    ``self_clearance`` apart. ``INADMISSIBLE``: a limit or margin fails. ``UNDECIDED``: admissible, but
+    some body or pair needs an exact (FCL) query. ``NOT_FINITE``: a joint is NaN or infinite.
+    """
+    poses = np.empty((ibuf[0], 13))
+    for i in range(q.shape[0]):
+        if not math.isfinite(q[i]):
+            return NOT_FINITE, poses, np.empty(0), np.empty(0)
+    cabin, pairs, ok = _packed_state(q, fbuf, ibuf, grid, self_clearance, poses)
+    if not ok:
+        return INADMISSIBLE, poses, cabin, pairs
+    for b in range(cabin.shape[0]):
+        if not cabin[b] > clearance:
+            return UNDECIDED, poses, cabin, pairs
+    for k in range(pairs.shape[0]):
+        if not pairs[k] > self_clearance:
+            return UNDECIDED, poses, cabin, pairs
+    return CLEAR, poses, cabin, pairs
+
+
+# ------------------------------------------------------------------------------------- motion walk
+@njit(cache=True, fastmath=False, error_model="numpy")
+def first_inadmissible(
+    q_a: np.ndarray, dq: np.ndarray, n_fine: int, fbuf: np.ndarray, ibuf: np.ndarray
+) -> int:
+    """First of the samples t_i = i / n_fine (as ``numpy.linspace``) where c(q) fails; -1: none."""
+    u = _unpack(fbuf, ibuf)
+    stage, c_lo, c_hi = u[2], u[28], u[29]
+    c = np.empty(N_CONSTRAINTS)
+    q = np.empty(q_a.shape[0])
+    step = 1.0 / n_fine
+    for i in range(n_fine + 1):
+        t = i * step if i < n_fine else 1.0
+        for j in range(q.shape[0]):
+            q[j] = q_a[j] + t * dq[j]
+        constraints(q, stage, c)
+        if not admissible(c, c_lo, c_hi):
+            return i
+    return -1
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def end_ratio(q_a: np.ndarray, q_b: np.ndarray, fbuf: np.ndarray) -> float:
+    """Largest link-height ratio (y_B/L1, y_C/L3, y_E/L4) at the two ends; 1 if one is not finite."""
+    stage = fbuf[40:44]  # after T_tool_box (16) and mdh (24), see ``pack``
+    c = np.empty(N_CONSTRAINTS)
+    out = -math.inf
+    for q in (q_a, q_b):
+        constraints(q, stage, c)
+        for i in range(N_CONSTRAINTS - 3, N_CONSTRAINTS):
+            if not math.isfinite(c[i]):
+                return 1.0
+            out = max(out, c[i])
+    return out
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def segment_reach(
+    rho: np.ndarray,  # (B, 8) static reach bounds
+    link: np.ndarray,  # (B,) bool: a stage link (its y and gamma bounds depend on the slope)
+    k: float,  # slope bound of the links along the segment
+    h: float,  # L2 / 2
+    pair_a: np.ndarray,
+    pair_b: np.ndarray,
+    rigid: np.ndarray,  # (P, 8) bool: joint j moves both bodies of pair p rigidly
+    adq: np.ndarray,  # (8,) |q_b - q_a|
+) -> tuple[np.ndarray, np.ndarray]:
+    """Displacement bounds over the segment: bodies rho . |dq|, pairs (rho_a + rho_b, rigid joints 0) . |dq|.
+
+    ``bodies.segment_reach_bounds`` with the segment's slope bound, then the products, in one pass.
+    """
+    n_b = rho.shape[0]
+    r = rho.copy()
+    for b in range(n_b):
+        if link[b]:
+            r[b, 2] = max(1.0, k)  # y
+            r[b, 3] = h * (1.0 + k)  # gamma
+    reach = np.zeros(n_b)
+    for b in range(n_b):
+        for j in range(8):
+            reach[b] += r[b, j] * adq[j]
+    n_p = pair_a.shape[0]
+    pair = np.zeros(n_p)
+    for p in range(n_p):
+        for j in range(8):
+            if not rigid[p, j]:
+                pair[p] += (r[pair_a[p], j] + r[pair_b[p], j]) * adq[j]
+    return reach, pair
+
+
+#: Codes of :func:`motion_walk`.
+WALK_DONE, WALK_PROBE, WALK_FAIL, WALK_GROW = 0, 1, 2, 3
+#: Slots of the walk's integer (``ci``) and float (``cf``) context arrays.
+CI_TASK, CI_I, CI_PHASE, CI_N, CI_COUNT, CI_SLOT, CI_LEVELS, CI_CABIN = 0, 1, 2, 3, 4, 5, 6, 7
+CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_LEVEL0 = range(9)
+CI_SIZE, CF_SIZE = 8, 12
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _walk_state(
+    i: int,
+    ci: np.ndarray,
+    cf: np.ndarray,
+    q_a: np.ndarray,
+    dq: np.ndarray,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
+    grid: np.ndarray,
+    slot_of: np.ndarray,
+    poses: np.ndarray,
+    cabin: np.ndarray,
+    pairs: np.ndarray,
+) -> int:
+    """Slot of state i (t = i / n), evaluated on first use; -1 when the store is full."""
+    s = slot_of[i]
+    if s >= 0:
+        return s
+    s = ci[CI_COUNT]
+    if s == poses.shape[0]:
+        return -1
+    t = i / ci[CI_N]
+    q = np.empty(q_a.shape[0])
+    for j in range(q.shape[0]):
+        q[j] = q_a[j] + t * dq[j]
+    cab, prs, _ = _packed_state(q, fbuf, ibuf, grid, cf[CF_THRESHOLD], poses[s])
+    cabin[s, :] = cab
+    pairs[s, :] = prs
+    slot_of[i] = s
+    ci[CI_COUNT] = s + 1
+    return s
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def motion_walk(
+    ci: np.ndarray,
+    cf: np.ndarray,
+    q_a: np.ndarray,
+    q_b: np.ndarray,
+    dq: np.ndarray,
+    reach: np.ndarray,
+    pair_reach: np.ndarray,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
+    grid: np.ndarray,
+    slot_of: np.ndarray,
+    poses: np.ndarray,
+    cabin: np.ndarray,
+    pairs: np.ndarray,
+) -> int:
+    """The certified motion walk of ``CollisionWorld.check_motion``, resumable around FCL probes.
+
+    Tasks: every body against the cabin (if any), then every checked pair. For each, both end states
+    first (spare clearance f0, f1 >= margin with f0 + f1 >= D covers the segment), the carriage by its
+    exact table, else the walk: at state i the spare clearance E (the bound, or an FCL probe on the grown
+    body), then the next state at t + (E + margin) / D snapped down onto the schedule t = i / n.
+
+    Returns ``WALK_PROBE`` when the walk needs FCL: ``ci[CI_SLOT]`` is the state's slot, the
+    ``ci[CI_LEVELS]`` levels to try in order are at ``cf[CF_LEVEL0:]``, ``cf[CF_E]`` the bound's E; the
+    caller writes the first level that did not collide (or leaves E) into ``cf[CF_E]`` and calls again.
+    ``WALK_FAIL``: no margin could be proven (task ``ci[CI_TASK]``, at ``cf[CF_TFAIL]``). ``WALK_GROW``:
+    the state store is full (enlarge and call again). ``WALK_DONE``: every task is certified.
+    """
+    u = _unpack(fbuf, ibuf)
+    capsule_pair, capsule_box, carriage = u[21], u[23], u[24]
+    table, z0, dz = u[25], u[26], u[27]
+    n_b = reach.shape[0]
+    n_cabin = n_b if ci[CI_CABIN] else 0
+    n_tasks = n_cabin + pair_reach.shape[0]
+    n = ci[CI_N]
+    mm = cf[CF_MARGIN]
+    while ci[CI_TASK] < n_tasks:
+        task = ci[CI_TASK]
+        is_cabin = task < n_cabin
+        idx = task if is_cabin else task - n_cabin
+        D = reach[idx] if is_cabin else pair_reach[idx]
+        base = cf[CF_CLEARANCE] if is_cabin else cf[CF_OWN]
+        exact = (not is_cabin) and (capsule_pair[idx] != 0 or capsule_box[idx] > 0)
+        phase = ci[CI_PHASE]
+        if phase == 0:  # a new task: both end states
+            s0 = _walk_state(0, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
+            if s0 < 0:
+                return WALK_GROW
+            s1 = _walk_state(n, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
+            if s1 < 0:
+                return WALK_GROW
+            f0 = (cabin[s0, idx] if is_cabin else pairs[s0, idx]) - base
+            f1 = (cabin[s1, idx] if is_cabin else pairs[s1, idx]) - base
+            if f0 >= mm and f1 >= mm and f0 + f1 >= D:
+                ci[CI_TASK] += 1
+                continue
+            if is_cabin and idx == carriage and table.shape[0] > 0:
+                # The carriage moves with d1 only: its exact clearance table covers the whole segment.
+                lo, hi = min(q_a[0], q_b[0]), max(q_a[0], q_b[0])
+                nt = table.shape[0]
+                if not (lo < z0 or hi > z0 + dz * (nt - 1)):
+                    k0 = int(min(max(math.floor((lo - z0) / dz), 0.0), nt - 1.0))
+                    k1 = int(min(max(math.ceil((hi - z0) / dz), 0.0), nt - 1.0))
+                    if table[k0 : k1 + 1].min() - 0.5 * dz > cf[CF_CLEARANCE]:
+                        ci[CI_TASK] += 1
+                        continue
+            cf[CF_TSTOP] = 1.0 - f1 / D if f1 >= mm and D > 0.0 else 1.0
+            ci[CI_I] = 0
+            cf[CF_LAST] = mm
+            ci[CI_PHASE] = phase = 2
+        i = ci[CI_I]
+        if phase == 2:  # at state i: the bound's spare clearance, then probes if they can prove more
+            s = _walk_state(i, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
+            if s < 0:
+                return WALK_GROW
+            free = (cabin[s, idx] if is_cabin else pairs[s, idx]) - base
+            E = free if free >= mm else 0.0
+            m = 0
+            if D > 0.0 and not exact:
+                level = min(0.3, max(2.0 * cf[CF_LAST], 2.0 * E, 4.0 * mm))
+                if level > E:
+                    cf[CF_LEVEL0 + m] = level
+                    m += 1
+            if E == 0.0 and not exact:
+                for level in (4 * mm, 2 * mm, mm):
+                    cf[CF_LEVEL0 + m] = level
+                    m += 1
+            if m > 0:
+                ci[CI_SLOT] = s
+                ci[CI_LEVELS] = m
+                cf[CF_E] = E
+                ci[CI_PHASE] = 1
+                return WALK_PROBE
+        else:  # phase 1: the caller's probe result
+            E = cf[CF_E]
+        cf[CF_LAST] = max(E, mm)
+        t = i / n
+        if E == 0.0:
+            cf[CF_TFAIL] = t
+            return WALK_FAIL
+        if i == n or D <= 0.0 or t + E / D >= cf[CF_TSTOP]:
+            ci[CI_TASK] += 1
+            ci[CI_PHASE] = 0
+            continue
+        ci[CI_I] = min(n, max(i + 1, int(math.floor((t + (E + mm) / D) * n + 1e-9))))
+        ci[CI_PHASE] = 2
+    return WALK_DONE

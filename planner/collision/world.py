@@ -22,6 +22,7 @@ Every decision that something is *clear* is certified; nothing is sampled at a f
 from __future__ import annotations
 
 import hashlib
+import math
 import threading
 from dataclasses import dataclass, field
 from functools import cache
@@ -33,7 +34,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.collision import _kernels
-from planner.collision.bodies import BodySet, PayloadGeometry, Shape, cabin8_bodies, segment_reach_bounds
+from planner.collision.bodies import (
+    BodySet,
+    PayloadGeometry,
+    Shape,
+    cabin8_bodies,
+    link_slope_bound,
+    segment_reach_bounds,
+)
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
 from planner.collision.mesh_loader import LoadedMesh
 from planner.exceptions import InvalidInput
@@ -117,6 +125,9 @@ class _State:
     def length(self, b: int) -> float:
         """Capsule length of body b (0 for boxes)."""
         return float(self.flat[b, 12])
+
+
+_VALID = StateReport(True)
 
 
 @dataclass(frozen=True)
@@ -229,6 +240,9 @@ class CollisionWorld:
         cabin: The cabin mesh in the base frame (``None``: free space, self-collision only).
         payload: The carried payload (``None``: none).
         grid_step_m: Node spacing of the clearance lower-bound grid [m].
+        self_clearance: Distance [m] non-adjacent bodies keep from each other.
+        reference: Use the reference routes (CasADi poses, the motion walk in Python) instead of the
+            compiled kernels; same verdicts, slower (tests and the benchmark compare the two).
 
     Geometry that depends only on the cabin (FCL BVH, clearance grid) is cached per mesh content and pose,
     so several worlds on one cabin share it.
@@ -241,9 +255,11 @@ class CollisionWorld:
         payload: PayloadGeometry | None = None,
         grid_step_m: float = 0.03,
         self_clearance: float = DEFAULT_SELF_CLEARANCE_M,
+        reference: bool = False,
     ) -> None:
         _check_clearance(self_clearance)
         self.self_clearance = float(self_clearance)
+        self.reference = bool(reference)
         self.robot = robot
         self.cabin = cabin
         self.payload = payload
@@ -266,6 +282,8 @@ class CollisionWorld:
         self._local = threading.local()
         self._req = fcl.CollisionRequest()
         self._n_bodies = len(self.names)
+        self._capsule = [s.kind == "capsule" for s in self.bodies.shapes]
+        self._link_mask = np.array([n in ("link_ab", "link_cd", "link_ef") for n in self.names])
         self._fcl_queries = 0
         # Fine cover (cabin bounds): radii and the first sphere of each body, for per-body minima. With a
         # cabin the carriage's bound comes from its exact clearance table, so it needs no spheres.
@@ -360,6 +378,47 @@ class CollisionWorld:
                 else (np.zeros(0), 0.0, 1.0)
             ),
         )
+        # Closed-form poses in the kernel (the CasADi pose function stays the reference, :meth:`poses`).
+        if len(robot.c_lower) != _kernels.N_CONSTRAINTS:
+            raise InvalidInput(
+                f"robot: {len(robot.c_lower)} admissibility values, the collision kernels expect "
+                f"{_kernels.N_CONSTRAINTS}",
+                field="robot",
+            )
+        links = robot.desc.serial_chain
+        mdh = np.array(
+            [
+                [link.alpha, link.a, link.theta, link.d, float(j), 1.0 if revolute else 0.0]
+                for link, (j, revolute) in zip(links, chain.LINK_VARIABLES, strict=True)
+            ]
+        )
+        geo = robot.geometry
+        table = self._carriage_table
+        self._fbuf, self._ibuf = _kernels.pack(
+            np.ascontiguousarray(self._T_tool_box, dtype=float),
+            mdh,
+            np.array([geo.L1, geo.L2, geo.L3, geo.L4]),
+            np.array([_kernels.KIND_CODES[n] for n in self.names], dtype=np.int64),
+            (*self._fine_cover, self._fine_r, self._fine_bounds),
+            g.origin if g is not None else np.zeros(3),
+            1.0 / g.step if g is not None else 1.0,
+            self._grid_shape,
+            g is not None,
+            (*self._coarse_cover, self._sph_r, self._coarse_bounds),
+            self._pair_a,
+            self._pair_b,
+            self._radius,
+            self._capsule_pair,
+            self._half,
+            self._capsule_box,
+            self._carriage,
+            table[2] if table is not None else np.zeros(0),
+            table[0] if table is not None else 0.0,
+            table[1] if table is not None else 1.0,
+            self._c_lo,
+            self._c_hi,
+        )
+        self._grid_flat = np.ascontiguousarray(self._grid_flat, dtype=float)
 
     # ------------------------------------------------------------------ poses
     def _evaluate(self, q: Array) -> tuple[Array, Array]:
@@ -449,11 +508,10 @@ class CollisionWorld:
 
     def _object(self, b: int, R: Array, p: Array, length: float, margin: float) -> fcl.CollisionObject:
         """A posed FCL object of body b grown by ``margin``; objects are reused (per thread), only moved."""
-        key = (b, margin, round(length, 9) if self.bodies.shapes[b].kind == "capsule" else 0.0)
-        objects: dict[tuple[int, float, float], fcl.CollisionObject] | None = getattr(
-            self._local, "objects", None
-        )
-        if objects is None:
+        key = (b, margin, round(length, 9) if self._capsule[b] else 0.0)
+        try:
+            objects: dict[tuple[int, float, float], fcl.CollisionObject] = self._local.objects
+        except AttributeError:
             objects = self._local.objects = {}
         obj = objects.get(key)
         if obj is None:
@@ -494,10 +552,20 @@ class CollisionWorld:
             all_contacts: Collect every contact instead of stopping at the first.
         """
         _check_clearance(clearance)
-        q = np.asarray(q, dtype=float)
-        if not np.all(np.isfinite(q)):
-            return StateReport(False, tuple(self._limit_contacts(q)))
-        state = self._state(q, self.self_clearance)
+        q = _joints(q)
+        if self.reference:
+            if not np.all(np.isfinite(q)):
+                return StateReport(False, tuple(self._limit_contacts(q)))
+            state = self._state(q, self.self_clearance)
+        else:
+            code, flat, cabin, pairs = _kernels.packed_check(
+                q, self._fbuf, self._ibuf, self._grid_flat, clearance, self.self_clearance
+            )
+            if code == _kernels.CLEAR:  # the bounds prove everything: no FCL query
+                return _VALID
+            if code == _kernels.NOT_FINITE:
+                return StateReport(False, tuple(self._limit_contacts(q)))
+            state = _State(flat, cabin, pairs, code != _kernels.INADMISSIBLE)
         contacts = [] if state.admissible else self._limit_contacts(q)
         if contacts and not all_contacts:
             return StateReport(False, tuple(contacts))
@@ -515,36 +583,58 @@ class CollisionWorld:
         return StateReport(not contacts, tuple(contacts))
 
     def is_valid(self, q: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
-        """True when limits, margins, cabin clearance and self-clearance all hold at q."""
-        return self.check_state(q, clearance).valid
+        """True when limits, margins, cabin clearance and self-clearance all hold at q.
+
+        The verdict of :meth:`check_state`, without building a report: one kernel call, then FCL queries
+        only for what the bounds cannot prove clear.
+        """
+        if self.reference:
+            return self.check_state(q, clearance).valid
+        _check_clearance(clearance)
+        q = _joints(q)
+        own = self.self_clearance
+        code, flat, cabin, pairs = _kernels.packed_check(
+            q, self._fbuf, self._ibuf, self._grid_flat, clearance, own
+        )
+        if code != _kernels.UNDECIDED:
+            return code == _kernels.CLEAR
+        st = _State(flat, cabin, pairs, True)
+        for b, lb in enumerate(cabin.tolist()):
+            if lb <= clearance and self._cabin_hit(st, b, clearance):
+                return False
+        for k, lb in enumerate(pairs.tolist()):
+            if lb <= own and self._pair_hit(st, k, own):
+                return False
+        return True
 
     def _states(self, qs: Array, threshold: float) -> list[_State]:
         """Poses and certified bounds for (N, 8) configurations."""
-        qs = np.atleast_2d(qs)
-        if qs.shape[0] == 1:
-            flat, c = self._evaluate_one(qs[0])
-        else:
-            flat, c = self._evaluate(qs)
-        out = []
-        for i in range(flat.shape[0]):
-            cabin, pairs, ok = _kernels.state_bounds(
-                flat[i], *self._kernel_args, c[i], self._c_lo, self._c_hi, threshold
-            )
-            out.append(_State(flat[i], cabin, pairs, ok))
-        return out
+        qs = np.ascontiguousarray(np.atleast_2d(qs), dtype=float)
+        return [self._state(q, threshold) for q in qs]
 
-    def _evaluate_one(self, q: Array) -> tuple[Array, Array]:
-        """The single-configuration fast path of :meth:`_evaluate` (no wrapper allocations)."""
+    def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> _State:
+        """Poses and certified bounds at one configuration (8,), contiguous float64: one kernel call.
+
+        ``threshold``: pairs whose bound is not above it get their exact distance where one is known.
+        """
+        if self.reference:
+            return self._state_reference(q, threshold)
+        flat, cabin, pairs, ok = _kernels.packed_state(q, self._fbuf, self._ibuf, self._grid_flat, threshold)
+        return _State(flat, cabin, pairs, ok)
+
+    def _state_reference(self, q: Array, threshold: float) -> _State:
+        """:meth:`_state` by the reference route: CasADi pose function, then the bound kernel."""
         slot = self._pose_fast._slot()
         if not getattr(slot, "bound", False):
             slot.args[1][:] = self._T_tool_box.ravel(order="F")
             slot.bound = True  # type: ignore[attr-defined]
         slot.args[0][:] = q
         slot.trigger()
-        return slot.res[0].reshape(1, self._n_bodies, 13).copy(), slot.res[1][None, :].copy()
-
-    def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> _State:
-        return self._states(q[None, :], threshold)[0]
+        flat = slot.res[0].reshape(self._n_bodies, 13).copy()
+        cabin, pairs, ok = _kernels.state_bounds(
+            flat, *self._kernel_args, slot.res[1].copy(), self._c_lo, self._c_hi, threshold
+        )
+        return _State(flat, cabin, pairs, ok)
 
     def _carriage_clearance(self, d1_a: float, d1_b: float) -> float:
         """Certified carriage-to-cabin clearance for every d1 between d1_a and d1_b (table minimum)."""
@@ -634,8 +724,10 @@ class CollisionWorld:
                 f"motion_margin: must be in [{MIN_MOTION_MARGIN_M}, 0.1] m, got {motion_margin}",
                 field="motion_margin",
             )
-        q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)
+        q_a, q_b = _joints(q_a), _joints(q_b)
         dq = q_b - q_a
+        if not self.reference:
+            return self._check_motion_compiled(q_a, q_b, dq, clearance, motion_margin, own, reach_ratio)
         rho, pair_rho = self._segment_reach(q_a, q_b, reach_ratio)
         reach = rho @ np.abs(dq)
         n_fine = int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
@@ -723,6 +815,98 @@ class CollisionWorld:
                 i = min(n, max(i + 1, int(np.floor((t_of(i) + (E + motion_margin) / D) * n + 1e-9))))
         return MotionReport(True, len(cache), self._fcl_queries - before)
 
+    def _check_motion_compiled(
+        self,
+        q_a: Array,
+        q_b: Array,
+        dq: Array,
+        clearance: float,
+        motion_margin: float,
+        own: float,
+        ratio: float | None,
+    ) -> MotionReport:
+        """:meth:`check_motion` through the compiled kernels: the same samples, bounds and walk.
+
+        Limits at the same samples, the same reach bounds (:meth:`_segment_reach`), then
+        :func:`~planner.collision._kernels.motion_walk`, which evaluates states lazily in compiled code and
+        returns here only when a task needs FCL probes on a grown body.
+        """
+        adq = np.abs(dq)
+        n_fine = int(min(10_000, max(1, np.ceil(float(adq.max()) / LIMIT_STEP))))
+        bad = _kernels.first_inadmissible(q_a, dq, n_fine, self._fbuf, self._ibuf)
+        if bad >= 0:
+            t = bad * (1.0 / n_fine) if bad < n_fine else 1.0  # numpy.linspace's samples
+            return MotionReport(False, n_fine + 1, 0, t, tuple(self._limit_contacts(q_a + t * dq)))
+        g = self.robot.geometry
+        end = _kernels.end_ratio(q_a, q_b, self._fbuf)
+        dev = 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
+        if ratio is not None:
+            end = max(end, ratio)
+        reach, pair_reach = _kernels.segment_reach(
+            self.bodies.rho,
+            self._link_mask,
+            link_slope_bound(end + dev),
+            0.5 * g.L2,
+            self._pair_a,
+            self._pair_b,
+            self.bodies.pair_rigid,
+            adq,
+        )
+        has_cabin = self._cabin_obj is not None
+        d_max = max([*(reach.tolist() if has_cabin else []), *pair_reach.tolist()], default=0.0)
+        n = int(max(1, np.ceil(d_max / motion_margin)))
+        cap = min(n + 1, 32)
+        slot_of = np.full(n + 1, -1, dtype=np.int64)
+        poses = np.empty((cap, self._n_bodies, 13))
+        cabin = np.empty((cap, self._n_bodies))
+        pairs = np.empty((cap, len(self._pair_a)))
+        ci = np.zeros(_kernels.CI_SIZE, dtype=np.int64)
+        cf = np.zeros(_kernels.CF_SIZE)
+        ci[_kernels.CI_N], ci[_kernels.CI_CABIN] = n, has_cabin
+        cf[_kernels.CF_CLEARANCE], cf[_kernels.CF_OWN], cf[_kernels.CF_MARGIN] = clearance, own, motion_margin
+        # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
+        cf[_kernels.CF_THRESHOLD] = own + 0.06
+        n_cabin = self._n_bodies if has_cabin else 0
+        before = self._fcl_queries
+        while True:
+            code = _kernels.motion_walk(
+                ci, cf, q_a, q_b, dq, reach, pair_reach, self._fbuf, self._ibuf, self._grid_flat,
+                slot_of, poses, cabin, pairs,
+            )  # fmt: skip
+            task = int(ci[_kernels.CI_TASK])
+            is_cabin = task < n_cabin
+            idx = task if is_cabin else task - n_cabin
+            base = clearance if is_cabin else own
+            if code == _kernels.WALK_DONE:
+                return MotionReport(True, int(ci[_kernels.CI_COUNT]), self._fcl_queries - before)
+            if code == _kernels.WALK_GROW:
+                grow = poses.shape[0]
+                poses = np.concatenate([poses, np.empty_like(poses[:grow])])
+                cabin = np.concatenate([cabin, np.empty_like(cabin[:grow])])
+                pairs = np.concatenate([pairs, np.empty_like(pairs[:grow])])
+            elif code == _kernels.WALK_FAIL:
+                contact = (
+                    self._cabin_contact(idx, base + motion_margin)
+                    if is_cabin
+                    else self._pair_contact(idx, base + motion_margin)
+                )
+                states = int(ci[_kernels.CI_COUNT])
+                t_fail = float(cf[_kernels.CF_TFAIL])
+                return MotionReport(False, states, self._fcl_queries - before, t_fail, (contact,))
+            else:  # WALK_PROBE: the first level at which the grown body is clear becomes the spare clearance
+                slot = int(ci[_kernels.CI_SLOT])
+                st = _State(poses[slot], cabin[slot], pairs[slot])
+                first = _kernels.CF_LEVEL0
+                for level in cf[first : first + int(ci[_kernels.CI_LEVELS])].tolist():
+                    hit = (
+                        self._cabin_hit(st, idx, base + level)
+                        if is_cabin
+                        else self._pair_hit(st, idx, base + level)
+                    )
+                    if not hit:
+                        cf[_kernels.CF_E] = level
+                        break
+
     def _segment_reach(self, q_a: Array, q_b: Array, ratio: float | None = None) -> tuple[Array, Array]:
         """Reach bounds valid along the straight segment q_a -> q_b.
 
@@ -805,7 +989,7 @@ class CollisionWorld:
         Distances are exact FCL queries on the un-grown shapes; candidates whose certified lower bound
         already exceeds the best distance found are skipped (branch and bound). Penetration gives <= 0.
         """
-        st = self._state(np.asarray(q, dtype=float))
+        st = self._state(_joints(q))
         candidates: list[tuple[float, str, int]] = []
         if self._cabin_obj is not None:
             candidates += [(float(lb), "cabin", b) for b, lb in enumerate(st.cabin_lb)]
@@ -860,8 +1044,16 @@ def _cover_table(shapes: tuple[Shape, ...], centres: tuple[Array, ...]) -> tuple
     return np.concatenate(body), np.ascontiguousarray(np.concatenate(local)), np.concatenate(frac)
 
 
+def _joints(q: Array) -> Array:
+    """A joint vector as the kernels need it: contiguous float64 of shape (8,)."""
+    q = np.ascontiguousarray(q, dtype=float)
+    if q.shape != (8,):
+        raise InvalidInput(f"q: a joint vector of 8 values expected, got shape {q.shape}", field="q")
+    return q
+
+
 def _check_clearance(clearance: float) -> None:
-    if not (np.isfinite(clearance) and 0.0 <= clearance <= 0.5):
+    if not (math.isfinite(clearance) and 0.0 <= clearance <= 0.5):
         raise InvalidInput(
             f"clearance: must be a finite distance in [0, 0.5] m, got {clearance}", field="clearance"
         )

@@ -32,6 +32,8 @@ Array = NDArray[np.float64]
 D1, X, Y, GAMMA, THETA3, THETA4, D5, THETA6 = range(8)
 #: For each MDH link, the joint index of its variable and whether it replaces theta (True) or d (False).
 _LINK_VARIABLES: tuple[tuple[int, bool], ...] = ((THETA3, True), (THETA4, True), (D5, False), (THETA6, True))
+#: Public name of the same table (the collision kernels evaluate the chain in closed form).
+LINK_VARIABLES = _LINK_VARIABLES
 
 
 def _link_values(links: Sequence[MDHSpec], i: int, q_var: Array) -> tuple[Array | float, Array | float]:

@@ -1,0 +1,116 @@
+"""Compiled hot path against its references: closed-form poses vs CasADi, kernels vs the reference route.
+
+The compiled route (numba poses, packed kernels, the motion walk in compiled code) must give the reference
+route's numbers and verdicts -- exactly, report for report -- on hundreds of random cases.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.collision import _kernels
+from planner.collision.bodies import PayloadGeometry
+from planner.collision.mesh_loader import load_mesh
+from planner.collision.world import CollisionWorld
+from planner.exceptions import InvalidInput
+from planner.robots.cabin8 import Cabin8
+from tests.conftest import admissible_joints
+
+MESHES = Path(__file__).resolve().parents[2] / "meshes"
+
+
+@pytest.fixture(scope="module")
+def payload() -> PayloadGeometry:
+    grasp = np.eye(4)
+    grasp[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # not the identity
+    grasp[:3, 3] = [0.02, -0.01, 0.30]
+    return PayloadGeometry((0.45, 0.35, 0.50), T_tool_payload=grasp, mass=100.0)
+
+
+@pytest.fixture(scope="module")
+def worlds(robot: Cabin8, payload: PayloadGeometry) -> tuple[CollisionWorld, CollisionWorld]:
+    mesh = load_mesh(MESHES / "cabin-cluttered.stl", units="m")
+    return CollisionWorld(robot, mesh, payload), CollisionWorld(robot, mesh, payload, reference=True)
+
+
+def along_rail(robot: Cabin8, n: int, seed: int) -> np.ndarray:
+    qs = admissible_joints(robot, n, seed=seed)
+    qs[:, 0] = np.random.default_rng(seed).uniform(0.0, 6.0, n)
+    return qs
+
+
+def test_closed_form_poses_equal_the_casadi_model(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
+    """Body poses and c(q) from the numba kernel equal the CasADi pose function to 1e-12, off-limits too."""
+    world = worlds[0]
+    qs = along_rail(robot, 200, seed=11)
+    wild = qs + np.random.default_rng(12).normal(0.0, 0.3, qs.shape)  # inadmissible, some links unreachable
+    u = _kernels._unpack(world._fbuf, world._ibuf)
+    for q in np.vstack([qs, wild]):
+        ref_poses, ref_c = world._evaluate(q)
+        poses, c = np.empty((len(world.names), 13)), np.empty(_kernels.N_CONSTRAINTS)
+        _kernels.body_poses(q, u[0], u[1], u[2], u[3], poses, c)
+        finite = np.isfinite(ref_c[0])
+        np.testing.assert_array_equal(np.isfinite(c), finite)  # NaN exactly where a link cannot close
+        np.testing.assert_allclose(c[finite], ref_c[0][finite], rtol=0, atol=1e-12)
+        if finite.all():
+            np.testing.assert_allclose(poses, ref_poses[0], rtol=0, atol=1e-12)
+
+
+def test_packed_states_equal_the_reference_route(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
+    fast, ref = worlds
+    for threshold in (0.005, 0.065):
+        for q in along_rail(robot, 150, seed=21):
+            a, b = fast._state(q, threshold), ref._state(q, threshold)
+            np.testing.assert_allclose(a.flat, b.flat, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(a.cabin_lb, b.cabin_lb, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(a.pair_lb, b.pair_lb, rtol=0, atol=1e-12)
+            assert a.admissible == b.admissible
+
+
+def test_state_verdicts_equal_the_reference_route(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
+    """is_valid (bool fast path) and check_state agree with the reference on valid and colliding states."""
+    fast, ref = worlds
+    qs = along_rail(robot, 200, seed=31)
+    qs[::7, 6] += 0.8  # some beyond the d5 limit
+    verdicts = []
+    for q in qs:
+        for clearance in (0.0, 0.01, 0.05):
+            expected = ref.check_state(q, clearance, all_contacts=True)
+            assert fast.check_state(q, clearance, all_contacts=True) == expected
+            assert fast.is_valid(q, clearance) == expected.valid
+            verdicts.append(expected.valid)
+    assert 0.2 < np.mean(verdicts) < 0.9  # both outcomes are well represented
+    assert not fast.is_valid(np.full(8, np.nan)) and not fast.check_state(np.full(8, np.inf)).valid
+    with pytest.raises(InvalidInput):
+        fast.is_valid(np.zeros(7))
+
+
+def test_motion_reports_equal_the_reference_walk(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
+    """Compiled and Python walks: the same report (verdict, states, FCL queries, t_fail, contact)."""
+    fast, ref = worlds
+    rng = np.random.default_rng(41)
+    starts = [q for q in along_rail(robot, 160, seed=41) if ref.is_valid(q)]
+    reports = []
+    for k, q in enumerate(starts):
+        step = rng.normal(size=8)
+        step *= (0.15 if k % 3 else 0.8) / np.linalg.norm(step)  # typical edges and long ones
+        for clearance, margin in ((0.01, 0.005), (0.03, 0.002)):
+            expected = ref.check_motion(q, q + step, clearance, margin)
+            assert fast.check_motion(q, q + step, clearance, margin) == expected
+            reports.append(expected)
+    assert len(reports) > 100
+    assert {r.valid for r in reports} == {True, False}
+    assert any(r.contacts and r.contacts[0].kind == "limit" for r in reports)
+    assert any(r.contacts and r.contacts[0].kind in ("cabin", "self") for r in reports)
+    assert max(r.states_checked for r in reports) > 32  # the state store had to grow
+
+
+def test_self_only_world_motion_equals_the_reference(robot: Cabin8, payload: PayloadGeometry) -> None:
+    fast, ref = CollisionWorld(robot, None, payload), CollisionWorld(robot, None, payload, reference=True)
+    rng = np.random.default_rng(51)
+    for q in admissible_joints(robot, 40, seed=51):
+        step = rng.normal(size=8) * 0.4
+        assert fast.check_motion(q, q + step) == ref.check_motion(q, q + step)
