@@ -46,6 +46,7 @@ from planner.planning.goals import (
     goal_configurations,
     track_approach,
 )
+from planner.planning.motion import motion_clear
 from planner.planning.ompl_adapter import plan_joint_path, simplify_waypoints
 from planner.planning.transit import find_transit
 
@@ -155,7 +156,7 @@ class Planner:
         self.progress = progress or (lambda stage, fraction: None)
         self.payload = scenario.payload.rigid_payload() if scenario.payload is not None else None
         self.world = CollisionWorld(self.robot, scenario.cabin, scenario.payload)
-        self.dynamics = Cabin8Dynamics(self.robot)
+        self.dynamics = Cabin8Dynamics.of(self.robot)
         self.forces = StaticForceCheck(self.dynamics, self.payload)
         # The planner keeps GATE_SLACK_M more than the requested clearance, so that the gate's own
         # certification (which must prove a margin at the samples it starts from) passes on its path.
@@ -175,9 +176,9 @@ class Planner:
         return self.world.is_valid(q, self.plan_clearance) and self.forces.ok(q)
 
     def _motion_ok(self, q_a: Array, q_b: Array) -> bool:
-        return self.world.check_motion(
-            q_a, q_b, self.plan_clearance, self.opts.motion_margin_m
-        ).valid and self.forces.segment_ok(q_a, q_b)
+        return motion_clear(
+            self.world, q_a, q_b, self.plan_clearance, self.opts.motion_margin_m
+        ) and self.forces.segment_ok(q_a, q_b)
 
     def _check_configuration(self, q: Array, what: str) -> None:
         rep = self.world.check_state(q, self.opts.clearance_m, all_contacts=True)

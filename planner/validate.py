@@ -40,7 +40,6 @@ from planner.dynamics.payload import RigidPayload
 from planner.exceptions import OutsideWorkspace
 from planner.kinematics.so3 import rotation_log
 from planner.robots.cabin8 import Cabin8
-from planner.timing.path import DriveGeometry
 from planner.timing.profile import DriveProfile
 
 Array = NDArray[np.float64]
@@ -255,11 +254,9 @@ def validate_profile(
             checks.append(Check(name, False, "not evaluated: the parallel stage does not assemble"))
         return GateReport(tuple(checks), n, float("nan"), peaks)
     # Efforts: recomputed independently from the joint motion implied by the drive motion.
-    dyn = dynamics or Cabin8Dynamics(robot)
-    G_inv = np.array([robot.drive_map_jacobian(qi)[1] for qi in q])
-    qd = np.einsum("nij,nj->ni", G_inv, ud)
-    gdqd = DriveGeometry(robot)(q, qd, np.zeros_like(qd))[2]  # (dG/dt) q_dot, exact (CasADi AD)
-    qdd = np.einsum("nij,nj->ni", G_inv, udd - gdqd)
+    dyn = dynamics or Cabin8Dynamics.of(robot)
+    # q_dot = G^-1 u_dot, q_ddot = G^-1 (u_ddot - G_dot q_dot), exact (CasADi AD of the drive map).
+    qd, qdd = dyn.joint_rates_batch(q, ud, udd)
     tau = dyn.drive_forces_batch(q, qd, qdd, req.payload)
     mismatch = float(np.max(np.abs(tau - eff) / lim.effort_max[None, :]))
     chk, peaks["effort"] = _ratio_check("effort", tau, lim.effort_max, robot, "N or N m", n)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -150,3 +152,60 @@ def test_payload_validation(kwargs: dict, field: str) -> None:
     with pytest.raises(InvalidInput) as err:
         RigidPayload(**kwargs)
     assert err.value.details["field"] == field
+
+
+def test_native_build_matches_the_casadi_virtual_machine(
+    robot: Cabin8, dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    """The C build (single and mapped calls) gives the interpreter's numbers, to rounding."""
+    rng = np.random.default_rng(5)
+    q = configs[:40]
+    qd, qdd = rng.normal(0.0, 0.2, q.shape), rng.normal(0.0, 0.5, q.shape)
+    p = payload.params()
+    ref = np.array([dyn.id_vm(q[i], qd[i], qdd[i], p)[1] for i in range(len(q))])
+    single = np.array([dyn.inverse_dynamics(q[i], qd[i], qdd[i], payload)[1] for i in range(len(q))])
+    batch = dyn.drive_forces_batch(q, qd, qdd, payload)
+    scale = np.max(np.abs(ref))
+    assert np.max(np.abs(single - ref)) <= 1e-12 * scale
+    assert np.max(np.abs(batch - ref)) <= 1e-12 * scale
+
+
+def test_native_build_falls_back_to_the_given_functions(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    import casadi as ca
+
+    from planner.kinematics.native import native
+
+    x = ca.SX.sym("x", 2)
+    fn = ca.Function("sq", [x], [x * x])
+    monkeypatch.setenv("CABINPLAN_NATIVE", "0")
+    assert native([fn], "test_sq")[0] is fn
+    monkeypatch.setenv("CABINPLAN_NATIVE", "1")
+    monkeypatch.setenv("CC", "/nonexistent/cc")  # a compiler that cannot run: the VM, with a warning
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
+    assert native([fn], "test_sq")[0] is fn
+    monkeypatch.delenv("CC")
+    built = native([fn], "test_sq")[0]  # a real build where a compiler exists
+    assert float(built(ca.DM([3.0, -2.0]))[1]) == 4.0
+
+
+def test_dynamics_are_built_once_per_model(robot: Cabin8) -> None:
+    assert Cabin8Dynamics.of(robot) is Cabin8Dynamics.of(robot)
+
+
+def test_batched_joint_rates_match_the_single_route(
+    robot: Cabin8, dyn: Cabin8Dynamics, configs: np.ndarray
+) -> None:
+    """The mapped (native) joint-rate map equals the per-sample one on a batch past SMALL_BATCH."""
+    rng = np.random.default_rng(9)
+    q = configs[:60]
+    ud, udd = rng.normal(size=q.shape) * 0.05, rng.normal(size=q.shape) * 0.1
+    qd, qdd = dyn.joint_rates_batch(q, ud, udd)
+    for i in range(len(q)):
+        qd_i, qdd_i = dyn.joint_rates(q[i], ud[i], udd[i])
+        np.testing.assert_allclose(qd[i], qd_i, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(qdd[i], qdd_i, rtol=0, atol=1e-10)
+    # And G q_dot is the drive velocity (the map inverts the drive Jacobian).
+    G = np.array([robot.drive_map_jacobian(qi)[0] for qi in q])
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", G, qd), ud, atol=1e-12)

@@ -22,6 +22,7 @@ J_qu = dq/du (paper eq. 53 with the force Jacobian of the drive map).
 
 from __future__ import annotations
 
+import weakref
 from functools import cached_property
 
 import casadi as ca
@@ -31,6 +32,7 @@ from numpy.typing import NDArray
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
+from planner.kinematics.native import native
 from planner.robots.cabin8 import Cabin8
 
 Array = NDArray[np.float64]
@@ -50,7 +52,16 @@ class Cabin8Dynamics:
     Every method takes the payload as a :class:`RigidPayload` (default: none).
     """
 
+    @classmethod
+    def of(cls, robot: Cabin8) -> Cabin8Dynamics:
+        """The dynamics of ``robot``, built once per model object (building takes about 0.1 s)."""
+        dyn = _BUILT.get(robot)
+        if dyn is None:
+            dyn = _BUILT[robot] = cls(robot)
+        return dyn
+
     def __init__(self, robot: Cabin8) -> None:
+        """Build (and compile) the dynamics of ``robot``; prefer :meth:`of`, which builds once per model."""
         self.robot = robot
         kin = robot.kin
         desc = robot.desc
@@ -131,10 +142,11 @@ class Cabin8Dynamics:
         moment = ca.mtimes(I_world, omega_dot) + ca.cross(omega, ca.mtimes(I_world, omega))
         tau += ca.mtimes(kin.Jq_sx[3:6, :].T, moment)
         tau_u = ca.mtimes(kin.G_inv_sx.T, tau)
-        self._id = FastFunction(
-            dense_function("inverse_dynamics", [q, qd, qdd, par], [tau, tau_u], {"cse": True})
-        )
-        self._id_map = self._id.fn.map(CHUNK)
+        id_fn = dense_function("inverse_dynamics", [q, qd, qdd, par], [tau, tau_u], {"cse": True})
+        #: The CasADi virtual-machine evaluation (the reference the native build is tested against).
+        self.id_vm = FastFunction(id_fn)
+        id_native, self._id_map = native([id_fn, id_fn.map(CHUNK)], "cabin8_dynamics")
+        self._id = FastFunction(id_native)
         lagrange_tau = ca.mtimes(M, qdd) + bias + grav
         self._id_lagrange = FastFunction(dense_function("id_lagrange", [q, qd, qdd, par], [lagrange_tau]))
 
@@ -172,17 +184,26 @@ class Cabin8Dynamics:
         """
         u2, ud2, udd2 = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (u, ud, udd))
         q = self.robot.joints_from_drives(u2)
-        par = _params(payload)
-        out = np.empty_like(u2)
-        for i in range(u2.shape[0]):
-            qd, qdd = self.joint_rates(q[i], ud2[i], udd2[i])
-            out[i] = self._id(q[i], qd, qdd, par)[1]
-        return out
+        qd, qdd = self.joint_rates_batch(q, ud2, udd2)
+        return self.drive_forces_batch(q, qd, qdd, payload)
 
     def joint_rates(self, q: Array, ud: Array, udd: Array) -> tuple[Array, Array]:
         """Joint velocity and acceleration (q_dot, q_ddot) from drive velocity and acceleration at q."""
         qd, qdd = self._joint_rates(q, ud, udd)
         return qd, qdd
+
+    def joint_rates_batch(self, q: Array, ud: Array, udd: Array) -> tuple[Array, Array]:
+        """:meth:`joint_rates` for (N, 8) joint positions and drive velocities / accelerations."""
+        q2, ud2, udd2 = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, ud, udd))
+        if q2.shape[0] <= SMALL_BATCH:
+            rows = [self._joint_rates(q2[i], ud2[i], udd2[i]) for i in range(q2.shape[0])]
+            return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+        qd, qdd = evaluate_mapped(self._joint_rates_map, q2, ud2, udd2)
+        return qd, qdd
+
+    @cached_property
+    def _joint_rates_map(self) -> ca.Function:
+        return native([self._joint_rates.fn.map(CHUNK)], "cabin8_joint_rates")[0]
 
     @cached_property
     def _joint_rates(self) -> FastFunction:
@@ -215,6 +236,8 @@ class Cabin8Dynamics:
         M, b, g = self._terms(q, qd, _params(payload))
         return M, b, g
 
+
+_BUILT: weakref.WeakKeyDictionary[Cabin8, Cabin8Dynamics] = weakref.WeakKeyDictionary()
 
 #: Batches up to this size are evaluated row by row (compiled buffers), larger ones by the mapped function.
 SMALL_BATCH = 24

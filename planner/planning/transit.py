@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
 from planner.kinematics import chain
+from planner.planning.motion import motion_clear
 from planner.redundancy.ik import random_admissible_joints
 
 Array = NDArray[np.float64]
@@ -97,7 +98,7 @@ def find_transit(
             continue
         q_a, q_b = posture.copy(), posture.copy()
         q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
-        if world.check_motion(q_a, q_b, clearance, motion_margin).valid and segment_ok(q_a, q_b):
+        if motion_clear(world, q_a, q_b, clearance, motion_margin) and segment_ok(q_a, q_b):
             log.info("transit posture found after %d candidates, %d state checks", tried, checks)
             return Transit(q_a, q_b, tried, checks)
     return None

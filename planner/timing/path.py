@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
 from planner.kinematics.compiled import CHUNK, evaluate_mapped
+from planner.kinematics.native import native
 from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
 
 Array = NDArray[np.float64]
@@ -185,13 +186,15 @@ def blended_polyline(
 
 @lru_cache(maxsize=8)
 def _drive_path_function(kin: Cabin8Kinematics) -> ca.Function:
+    """u, u', u'' of a joint path, mapped over CHUNK points (a native build where available)."""
     q = ca.SX.sym("q", 8)
     dq = ca.SX.sym("dq", 8)
     ddq = ca.SX.sym("ddq", 8)
     u = kin.drives_sx(q)
     du = ca.jtimes(u, q, dq)
     ddu = ca.jtimes(du, q, dq) + ca.jtimes(u, q, ddq)
-    return ca.Function("drive_path", [q, dq, ddq], [u, du, ddu])
+    fn = ca.Function("drive_path", [q, dq, ddq], [u, du, ddu])
+    return native([fn.map(CHUNK)], "cabin8_drive_path")[0]
 
 
 class DriveGeometry:
@@ -199,7 +202,7 @@ class DriveGeometry:
 
     def __init__(self, robot: Cabin8) -> None:
         self.robot = robot
-        self._fn = _drive_path_function(robot.kin).map(CHUNK)
+        self._fn = _drive_path_function(robot.kin)
 
     def __call__(self, q: Array, dq: Array, ddq: Array) -> tuple[Array, Array, Array]:
         """(N, 8) joint path values and derivatives -> (N, 8) u, u', u''."""

@@ -151,7 +151,7 @@ def sample_legs(
 ) -> tuple[DriveProfile, Array]:
     """Sample consecutive legs at t_k = k * period; also returns each sample's leg index."""
     geometry = DriveGeometry(robot)
-    dynamics = dynamics or Cabin8Dynamics(robot)
+    dynamics = dynamics or Cabin8Dynamics.of(robot)
     # Each leg is slowed uniformly (by at most one period) so that it lasts a whole number of periods:
     # its boundaries fall on samples, the last sample is exactly the goal at rest, and velocities and
     # accelerations only shrink (by k and k^2, k <= 1).

@@ -170,7 +170,7 @@ class ToppraStage:
     name: str = "toppra"
 
     def __post_init__(self) -> None:
-        self.dynamics = Cabin8Dynamics(self.robot)
+        self.dynamics = Cabin8Dynamics.of(self.robot)
         self.geometry = DriveGeometry(self.robot)
 
     def time_path(self, path: JointPath) -> TimedPath:
