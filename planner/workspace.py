@@ -132,7 +132,8 @@ def boundary_search(
     bounds = np.asarray(bounds_m, dtype=float)
     if not (np.isfinite(step_m) and step_m > 0):
         raise InvalidInput(f"step_m: must be a positive length, got {step_m}", field="step_m")
-    axes = tuple(np.arange(lo, hi + 0.5 * step_m, step_m) for lo, hi in bounds)
+    ax = [np.arange(lo, hi + 0.5 * step_m, step_m) for lo, hi in bounds]
+    axes: tuple[Array, Array, Array] = (ax[0], ax[1], ax[2])
     shape = tuple(len(a) for a in axes)
     if int(np.prod(shape)) > max_points:
         raise InvalidInput(
@@ -168,7 +169,7 @@ def boundary_search(
             z_high.append(exit_[order_l, 2])
     bnd = np.concatenate(boundary) if boundary else np.zeros((0, 3))
     if len(bnd) == 0:
-        return Workspace(axes, inside, bnd, 0.0, np.full((3, 2), np.nan), float(step_m))  # type: ignore[arg-type]
+        return Workspace(axes, inside, bnd, 0.0, np.full((3, 2), np.nan), float(step_m))
     volume = float(np.sum(np.concatenate(z_high) - np.concatenate(z_low)) * step_m**2)
     extents = np.column_stack([bnd.min(axis=0), bnd.max(axis=0)])
     extra = [
@@ -178,7 +179,7 @@ def boundary_search(
     ]
     bnd = np.concatenate([bnd, *extra])
     extents = np.column_stack([bnd.min(axis=0), bnd.max(axis=0)])
-    return Workspace(axes, inside, bnd, volume, extents, float(step_m))  # type: ignore[arg-type]
+    return Workspace(axes, inside, bnd, volume, extents, float(step_m))
 
 
 def two_pass_search(

@@ -42,7 +42,8 @@ The pose is ``x = (X, Y, Z, phi, theta, psi)`` with ``R = RotZ(phi) RotY(theta) 
 * Table 1's link lengths l, n, m are per chain (l = 100 mm for chain 1, n = m = 120 mm for chains 2, 3);
   eq. (12) writes m for all three.
 
-**Closure equations** (used by the Newton forward kinematics), one per drive, in [m]::
+**Closure equations** Phi(q, x) = 0, one per drive, in [m] (no square roots: they hold on every assembly
+mode; the forward kinematics solves their working-branch form ``IK(x) - q = 0`` and then checks them)::
 
     Phi_w_i = C_i . u_i - w_i                                   (i = 1, 2)
     Phi_beta = (C_3 - B_3) . n(beta)
@@ -51,12 +52,17 @@ The pose is ``x = (X, Y, Z, phi, theta, psi)`` with ``R = RotZ(phi) RotY(theta) 
 
 The drive Jacobian ``J = dq/dx`` (6x6, pose rates as Euler-angle rates) is analytic; the screw
 (twist) system of every chain gives the loop-closure Jacobian whose rank fixes the mobility.
+
+**Singularity (not in the paper).** With the platform level and unyawed, C_i - p is parallel to u_i, so the
+constraint forces of the chain-1/2 slider planes (along u_1, u_2 through C_1, C_2) and, at beta = 90 deg,
+of the chain-3 plane (along u_3 through C_3) are three coplanar lines through O1: J is singular there (type
+II), and the whole level, unyawed workspace is badly conditioned. A yaw of a few tenths of a radian cures it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -72,7 +78,6 @@ DRIVES = ("w1", "w2", "beta", "s1", "s2", "s3")
 POSE = ("x", "y", "z", "phi", "theta", "psi")
 _Z = np.array([0.0, 0.0, 1.0])
 
-JointType = Literal["P", "R", "S"]
 _JOINT_DOF: dict[str, int] = {"P": 1, "R": 1, "S": 3}
 
 
