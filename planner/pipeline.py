@@ -538,6 +538,17 @@ class Planner:
             duration_ratio=profile.duration_s / bound if bound > 0 else 1.0,
             planning_time_s=self._elapsed(),
         )
+        if line is not None and line.line is not None:
+            # With an insertion the robot stops at the pre-insertion pose, so no trajectory of this shape
+            # beats the single-drive bound to it plus the one along the line.
+            u_pre = self.robot.drives_from_joints(line.line[0])
+            staged = single_drive_lower_bound(
+                self.robot, profile.position[0], u_pre
+            ) + single_drive_lower_bound(self.robot, u_pre, profile.position[-1])
+            self.report.update(
+                staged_lower_bound_s=staged,
+                staged_duration_ratio=profile.duration_s / staged if staged > 0 else 1.0,
+            )
         self.progress("done", 1.0)
         return PlanResult(profile, gate, self.report, waypoints)
 
