@@ -54,3 +54,15 @@ def test_errors_name_the_field(tmp_path: Path, edit: dict, field: str) -> None:
     assert exc.value.details["field"] == field or (
         exc.value.details["field"] == "<root>" and field in str(exc.value)
     )
+
+
+def test_registered_by_name() -> None:
+    from planner.exceptions import InvalidInput
+    from planner.robots import available_robots, load_robot
+
+    assert "pprs6" in available_robots()
+    robot = load_robot("pprs6")
+    assert robot.drive_names == ("w1", "w2", "beta", "s1", "s2", "s3")
+    assert robot.drive_units == ("m", "m", "rad", "m", "m", "m")
+    with pytest.raises(InvalidInput):
+        load_robot("pprs6", rail_length=2.0)
