@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint typecheck check bench lock clean
+.PHONY: run serve test lint typecheck check bench lock clean
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -17,6 +17,9 @@ run: $(STAMP)  ## the main job on embedded defaults: plan the reference bay inse
 	mkdir -p out
 	$(BIN)/cabinplan plan tests/scenarios/aisle-bay-insert.yaml -o out/aisle-bay-insert.json \
 		--csv out/aisle-bay-insert.csv --plot out/aisle-bay-insert.png
+
+serve: $(STAMP)  ## the HTTP service on 127.0.0.1:8000 (embedded defaults; prints the local API key)
+	$(BIN)/python -m api
 
 test: $(STAMP)  ## lint, type-check and the whole test suite
 	$(BIN)/ruff check planner api tests bench

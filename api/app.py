@@ -119,6 +119,7 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         description="Trajectory planning and redundancy control for cabin assembly robots. Every error "
         "is an RFC 9457 problem (application/problem+json). Authenticate with the X-API-Key header.",
         lifespan=lifespan,
+        default_response_class=problems.SafeJSONResponse,
         docs_url="/docs",
         openapi_url="/openapi.json",
     )

@@ -9,7 +9,9 @@ never a stack trace.
 
 from __future__ import annotations
 
+import json
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from http import HTTPStatus
 from typing import Any
@@ -134,16 +136,31 @@ def from_validation_error(exc: ValidationError, what: str) -> Problem:
 
 
 def _jsonable(value: Any) -> Any:
+    """Strict-JSON copy: mappings and sequences recursively, non-finite floats as ``None``."""
     if isinstance(value, Mapping):
         return {str(k): _jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [_jsonable(v) for v in value]
-    if isinstance(value, str | int | float | bool) or value is None:
+    if isinstance(value, bool | str | int) or value is None:
         return value
     try:
-        return float(value)
+        f = float(value)
     except (TypeError, ValueError):
         return str(value)
+    return f if math.isfinite(f) else None
+
+
+class SafeJSONResponse(JSONResponse):
+    """JSON response that never fails on NaN/inf: such values (e.g. an infinite residual) become null."""
+
+    def render(self, content: Any) -> bytes:
+        """Strict JSON; values that are not JSON numbers are replaced by ``null``."""
+        try:
+            return json.dumps(content, ensure_ascii=False, allow_nan=False, separators=(",", ":")).encode()
+        except ValueError:
+            return json.dumps(
+                _jsonable(content), ensure_ascii=False, allow_nan=False, separators=(",", ":")
+            ).encode()
 
 
 def install(app: FastAPI) -> None:
@@ -194,6 +211,7 @@ def install(app: FastAPI) -> None:
 __all__ = [
     "PROBLEM_JSON",
     "Problem",
+    "SafeJSONResponse",
     "from_planner_error",
     "from_validation_error",
     "install",

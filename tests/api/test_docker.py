@@ -1,0 +1,47 @@
+"""The Dockerfile (no engine on the CI machine: its promises are checked by reading it)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _instructions() -> list[tuple[str, str]]:
+    text = (ROOT / "Dockerfile").read_text(encoding="utf-8").replace("\\\n", " ")
+    out = []
+    for line in text.splitlines():
+        line = line.strip()
+        if line and not line.startswith("#"):
+            op, _, rest = line.partition(" ")
+            out.append((op.upper(), rest.strip()))
+    return out
+
+
+def test_slim_base_lock_file_then_project_without_deps() -> None:
+    ins = _instructions()
+    assert ins[0] == ("FROM", "python:3.11-slim")
+    runs = [rest for op, rest in ins if op == "RUN"]
+    lock = next(i for i, r in enumerate(runs) if "-r requirements.lock" in r)
+    project = next(i for i, r in enumerate(runs) if "--no-deps ." in r)
+    assert lock < project
+    assert ("COPY", "requirements.lock ./") in ins
+
+
+def test_runs_as_a_non_root_user_with_a_healthcheck_on_the_health_route() -> None:
+    ins = _instructions()
+    users = [rest for op, rest in ins if op == "USER"]
+    assert users and users[-1] not in ("root", "0")
+    user_at = max(i for i, (op, _) in enumerate(ins) if op == "USER")
+    cmd_at = max(i for i, (op, _) in enumerate(ins) if op == "CMD")
+    assert user_at < cmd_at
+    health = [rest for op, rest in ins if op == "HEALTHCHECK"]
+    assert len(health) == 1 and "/api/v1/health" in health[0]
+    env = " ".join(rest for op, rest in ins if op == "ENV")
+    assert re.search(r"CABINPLAN_HOST=0\.0\.0\.0", env) and "CABINPLAN_DATA_DIR=/data" in env
+
+
+def test_dockerignore_keeps_the_venv_and_git_out() -> None:
+    ignored = (ROOT / ".dockerignore").read_text(encoding="utf-8").split()
+    assert {".git", ".venv"} <= set(ignored)

@@ -1,0 +1,53 @@
+"""Property-based fuzzing of every operation of the OpenAPI schema (schemathesis): never a 5xx.
+
+Bounded so that it stays fast: a few examples per operation, no shrinking deadline, jobs never run (idle
+runner). Every answer is checked: a status below 500, and errors are problem+json.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import schemathesis
+from fastapi.testclient import TestClient
+from hypothesis import HealthCheck, settings
+
+from api.app import create_app
+from api.auth import create_key
+from tests.api.conftest import IdleRunner, make_settings
+
+
+def _app():  # built at import: schemathesis reads the schema when the module is collected
+    import tempfile
+
+    data_dir = Path(tempfile.mkdtemp(prefix="cabinplan-fuzz-"))
+    return create_app(make_settings(data_dir, max_upload_bytes=64 * 1024), runner=IdleRunner())
+
+
+APP = _app()
+schema = schemathesis.openapi.from_asgi("/openapi.json", APP)
+KEY: dict[str, str] = {}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _lifespan() -> Iterator[None]:
+    with TestClient(APP):  # creates the tables and starts the (idle) runner
+        KEY["alpha"] = create_key(APP.state.ctx, "alpha", "fuzz")[1]
+        yield
+
+
+@schema.parametrize()
+@settings(max_examples=6, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
+def test_no_server_errors(case: schemathesis.Case) -> None:
+    response = case.call(headers={"X-API-Key": KEY["alpha"]})
+    assert response.status_code < 500, f"{case.method} {case.formatted_path}: {response.text[:500]}"
+    if response.status_code >= 400:
+        content_type = response.headers.get("content-type", [""])[0]
+        assert content_type.startswith("application/problem+json"), (
+            response.status_code,
+            response.text[:200],
+        )
+        body = response.json()
+        assert body["status"] == response.status_code and "Traceback" not in response.text

@@ -1,0 +1,114 @@
+"""The job lifecycle end to end with the real process runner: submit, poll, fetch; limits; cancel."""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from planner.robots import load_robot
+from tests.api.conftest import Service, free_transfer, make_settings, scenario, start_service, wait_for
+
+
+@pytest.fixture(scope="module")
+def svc(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
+    # no grace: a job's hard wall-clock limit is exactly its time_limit_s
+    yield from start_service(make_settings(tmp_path_factory.mktemp("jobs"), workers=2, job_grace_s=0.0))
+
+
+@pytest.fixture(scope="module")
+def transfer(svc: Service) -> dict[str, Any]:
+    """The reference aisle transfer planned through the API (the job document with its result)."""
+    r = svc.client.post("/api/v1/plans", json=scenario("aisle-transfer"), headers=svc.h())
+    assert r.status_code == 202
+    doc = wait_for(svc.client, svc.h(), r.json()["id"], timeout_s=90)
+    assert doc["status"] == "succeeded", doc
+    return doc
+
+
+def test_lifecycle_profile_respects_the_limits(svc: Service, transfer: dict[str, Any]) -> None:
+    result = transfer["result"]
+    assert result["report"]["gate"]["passed"] is True
+    assert transfer["progress"] == 1.0 and transfer["attempts"] == 1
+    assert transfer["provenance"] == result["provenance"]  # stored at submit = computed by the planner
+    robot = load_robot("cabin8")
+    v = np.array(result["velocity"])
+    assert np.all(np.abs(v) <= 1.01 * robot.limits.v_max)
+    np.testing.assert_allclose(v[0], 0.0, atol=1e-9)
+    np.testing.assert_allclose(v[-1], 0.0, atol=1e-9)
+    text = svc.client.get(f"/api/v1/plans/{transfer['id']}/profile.csv", headers=svc.h()).text
+    rows = list(csv.reader(io.StringIO(text)))
+    assert rows[0][0] == "t_s" and len(rows) - 1 == len(result["t"])
+    np.testing.assert_allclose([float(x) for x in rows[-1][1:9]], result["position"][-1], atol=1e-9)
+    png = svc.client.get(f"/api/v1/plans/{transfer['id']}/plot.png", headers=svc.h())
+    assert png.headers["content-type"] == "image/png" and png.content[:8] == b"\x89PNG\r\n\x1a\n"
+    listed = svc.client.get("/api/v1/plans?status=succeeded", headers=svc.h()).json()["items"]
+    assert transfer["id"] in {j["id"] for j in listed}
+
+
+def test_gate_route_passes_the_plan_and_fails_a_tampered_copy(svc: Service, transfer: dict[str, Any]) -> None:
+    body = {"scenario": scenario("aisle-transfer"), "profile": transfer["result"]}
+    report = svc.client.post("/api/v1/plans:validate", json=body, headers=svc.h()).json()
+    assert report["passed"] is True
+    tampered = {**transfer["result"], "velocity": [list(r) for r in transfer["result"]["velocity"]]}
+    k = len(tampered["velocity"]) // 2
+    tampered["velocity"][k][0] *= 3.0
+    report = svc.client.post(
+        "/api/v1/plans:validate", json={**body, "profile": tampered}, headers=svc.h()
+    ).json()
+    assert report["passed"] is False
+    assert any(not c["passed"] for c in report["checks"])
+
+
+def test_refusal_is_a_failed_job_with_the_planners_reason(svc: Service) -> None:
+    r = svc.client.post("/api/v1/plans", json=scenario("refuse-goal-unreachable"), headers=svc.h())
+    doc = wait_for(svc.client, svc.h(), r.json()["id"])
+    assert doc["status"] == "failed" and doc["reason"] == "goal_unreachable"
+    assert doc["result"]["status"] == "failed" and doc["result"]["reason"] == "goal_unreachable"
+
+
+def test_hard_limit_kills_the_job_and_the_next_one_runs(svc: Service) -> None:
+    # a 1 ms budget and no grace: no process can plan (or even resolve) the scenario in time
+    slow = svc.client.post(
+        "/api/v1/plans", json=scenario("aisle-bay-insert", time_limit_s=0.001), headers=svc.h()
+    )
+    killed = wait_for(svc.client, svc.h(), slow.json()["id"])
+    assert killed["status"] == "failed" and killed["reason"] == "time_limit_exceeded", killed
+    assert killed["finished_at"] - killed["started_at"] < 5.0
+    assert svc.client.get(f"/api/v1/plans/{killed['id']}/profile.csv", headers=svc.h()).status_code == 404
+    nxt = svc.client.post("/api/v1/plans", json=free_transfer(d1_goal=1.3), headers=svc.h())
+    done = wait_for(svc.client, svc.h(), nxt.json()["id"])
+    assert done["status"] == "succeeded" and done["result"]["report"]["gate"]["passed"] is True
+    assert svc.client.get("/api/v1/ready").json()["workers"]["running"] == 0
+
+
+def test_cancel_running_job_kills_it_and_health_stays_fast(svc: Service) -> None:
+    ids = [
+        svc.client.post("/api/v1/plans", json=scenario("aisle-bay-insert", seed=s), headers=svc.h()).json()[
+            "id"
+        ]
+        for s in (11, 12)
+    ]
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        states = [svc.client.get(f"/api/v1/plans/{i}", headers=svc.h()).json()["status"] for i in ids]
+        if states == ["running", "running"]:
+            break
+        time.sleep(0.05)
+    assert states == ["running", "running"]
+    assert svc.client.get("/api/v1/ready").json()["workers"]["running"] == 2
+    latencies = []
+    for _ in range(20):  # both workers busy: the event loop still answers at once
+        t = time.perf_counter()
+        assert svc.client.get("/api/v1/health").status_code == 200
+        latencies.append(time.perf_counter() - t)
+    assert max(latencies) < 0.05, latencies
+    for i in ids:
+        doc = svc.client.delete(f"/api/v1/plans/{i}", headers=svc.h()).json()
+        assert doc["status"] == "cancelled", doc
+    assert svc.client.get("/api/v1/ready").json()["workers"]["running"] == 0
