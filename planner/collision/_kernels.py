@@ -157,13 +157,16 @@ def capsule_pair_distances(
     for k in range(pair_a.shape[0]):
         if not is_capsule_pair[k] or out[k] > threshold:
             continue
-        a, b = pair_a[k], pair_b[k]
-        za = poses[a, 6:9] * (0.5 * poses[a, 12])
-        zb = poses[b, 6:9] * (0.5 * poses[b, 12])
-        d = segment_distance(
-            poses[a, 9:12] - za, poses[a, 9:12] + za, poses[b, 9:12] - zb, poses[b, 9:12] + zb
-        )
-        out[k] = d - radius[a] - radius[b]
+        out[k] = _capsule_capsule(poses, radius, pair_a[k], pair_b[k])
+
+
+@njit(cache=True, fastmath=False)
+def _capsule_capsule(poses: np.ndarray, radius: np.ndarray, a: int, b: int) -> float:
+    """Exact distance of the capsules a and b: segment distance minus both radii."""
+    za = poses[a, 6:9] * (0.5 * poses[a, 12])
+    zb = poses[b, 6:9] * (0.5 * poses[b, 12])
+    d = segment_distance(poses[a, 9:12] - za, poses[a, 9:12] + za, poses[b, 9:12] - zb, poses[b, 9:12] + zb)
+    return d - radius[a] - radius[b]
 
 
 @njit(cache=True, fastmath=False)
@@ -290,17 +293,23 @@ def capsule_box_distances(
         kind = capsule_box[k]
         if kind == 0 or out[k] > threshold:
             continue
-        c, b = (pair_a[k], pair_b[k]) if kind == 1 else (pair_b[k], pair_a[k])
-        z = poses[c, 6:9] * (0.5 * poses[c, 12])
-        p0 = poses[c, 9:12] - z - poses[b, 9:12]
-        p1 = poses[c, 9:12] + z - poses[b, 9:12]
-        # Into the box frame: R^T v, with R column-major in poses[b, 0:9].
-        a0 = np.empty(3)
-        a1 = np.empty(3)
-        for i in range(3):
-            a0[i] = poses[b, 3 * i] * p0[0] + poses[b, 3 * i + 1] * p0[1] + poses[b, 3 * i + 2] * p0[2]
-            a1[i] = poses[b, 3 * i] * p1[0] + poses[b, 3 * i + 1] * p1[1] + poses[b, 3 * i + 2] * p1[2]
-        out[k] = segment_box_distance(a0, a1, half[b]) - radius[c]
+        out[k] = _capsule_box(poses, radius, half, pair_a[k], pair_b[k], kind)
+
+
+@njit(cache=True, fastmath=False)
+def _capsule_box(poses: np.ndarray, radius: np.ndarray, half: np.ndarray, a: int, b: int, kind: int) -> float:
+    """Exact capsule-box distance of pair (a, b); ``kind`` 1: a is the capsule, 2: b is."""
+    c, b = (a, b) if kind == 1 else (b, a)
+    z = poses[c, 6:9] * (0.5 * poses[c, 12])
+    p0 = poses[c, 9:12] - z - poses[b, 9:12]
+    p1 = poses[c, 9:12] + z - poses[b, 9:12]
+    # Into the box frame: R^T v, with R column-major in poses[b, 0:9].
+    a0 = np.empty(3)
+    a1 = np.empty(3)
+    for i in range(3):
+        a0[i] = poses[b, 3 * i] * p0[0] + poses[b, 3 * i + 1] * p0[1] + poses[b, 3 * i + 2] * p0[2]
+        a1[i] = poses[b, 3 * i] * p1[0] + poses[b, 3 * i + 1] * p1[1] + poses[b, 3 * i + 2] * p1[2]
+    return segment_box_distance(a0, a1, half[b]) - radius[c]
 
 
 # ----------------------------------------------------------------------------------------------- poses
@@ -737,7 +746,57 @@ def packed_state(
 
 
 #: Codes of :func:`packed_check`.
-CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE = 0, 1, 2, 3
+CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def certain_cabin_contact(
+    b: int,
+    poses: np.ndarray,
+    clearance: float,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
+    grid: np.ndarray,
+    upper_slack: float,
+) -> bool:
+    """True when the cabin surface certainly enters body b grown by ``clearance`` (FCL would report it).
+
+    At a fine-cover centre x the grid bounds the distance to the surface from above by
+    UB(x) = LB(x) + ``upper_slack`` (where LB is finite); if the ball of radius UB(x) about x lies inside
+    the grown body (box: UB(x) < min_i (h_i + clearance - |x_i|) in the body frame; capsule, x on the
+    axis: UB(x) < r + clearance), a surface point -- hence a triangle -- lies strictly inside it.
+    """
+    u = _unpack(fbuf, ibuf)
+    fine_local, fine_frac, fine_bounds = u[5], u[6], u[8]
+    origin, inv_step, shape, has_grid = u[9], u[10], u[11], u[12]
+    radius, half = u[20], u[22]
+    if not has_grid:
+        return False
+    is_box = half[b, 0] > 0.0
+    sy = shape[1] * shape[2]
+    sz = shape[2]
+    centre = np.empty(3)
+    for s in range(fine_bounds[b], fine_bounds[b + 1]):
+        if is_box:
+            inner = math.inf
+            for i in range(3):
+                inner = min(inner, half[b, i] + clearance - abs(fine_local[s, i]))
+        else:
+            inner = radius[b] + clearance
+        if inner <= upper_slack:  # UB >= upper_slack: cannot fit
+            continue
+        for i in range(3):
+            v = poses[b, 9 + i] + fine_frac[s] * poses[b, 12] * poses[b, 6 + i]
+            for j in range(3):
+                v += poses[b, 3 * j + i] * fine_local[s, j]
+            centre[i] = v
+        i0 = min(max(int(math.floor((centre[0] - origin[0]) * inv_step + 0.5)), 0), shape[0] - 1)
+        j0 = min(max(int(math.floor((centre[1] - origin[1]) * inv_step + 0.5)), 0), shape[1] - 1)
+        k0 = min(max(int(math.floor((centre[2] - origin[2]) * inv_step + 0.5)), 0), shape[2] - 1)
+        lb = grid[i0 * sy + j0 * sz + k0]
+        if math.isfinite(lb) and lb + upper_slack + 1e-6 < inner:
+            return True
+    return False
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -748,12 +807,15 @@ def packed_check(
     grid: np.ndarray,
     clearance: float,
     self_clearance: float,
+    upper_slack: float,
 ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
     """The compiled part of a state check: (code, poses, cabin bounds, pair bounds).
 
     ``CLEAR``: admissible and the bounds prove every body ``clearance`` from the cabin and every pair
-    ``self_clearance`` apart. ``INADMISSIBLE``: a limit or margin fails. ``UNDECIDED``: admissible, but
-    some body or pair needs an exact (FCL) query. ``NOT_FINITE``: a joint is NaN or infinite.
+    ``self_clearance`` apart. ``INADMISSIBLE``: a limit or margin fails. ``CONTACT``: admissible, and
+    the cabin certainly enters some body grown by ``clearance`` (:func:`certain_cabin_contact`; a
+    negative ``upper_slack`` disables the test). ``UNDECIDED``: admissible, but some body or pair needs
+    an exact (FCL) query. ``NOT_FINITE``: a joint is NaN or infinite.
     """
     poses = np.empty((ibuf[0], 13))
     for i in range(q.shape[0]):
@@ -762,13 +824,113 @@ def packed_check(
     cabin, pairs, ok = _packed_state(q, fbuf, ibuf, grid, self_clearance, poses)
     if not ok:
         return INADMISSIBLE, poses, cabin, pairs
+    code = CLEAR
     for b in range(cabin.shape[0]):
         if not cabin[b] > clearance:
-            return UNDECIDED, poses, cabin, pairs
-    for k in range(pairs.shape[0]):
-        if not pairs[k] > self_clearance:
-            return UNDECIDED, poses, cabin, pairs
-    return CLEAR, poses, cabin, pairs
+            if upper_slack >= 0.0 and certain_cabin_contact(
+                b, poses, clearance, fbuf, ibuf, grid, upper_slack
+            ):
+                return CONTACT, poses, cabin, pairs
+            code = UNDECIDED
+    if code == CLEAR:
+        for k in range(pairs.shape[0]):
+            if not pairs[k] > self_clearance:
+                return UNDECIDED, poses, cabin, pairs
+    return code, poses, cabin, pairs
+
+
+# ------------------------------------------------------------------------------- bounds one by one
+# The motion walk reads few bounds at most of its states: these compute one body's or one pair's entry of
+# :func:`state_bounds` on demand, with the same arithmetic in the same order (so the same numbers).
+@njit(cache=True, fastmath=False, error_model="numpy")
+def cabin_bound_one(b: int, poses: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, grid: np.ndarray) -> float:
+    """Entry b of the cabin bounds of :func:`state_bounds` (sphere cover on the grid, carriage table)."""
+    u = _unpack(fbuf, ibuf)
+    fine_local, fine_frac, fine_r, fine_bounds = u[5], u[6], u[7], u[8]
+    origin, inv_step, shape, has_grid = u[9], u[10], u[11], u[12]
+    carriage, table, table_z0, table_dz = u[24], u[25], u[26], u[27]
+    best = math.inf
+    if has_grid:
+        sy = shape[1] * shape[2]
+        sz = shape[2]
+        centre = np.empty(3)
+        for s in range(fine_bounds[b], fine_bounds[b + 1]):
+            for i in range(3):
+                v = poses[b, 9 + i] + fine_frac[s] * poses[b, 12] * poses[b, 6 + i]
+                for j in range(3):
+                    v += poses[b, 3 * j + i] * fine_local[s, j]
+                centre[i] = v
+            i0 = int(math.floor((centre[0] - origin[0]) * inv_step + 0.5))
+            j0 = int(math.floor((centre[1] - origin[1]) * inv_step + 0.5))
+            k0 = int(math.floor((centre[2] - origin[2]) * inv_step + 0.5))
+            i0 = min(max(i0, 0), shape[0] - 1)
+            j0 = min(max(j0, 0), shape[1] - 1)
+            k0 = min(max(k0, 0), shape[2] - 1)
+            v = grid[i0 * sy + j0 * sz + k0] - fine_r[s]
+            if v < best:
+                best = v
+    if table.shape[0] > 0 and b == carriage:
+        d1 = poses[carriage, 11]
+        k = int(math.floor((d1 - table_z0) / table_dz + 0.5))
+        k = min(max(k, 0), table.shape[0] - 1)
+        exact = table[k] - abs(d1 - (table_z0 + k * table_dz))
+        if exact > best or best == math.inf:
+            best = exact
+    return best
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _coarse_box(
+    b: int, poses: np.ndarray, local: np.ndarray, frac: np.ndarray, r: np.ndarray, bounds: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Coarse cover centres of body b (as :func:`cover_centres`) and their bounding box (lo, hi)."""
+    n = bounds[b + 1] - bounds[b]
+    centres = np.empty((n, 3))
+    lo = np.full(3, math.inf)
+    hi = np.full(3, -math.inf)
+    for m in range(n):
+        s = bounds[b] + m
+        for i in range(3):
+            v = poses[b, 9 + i] + frac[s] * poses[b, 12] * poses[b, 6 + i]
+            for j in range(3):
+                v += poses[b, 3 * j + i] * local[s, j]
+            centres[m, i] = v
+        for d in range(3):
+            lo[d] = min(lo[d], centres[m, d] - r[s])
+            hi[d] = max(hi[d], centres[m, d] + r[s])
+    return centres, lo, hi
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def pair_bound_one(k: int, poses: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, threshold: float) -> float:
+    """Entry k of the pair bounds of :func:`state_bounds` (box separation, sphere gaps, exact distances)."""
+    u = _unpack(fbuf, ibuf)
+    coarse_local, coarse_frac, coarse_r, coarse_bounds = u[14], u[15], u[16], u[17]
+    pair_a, pair_b, radius, capsule_pair, half, capsule_box = u[18], u[19], u[20], u[21], u[22], u[23]
+    a, b = pair_a[k], pair_b[k]
+    ca_, lo_a, hi_a = _coarse_box(a, poses, coarse_local, coarse_frac, coarse_r, coarse_bounds)
+    cb_, lo_b, hi_b = _coarse_box(b, poses, coarse_local, coarse_frac, coarse_r, coarse_bounds)
+    sep = -math.inf
+    for d in range(3):
+        sep = max(sep, lo_b[d] - hi_a[d], lo_a[d] - hi_b[d])
+    if sep <= threshold:
+        gap = math.inf
+        for s in range(ca_.shape[0]):
+            rs = coarse_r[coarse_bounds[a] + s]
+            for t in range(cb_.shape[0]):
+                dx = ca_[s, 0] - cb_[t, 0]
+                dy = ca_[s, 1] - cb_[t, 1]
+                dz = ca_[s, 2] - cb_[t, 2]
+                g = math.sqrt(dx * dx + dy * dy + dz * dz) - rs - coarse_r[coarse_bounds[b] + t]
+                if g < gap:
+                    gap = g
+        sep = max(sep, gap)
+    if capsule_pair[k] and not sep > threshold:
+        return _capsule_capsule(poses, radius, a, b)
+    kind = capsule_box[k]
+    if kind != 0 and not sep > threshold:
+        return _capsule_box(poses, radius, half, a, b, kind)
+    return sep
 
 
 # ------------------------------------------------------------------------------------- motion walk
@@ -875,12 +1037,38 @@ def _walk_state(
     q = np.empty(q_a.shape[0])
     for j in range(q.shape[0]):
         q[j] = q_a[j] + t * dq[j]
-    cab, prs, _ = _packed_state(q, fbuf, ibuf, grid, cf[CF_THRESHOLD], poses[s])
-    cabin[s, :] = cab
-    pairs[s, :] = prs
+    u = _unpack(fbuf, ibuf)
+    body_poses(q, u[0], u[1], u[2], u[3], poses[s], np.empty(N_CONSTRAINTS))
+    cabin[s, :] = math.nan  # bounds are evaluated on demand (:func:`_walk_bound`)
+    pairs[s, :] = math.nan
     slot_of[i] = s
     ci[CI_COUNT] = s + 1
     return s
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _walk_bound(
+    s: int,
+    is_cabin: bool,
+    idx: int,
+    cf: np.ndarray,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
+    grid: np.ndarray,
+    poses: np.ndarray,
+    cabin: np.ndarray,
+    pairs: np.ndarray,
+) -> float:
+    """The bound of body/pair idx at slot s (NaN in the store: not yet evaluated)."""
+    if is_cabin:
+        v = cabin[s, idx]
+        if math.isnan(v):
+            v = cabin[s, idx] = cabin_bound_one(idx, poses[s], fbuf, ibuf, grid)
+        return v
+    v = pairs[s, idx]
+    if math.isnan(v):
+        v = pairs[s, idx] = pair_bound_one(idx, poses[s], fbuf, ibuf, cf[CF_THRESHOLD])
+    return v
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -936,8 +1124,8 @@ def motion_walk(
             s1 = _walk_state(n, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
             if s1 < 0:
                 return WALK_GROW
-            f0 = (cabin[s0, idx] if is_cabin else pairs[s0, idx]) - base
-            f1 = (cabin[s1, idx] if is_cabin else pairs[s1, idx]) - base
+            f0 = _walk_bound(s0, is_cabin, idx, cf, fbuf, ibuf, grid, poses, cabin, pairs) - base
+            f1 = _walk_bound(s1, is_cabin, idx, cf, fbuf, ibuf, grid, poses, cabin, pairs) - base
             if f0 >= mm and f1 >= mm and f0 + f1 >= D:
                 ci[CI_TASK] += 1
                 continue
@@ -960,7 +1148,7 @@ def motion_walk(
             s = _walk_state(i, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
             if s < 0:
                 return WALK_GROW
-            free = (cabin[s, idx] if is_cabin else pairs[s, idx]) - base
+            free = _walk_bound(s, is_cabin, idx, cf, fbuf, ibuf, grid, poses, cabin, pairs) - base
             E = free if free >= mm else 0.0
             m = 0
             if D > 0.0 and not exact:

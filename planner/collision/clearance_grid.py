@@ -10,8 +10,12 @@ Query. For a point q whose nearest node is g, |q - g| <= h sqrt(3)/2 and the dis
 ``d(q) >= d_m(g) - h sqrt(3) - e_s``: the grid stores exactly that bound. Points outside the grid box get
 ``-inf`` (unknown). A sphere of radius r centred at q is certainly clear of the mesh by ``LB(q) - r``.
 
-This never decides that something collides; it only proves clearance so exact (FCL) queries can be
-skipped. Build cost: about a second for a 6 m cabin at 3 cm (one distance transform); :func:`cached_build`
+Upper bound. The same grid bounds the distance from above: the nearest marked node m of g is within
+``h sqrt(3)/2`` of a surface sample, so ``d(q) <= |q - g| + d_m(g) + h sqrt(3)/2 <= LB(q) + 2 h sqrt(3) +
+e_s`` (:attr:`ClearanceGrid.upper_slack`) wherever LB(q) is finite. The world uses it only to recognise
+certain contacts (a surface point strictly inside a grown body); clearance is always proven by LB.
+
+Build cost: about a second for a 6 m cabin at 3 cm (one distance transform); :func:`cached_build`
 keeps built grids on disk, keyed by the mesh content, pose and step.
 """
 
@@ -82,6 +86,12 @@ class ClearanceGrid:
     origin: Array
     step: float
     lower_bound: Array
+    sample_spacing: float = 0.015
+
+    @property
+    def upper_slack(self) -> float:
+        """``d(q) <= query(q) + upper_slack`` [m] wherever ``query(q)`` is finite (see the module doc)."""
+        return 2.0 * self.step * math.sqrt(3.0) + 2.0 * self.sample_spacing
 
     @classmethod
     def build(
@@ -103,7 +113,7 @@ class ClearanceGrid:
         d_marked = ndimage.distance_transform_edt(free, sampling=step)
         bound = d_marked - step * math.sqrt(3.0) - 2.0 * sample_spacing
         # One layer of -inf around the grid: clipped indices of outside points land there.
-        return cls(lo - step, float(step), np.pad(bound, 1, constant_values=-np.inf))
+        return cls(lo - step, float(step), np.pad(bound, 1, constant_values=-np.inf), float(sample_spacing))
 
     def query(self, points: Array) -> Array:
         """Certified lower bound of the distance from each point (..., 3) to the mesh [m]; -inf outside."""
@@ -141,7 +151,10 @@ def cached_build(key: str, vertices: Array, faces: NDArray[np.int64], step: floa
         try:
             with np.load(path, allow_pickle=False) as data:
                 grid = ClearanceGrid(
-                    np.array(data["origin"]), float(data["step"]), np.array(data["lower_bound"])
+                    np.array(data["origin"]),
+                    float(data["step"]),
+                    np.array(data["lower_bound"]),
+                    float(data["sample_spacing"]) if "sample_spacing" in data else 0.015,
                 )
             if grid.step == float(step) and grid.lower_bound.ndim == 3 and grid.origin.shape == (3,):
                 return grid
@@ -152,7 +165,13 @@ def cached_build(key: str, vertices: Array, faces: NDArray[np.int64], step: floa
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as tmp:
-                np.savez(tmp, origin=grid.origin, step=grid.step, lower_bound=grid.lower_bound)
+                np.savez(
+                    tmp,
+                    origin=grid.origin,
+                    step=grid.step,
+                    lower_bound=grid.lower_bound,
+                    sample_spacing=grid.sample_spacing,
+                )
             os.replace(tmp.name, path)
         except OSError as exc:
             log.warning("clearance grid cache not written (%s)", exc)

@@ -419,6 +419,7 @@ class CollisionWorld:
             self._c_hi,
         )
         self._grid_flat = np.ascontiguousarray(self._grid_flat, dtype=float)
+        self._upper_slack = g.upper_slack if g is not None else -1.0
 
     # ------------------------------------------------------------------ poses
     def _evaluate(self, q: Array) -> tuple[Array, Array]:
@@ -559,7 +560,7 @@ class CollisionWorld:
             state = self._state(q, self.self_clearance)
         else:
             code, flat, cabin, pairs = _kernels.packed_check(
-                q, self._fbuf, self._ibuf, self._grid_flat, clearance, self.self_clearance
+                q, self._fbuf, self._ibuf, self._grid_flat, clearance, self.self_clearance, -1.0
             )
             if code == _kernels.CLEAR:  # the bounds prove everything: no FCL query
                 return _VALID
@@ -594,10 +595,10 @@ class CollisionWorld:
         q = _joints(q)
         own = self.self_clearance
         code, flat, cabin, pairs = _kernels.packed_check(
-            q, self._fbuf, self._ibuf, self._grid_flat, clearance, own
+            q, self._fbuf, self._ibuf, self._grid_flat, clearance, own, self._upper_slack
         )
         if code != _kernels.UNDECIDED:
-            return code == _kernels.CLEAR
+            return code == _kernels.CLEAR  # a certain contact is as invalid as an FCL-found one
         st = _State(flat, cabin, pairs, True)
         for b, lb in enumerate(cabin.tolist()):
             if lb <= clearance and self._cabin_hit(st, b, clearance):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import fcl
 import numpy as np
 import pytest
 
@@ -114,3 +115,53 @@ def test_self_only_world_motion_equals_the_reference(robot: Cabin8, payload: Pay
     for q in admissible_joints(robot, 40, seed=51):
         step = rng.normal(size=8) * 0.4
         assert fast.check_motion(q, q + step) == ref.check_motion(q, q + step)
+
+
+def test_clearance_grid_upper_bound(worlds: tuple[CollisionWorld, ...]) -> None:
+    """Inside the grid, distance <= LB + upper_slack (exact point distances by FCL)."""
+    world = worlds[0]
+    grid, cabin = world._grid, world._cabin_obj
+    assert grid is not None and cabin is not None and world.cabin is not None
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(
+        world.cabin.vertices.min(axis=0) - 0.2, world.cabin.vertices.max(axis=0) + 0.2, (400, 3)
+    )
+    req = fcl.DistanceRequest()
+    exact = np.array(
+        [fcl.distance(fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform(p)), cabin, req) for p in pts]
+    )
+    lb = grid.query(pts)
+    inside = np.isfinite(lb)
+    assert inside.mean() > 0.9
+    assert np.all(lb[inside] <= exact[inside] + 1e-9)
+    assert np.all(exact[inside] <= lb[inside] + grid.upper_slack + 1e-9)
+
+
+def test_certain_contacts_are_real(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
+    """Every body the kernel calls certainly in contact collides in FCL (grown by the clearance)."""
+    world = worlds[0]
+    cabin = world._cabin_obj
+    assert cabin is not None
+    found = 0
+    for q in along_rail(robot, 200, seed=61):
+        for clearance in (0.0, 0.01, 0.05):
+            code, flat, _, _ = _kernels.packed_check(
+                q,
+                world._fbuf,
+                world._ibuf,
+                world._grid_flat,
+                clearance,
+                world.self_clearance,
+                world._upper_slack,
+            )
+            R, p, lengths = world.poses(q)
+            for b in range(len(world.names)):
+                if _kernels.certain_cabin_contact(
+                    b, flat, clearance, world._fbuf, world._ibuf, world._grid_flat, world._upper_slack
+                ):
+                    found += 1
+                    o = world._object(b, R[0, b], p[0, b], lengths[0, b], clearance)
+                    assert fcl.collide(o, cabin, fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+            if code == _kernels.CONTACT:
+                assert not worlds[1].is_valid(q, clearance)
+    assert found > 20  # the test recognises a good share of the contacts
