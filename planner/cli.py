@@ -14,7 +14,6 @@ from functools import wraps
 from pathlib import Path
 from typing import Annotated, Any, NoReturn, ParamSpec, TypeVar
 
-import numpy as np
 import typer
 from pydantic import ValidationError
 
@@ -93,11 +92,6 @@ def _cabin8(robot: str) -> Cabin8:
     return model
 
 
-def _pose_json(T: np.ndarray) -> dict[str, Any]:
-    pose = Pose.from_matrix(T)
-    return {"position": list(pose.position), "orientation": pose.orientation.model_dump()}
-
-
 RobotArg = Annotated[str, typer.Argument(help=f"robot model ({', '.join(available_robots())})")]
 
 
@@ -123,26 +117,15 @@ def fk(
             _fail("fk pprs6: give --drives (w1, w2, beta, s1, s2, s3)", EXIT_INVALID)
         _emit(pprs6_tools.fk_document(_json_arg(drives, "--drives")))
         return
-    model = _cabin8(robot)
+    from planner.tools import fk_document
+
+    _cabin8(robot)
     if (drives is None) == (joints is None):
         _fail("fk: give exactly one of --drives or --joints", EXIT_INVALID)
     if drives is not None:
-        u = model.drives_from_dict(_json_arg(drives, "--drives"), field="drives")
-        q = model.joints_from_drives(u)
+        _emit(fk_document(robot, drives=_json_arg(drives, "--drives")))
     else:
-        q = model.joints_from_dict(_json_arg(joints or "", "--joints"), field="joints")
-        u = model.drives_from_joints(q)
-    T = model.fk(q)
-    _emit(
-        {
-            "robot": model.name,
-            "joints": model.joints_dict(q),
-            "drives": model.drives_dict(u),
-            "T_base_tool": [float(v) for v in T.reshape(-1)],
-            "pose": _pose_json(T),
-            "violations": model.violations(q),
-        }
-    )
+        _emit(fk_document(robot, joints=_json_arg(joints or "", "--joints")))
 
 
 @app.command()
@@ -161,28 +144,15 @@ def ik(
 
         _emit(pprs6_tools.ik_document(_json_arg(pose, "--pose")))
         return
-    from planner.redundancy.ik import IKOptions, solve_pose_ik
+    from planner.tools import ik_document
 
-    model = _cabin8(robot)
+    _cabin8(robot)
     try:
         target = Pose.model_validate(_json_arg(pose, "--pose"))
     except ValidationError as exc:
         _fail(_readable(exc, "pose"), EXIT_INVALID)
-    near_u = None if near is None else model.drives_from_dict(_json_arg(near, "--near"), field="near")
-    sol = solve_pose_ik(model, target.matrix(), near_drives=near_u, options=IKOptions(seed=seed))
-    T = model.fk(sol.q)
-    _emit(
-        {
-            "robot": model.name,
-            "drives": model.drives_dict(sol.u),
-            "joints": model.joints_dict(sol.q),
-            "T_base_tool": [float(v) for v in T.reshape(-1)],
-            "position_error_m": sol.position_error_m,
-            "orientation_error_rad": sol.orientation_error_rad,
-            "min_margin": sol.min_margin,
-            "iterations": sol.iterations,
-        }
-    )
+    near_drives = None if near is None else _json_arg(near, "--near")
+    _emit(ik_document(robot, target, near=near_drives, seed=seed))
 
 
 @app.command()
@@ -297,20 +267,9 @@ def plan(
     if csv is not None:
         _write(csv, result.profile.to_csv(), "--csv")
     if plot is not None:
-        from planner.plot import profile_png
+        from planner.plot import plan_png
 
-        q = result.profile.joints
-        idx = np.unique(np.concatenate([np.arange(0, len(q), max(1, len(q) // 200)), [len(q) - 1]]))
-        clearance = planner.world.clearance_profile(q[idx]) if sc.cabin is not None else None
-        png = profile_png(
-            result.profile,
-            sc.robot,
-            result.profile.t[idx],
-            clearance,
-            sc.options.clearance_m,
-            title=f"{sc.spec.name}: {result.profile.duration_s:.2f} s",
-        )
-        _write(plot, png, "--plot")
+        _write(plot, plan_png(sc, result, planner.world), "--plot")
     typer.echo(
         f"cabinplan: {sc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, "
         f"{len(result.profile.t)} samples, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm "
