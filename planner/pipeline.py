@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
+from planner.dynamics.stiffness import Compensation, StaticDeflection, compensate_goals, stiffness_model
 from planner.exceptions import (
     ApproachInfeasible,
     GoalInCollision,
@@ -93,6 +94,8 @@ class PlanResult:
     gate: GateReport
     report: dict[str, Any] = field(repr=False)
     waypoints: Array = field(repr=False)
+    #: Predicted static deflection of the payload frame at every sample (N, 6), or None (no stiffness data).
+    deflection: Array | None = field(default=None, repr=False)
 
 
 def single_drive_lower_bound(robot: Any, u0: Array, u1: Array) -> float:
@@ -103,8 +106,22 @@ def single_drive_lower_bound(robot: Any, u0: Array, u1: Array) -> float:
     return float(np.max(t))
 
 
-def gate_requirements(sc: ResolvedScenario, payload: RigidPayload | None) -> GateRequirements:
-    """What the validation gate demands of any trajectory for this scenario."""
+def compensates_deflection(sc: ResolvedScenario) -> bool:
+    """Whether a scenario's pose goal is deflection-compensated (option, default: with a payload)."""
+    if sc.T_base_payload_goal is None or sc.robot.desc.stiffness is None:
+        return False
+    option = sc.options.compensate_deflection
+    return sc.payload is not None if option is None else bool(option)
+
+
+def gate_requirements(
+    sc: ResolvedScenario, payload: RigidPayload | None, T_base_payload_commanded: Array | None = None
+) -> GateRequirements:
+    """What the validation gate demands of any trajectory for this scenario.
+
+    ``T_base_payload_commanded`` is the planner's compensated command of a pose goal (the gate
+    recomputes it from the final sample when it is not given).
+    """
     return GateRequirements(
         start_u=sc.start_u,
         clearance_m=sc.options.clearance_m,
@@ -115,6 +132,8 @@ def gate_requirements(sc: ResolvedScenario, payload: RigidPayload | None) -> Gat
         approach_direction=sc.approach_direction,
         approach_distance_m=sc.approach_distance_m,
         payload=payload,
+        compensate_deflection=compensates_deflection(sc),
+        T_base_payload_commanded=T_base_payload_commanded,
     )
 
 
@@ -509,6 +528,7 @@ class Planner:
         t = time.perf_counter()
         self.progress("goals", 0.05)
         targets, lines = self.goals()
+        compensations = self._compensate(targets, lines)
         self._stage("goals", t)
         t = time.perf_counter()
         self.progress("search", 0.15)
@@ -526,9 +546,11 @@ class Planner:
                 legs.append(JointPath((SplinePiece.through(line.line_s, line.line),)))
             waypoints = np.vstack([waypoints, line.line[1:]])
         self._stage("smooth", t)
-        req = gate_requirements(sc, self.payload)
+        commanded = compensations[k].T_base_frame_commanded if compensations else None
+        req = gate_requirements(sc, self.payload, commanded)
         self.progress("timing", 0.75)
         profile, gate, timed = self.time_and_validate(legs, req)
+        deflection = self._deflection_report(profile, compensations[k] if compensations else None)
         bound = single_drive_lower_bound(self.robot, profile.position[0], profile.position[-1])
         self.report.update(
             legs=len(legs),
@@ -550,7 +572,63 @@ class Planner:
                 staged_duration_ratio=profile.duration_s / staged if staged > 0 else 1.0,
             )
         self.progress("done", 1.0)
-        return PlanResult(profile, gate, self.report, waypoints)
+        return PlanResult(profile, gate, self.report, waypoints, deflection)
+
+    def _compensate(self, targets: list[Array], lines: list[GoalCandidate | None]) -> list[Compensation]:
+        """Move pose-goal targets onto their deflection-compensated commands (in place); [] when off."""
+        sc = self.sc
+        if not compensates_deflection(sc) or sc.goal_q is not None:
+            return []
+        assert sc.T_base_payload_goal is not None
+
+        def accept(path: Array) -> bool:
+            if len(path) == 1:
+                return self._state_ok(path[0])
+            if any(self.robot.violations(qi) for qi in path):
+                return False
+            if len(path) == 2:
+                return self._state_ok(path[0]) and self._state_ok(path[1]) and self._motion_ok(*path)
+            return self.world.check_path(path, self.plan_clearance, self.opts.motion_margin_m).valid
+
+        T_tool_payload = sc.payload.T_tool_payload if sc.payload is not None else np.eye(4)
+        res = compensate_goals(
+            stiffness_model(self.robot),
+            targets,
+            lines,
+            sc.T_base_payload_goal,
+            self.payload,
+            T_tool_payload,
+            accept,
+        )
+        targets[:], lines[:] = res.targets, res.lines
+        self.report["compensation"] = {"candidates": len(res.targets), "rejected": res.rejected}
+        return res.compensations
+
+    def _deflection_report(self, profile: DriveProfile, comp: Compensation | None) -> Array | None:
+        """Predicted payload-frame deflection along the profile into the report; (N, 6) or None."""
+        if self.robot.desc.stiffness is None:
+            return None
+        sc = self.sc
+        T_tool_payload = sc.payload.T_tool_payload if sc.payload is not None else np.eye(4)
+        x = stiffness_model(self.robot).deflection_along(profile.joints, self.payload, T_tool_payload)
+        tr, rot = np.linalg.norm(x[:, :3], axis=1), np.linalg.norm(x[:, 3:], axis=1)
+        self.report["deflection"] = {
+            "frame": "payload" if sc.payload is not None else "tool",
+            "max_translation_m": float(tr.max()),
+            "max_rotation_rad": float(rot.max()),
+            "at_goal": StaticDeflection(x[-1, :3], x[-1, 3:]).to_dict(),
+            "compensated": comp is not None,
+        }
+        if comp is not None:
+            doc = comp.to_dict()
+            self.report["goal"] = {
+                "nominal": doc["nominal"],
+                "compensated": doc["compensated"],
+                "residual_m": comp.residual_m,
+                "residual_rad": comp.residual_rad,
+                "iterations": doc["iterations"],
+            }
+        return x
 
 
 def plan(

@@ -33,14 +33,17 @@ def profile_png(
     clearance_m: Array | None = None,
     required_clearance_m: float | None = None,
     title: str = "",
+    deflection: Array | None = None,
 ) -> bytes:
     """PNG bytes of the profile against its limits.
 
     Positions (fraction of travel), velocity / acceleration / effort as fractions of their limits per
-    drive, and the clearance to the cabin along the path (if given) with the required clearance.
+    drive, the clearance to the cabin along the path (if given) with the required clearance, and the
+    predicted static deflection (if given: (N, 6) twists at the profile's samples, translation [m] and
+    rotation [rad]) as its translation norm [mm] and rotation norm [mrad].
     """
     lim = robot.limits
-    rows = 5 if clearance_m is not None else 4
+    rows = 4 + (clearance_m is not None) + (deflection is not None)
     fig, axes = plt.subplots(rows, 1, figsize=(11, 2.6 * rows), sharex=True)
     t = profile.t
     names = profile.drive_names
@@ -70,6 +73,14 @@ def profile_png(
             ax.legend(fontsize=7)
         ax.set_ylabel("clearance [mm]")
         ax.set_ylim(bottom=0)
+    if deflection is not None:
+        ax = axes[-1]
+        x = np.asarray(deflection)
+        ax.plot(t, 1e3 * np.linalg.norm(x[:, :3], axis=1), color="tab:blue", lw=1, label="translation [mm]")
+        ax.plot(t, 1e3 * np.linalg.norm(x[:, 3:], axis=1), color="tab:orange", lw=1, label="rotation [mrad]")
+        ax.set_ylabel("static deflection")
+        ax.set_ylim(bottom=0)
+        ax.legend(fontsize=7)
     axes[-1].set_xlabel("t [s]")
     if title:
         fig.suptitle(title)
@@ -101,4 +112,5 @@ def plan_png(sc: ResolvedScenario, result: PlanResult, world: CollisionWorld) ->
         clearance,
         sc.options.clearance_m,
         title=f"{sc.spec.name}: {result.profile.duration_s:.2f} s",
+        deflection=result.deflection,
     )

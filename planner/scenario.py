@@ -261,6 +261,12 @@ class PlanOptions(BaseModel):
     approach_step_m: Number = Field(
         0.005, ge=0.001, le=0.05, description="Step in m along the straight approach motion."
     )
+    compensate_deflection: bool | None = Field(
+        None,
+        description="Pose goals: command the pose whose predicted static deflection (stiffness model, "
+        "payload and link weights) lands the payload on the requested pose within 0.01 mm and 1e-5 rad. "
+        "Default (null): true when a payload is given.",
+    )
 
     @model_validator(mode="before")
     @classmethod

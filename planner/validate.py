@@ -8,6 +8,9 @@ re-derives and checks:
 ``start``           the first sample is the scenario's start (1e-9), at rest;
 ``end_at_rest``     the last sample is at rest;
 ``goal``            the final pose is the goal (payload frame within 1 mm / 0.1 deg; drives goal: 1e-6);
+                    with deflection compensation the final pose is the *commanded* pose (1 mm / 0.1 deg)
+                    and the deflected pose predicted there by the stiffness model is the requested pose
+                    within 0.01 mm / 1e-5 rad (:mod:`planner.dynamics.stiffness`);
 ``position``        every drive within its travel (1e-9);
 ``velocity``        |u_dot| <= v_max (1% tolerance);
 ``acceleration``    |u_ddot| <= a_max (1%);
@@ -37,7 +40,14 @@ from numpy.typing import NDArray
 from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.exceptions import OutsideWorkspace
+from planner.dynamics.stiffness import (
+    COMPENSATION_TOL_M,
+    COMPENSATION_TOL_RAD,
+    compensate_goal,
+    deflected_pose,
+    stiffness_model,
+)
+from planner.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.kinematics.so3 import rotation_log
 from planner.robots.cabin8 import Cabin8
 from planner.timing.profile import DriveProfile
@@ -70,6 +80,11 @@ class GateRequirements:
     approach_direction: Array | None = field(default=None, repr=False)
     approach_distance_m: float = 0.0
     payload: RigidPayload | None = None
+    #: Deflection compensation of a pose goal: the final sample must reach the commanded payload pose
+    #: (kinematically) and its predicted deflected pose the requested one. The commanded pose is the
+    #: planner's; without it the gate recomputes it from the final sample's redundant coordinates.
+    compensate_deflection: bool = False
+    T_base_payload_commanded: Array | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)
@@ -272,7 +287,11 @@ def validate_profile(
     # Goal.
     T_tool = robot.fk_batch(q)
     T_pay = T_tool @ req.T_tool_payload
-    if req.T_base_payload_goal is not None:
+    T_line_goal = req.T_base_payload_goal
+    if req.T_base_payload_goal is not None and req.compensate_deflection:
+        chk, T_line_goal = _compensated_goal_check(q[-1], T_pay[-1], robot, req, n)
+        checks.append(chk)
+    elif req.T_base_payload_goal is not None:
         Tg = req.T_base_payload_goal
         dp = float(np.linalg.norm(T_pay[-1][:3, 3] - Tg[:3, 3]))
         da = float(np.linalg.norm(rotation_log(Tg[:3, :3].T @ T_pay[-1][:3, :3])))
@@ -290,7 +309,7 @@ def validate_profile(
         checks.append(Check("goal", e <= 1e-6, f"final drives off by {e:.3g}", e, n - 1))
     # Approach line.
     if req.approach_direction is not None and req.T_base_payload_goal is not None:
-        checks.append(_approach_check(T_pay, req))
+        checks.append(_approach_check(T_pay, req, T_line_goal))
     # Collision: certified between consecutive samples.
     rep = world.check_path(q, req.clearance_m, req.motion_margin_m, max_extra_m=GATE_MAX_EXTRA_M)
     if rep.valid:
@@ -311,10 +330,43 @@ def validate_profile(
     return GateReport(tuple(checks), n, min_c, peaks)
 
 
-def _approach_check(T_pay: Array, req: GateRequirements) -> Check:
+def _compensated_goal_check(
+    q_end: Array, T_end: Array, robot: Cabin8, req: GateRequirements, n: int
+) -> tuple[Check, Array]:
+    """Goal check of a deflection-compensated pose goal; also returns the commanded pose."""
+    assert req.T_base_payload_goal is not None
+    model = stiffness_model(robot)
+    T_cmd = req.T_base_payload_commanded
+    if T_cmd is None:
+        try:
+            T_cmd = compensate_goal(
+                model, req.T_base_payload_goal, q_end, req.payload, req.T_tool_payload
+            ).T_base_frame_commanded
+        except DeflectionNotCompensated as exc:
+            return Check("goal", False, f"no compensated command: {exc.message}", None, n - 1), T_end
+    dp = float(np.linalg.norm(T_end[:3, 3] - T_cmd[:3, 3]))
+    da = float(np.linalg.norm(rotation_log(T_cmd[:3, :3].T @ T_end[:3, :3])))
+    x = model.deflection(q_end, req.payload, req.T_tool_payload).twist
+    T_def = deflected_pose(T_end, x)
+    Tg = req.T_base_payload_goal
+    ep = float(np.linalg.norm(T_def[:3, 3] - Tg[:3, 3]))
+    ea = float(np.linalg.norm(rotation_log(Tg[:3, :3].T @ T_def[:3, :3])))
+    ok = dp <= GOAL_POSITION_TOL_M and da <= GOAL_ANGLE_TOL_RAD
+    ok = ok and ep <= COMPENSATION_TOL_M and ea <= COMPENSATION_TOL_RAD
+    detail = (
+        f"final payload pose off the commanded pose by {1e3 * dp:.3f} mm, {np.rad2deg(da):.4f} deg; "
+        f"predicted deflected pose ({1e3 * float(np.linalg.norm(x[:3])):.3f} mm sag) off the request by "
+        f"{1e3 * ep:.4f} mm, {ea:.2e} rad"
+    )
+    return Check("goal", ok, detail, max(dp, ep), n - 1), T_cmd
+
+
+def _approach_check(T_pay: Array, req: GateRequirements, T_goal: Array | None = None) -> Check:
+    """The insertion line check; ``T_goal`` is the line's goal pose (default: the requested goal)."""
     assert req.approach_direction is not None and req.T_base_payload_goal is not None
+    T_goal = req.T_base_payload_goal if T_goal is None else T_goal
     d = req.approach_direction / np.linalg.norm(req.approach_direction)
-    goal_p = req.T_base_payload_goal[:3, 3]
+    goal_p = T_goal[:3, 3]
     rel = T_pay[:, :3, 3] - goal_p[None, :]
     along = -(rel @ d)  # distance back from the goal along the line
     reached = np.flatnonzero(along >= req.approach_distance_m - LINE_TOL_M)
@@ -325,7 +377,7 @@ def _approach_check(T_pay: Array, req: GateRequirements) -> Check:
     k = int(reached[-1])
     seg = rel[k:]
     off = np.linalg.norm(seg - np.outer(seg @ d, d), axis=1)
-    Rg = req.T_base_payload_goal[:3, :3]
+    Rg = T_goal[:3, :3]
     ang = np.array([np.linalg.norm(rotation_log(Rg.T @ T[:3, :3])) for T in T_pay[k:]])
     worst_off, worst_ang = float(off.max()), float(ang.max())
     ok = worst_off <= LINE_TOL_M and worst_ang <= GOAL_ANGLE_TOL_RAD

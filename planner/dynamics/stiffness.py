@@ -57,8 +57,9 @@ Deflections are small-displacement twists of the reference frame's origin: trans
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -85,6 +86,13 @@ _EZ = np.array([0.0, 0.0, 1.0])
 
 
 # ------------------------------------------------------------------------------------------ building blocks
+def cross(a: Array, b: Array) -> Array:
+    """Cross product along the last axis (..., 3), broadcasting; cheaper than ``np.cross`` on small N."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def skew(r: Array) -> Array:
     """Skew operator S(r) of eq. (64): S(r) v = r x v; r (..., 3) -> (..., 3, 3)."""
     r = np.asarray(r, dtype=float)
@@ -155,7 +163,7 @@ def beam_frame(p_base: Array, p_tip: Array, z_ref: Array) -> tuple[Array, Array]
     x = axis / length[..., None]
     z = z_ref - np.sum(z_ref * x, axis=-1, keepdims=True) * x
     z = z / np.linalg.norm(z, axis=-1, keepdims=True)
-    y = np.cross(z, x)
+    y = cross(z, x)
     return np.stack([x, y, z], axis=-1), length
 
 
@@ -184,7 +192,7 @@ def revolute_twist(axis: Array, through: Array, point: Array) -> Array:
     It is ``(axis x (point - through), axis)``.
     """
     axis = np.broadcast_to(axis, np.shape(point))
-    return np.concatenate([np.cross(axis, point - through), axis], axis=-1)
+    return np.concatenate([cross(axis, point - through), axis], axis=-1)
 
 
 def prismatic_twist(axis: Array) -> Array:
@@ -215,7 +223,7 @@ def branch_stiffness(C: Array, J_passive: Array | None = None) -> Array:
 
 def wrench_at(force: Array, at: Array, point: Array) -> Array:
     """Wrench (N, 6) at ``point`` of forces (N, 3) acting at ``at`` (N, 3): (f, (at - point) x f)."""
-    return np.concatenate([force, np.cross(at - point, force)], axis=-1)
+    return np.concatenate([force, cross(at - point, force)], axis=-1)
 
 
 # ------------------------------------------------------------------------------------------------ results
@@ -762,3 +770,70 @@ def stiffness_model(robot: Cabin8) -> StiffnessModel:
         model = StiffnessModel(robot)
         _MODELS[key] = model
     return model
+
+
+# ------------------------------------------------------------------------------------------ planner hook
+@dataclass(frozen=True)
+class CompensatedGoals:
+    """Goal configurations (and approach lines) moved onto their compensated commands.
+
+    ``targets[i]``, ``lines[i]`` and ``compensations[i]`` belong together; candidates whose moved line or
+    configuration was rejected are dropped (``rejected`` counts them).
+    """
+
+    targets: list[Array]
+    lines: list[Any]
+    compensations: list[Compensation]
+    rejected: int
+
+
+def compensate_goals(
+    model: StiffnessModel,
+    targets: list[Array],
+    lines: list[Any],
+    T_base_payload_goal: Array,
+    payload: RigidPayload | None,
+    T_tool_payload: Array,
+    accept: Callable[[Array], bool],
+) -> CompensatedGoals:
+    """Move each goal configuration (and its approach line) onto the command that deflects onto the goal.
+
+    Each candidate's final configuration (the end of its approach line, else the target) is compensated by
+    :func:`compensate_goal` on its own (gamma, d5). The whole line is shifted by the same joint offset
+    dq = q_commanded - q_goal: a fixed-redundancy line stays a straight joint segment whose payload path is
+    the requested insertion line moved by the goal's correction (the deflection along the line changes
+    little; it is reported with the plan). ``accept(path (K, 8)) -> bool`` re-checks each moved line (or
+    the single configuration) for limits, force and clearance.
+
+    Raises:
+        DeflectionNotCompensated: no candidate can be compensated and accepted (``details`` says why).
+    """
+    out_t: list[Array] = []
+    out_l: list[Any] = []
+    comps: list[Compensation] = []
+    errors: list[str] = []
+    rejected = 0
+    for q, line in zip(targets, lines, strict=True):
+        path = line.line if (line is not None and getattr(line, "line", None) is not None) else None
+        q_end = path[-1] if path is not None else q
+        try:
+            comp = compensate_goal(model, T_base_payload_goal, q_end, payload, T_tool_payload)
+        except DeflectionNotCompensated as exc:
+            errors.append(exc.message)
+            continue
+        dq = comp.q_commanded - q_end
+        moved = (path if path is not None else q[None, :]) + dq[None, :]
+        if not accept(moved):
+            rejected += 1
+            continue
+        out_l.append(dataclasses.replace(line, line=moved, q=line.q + dq) if path is not None else line)
+        out_t.append(moved[0])
+        comps.append(comp)
+    if not out_t:
+        raise DeflectionNotCompensated(
+            "goal compensation: no goal configuration can be moved onto its deflection-compensated command "
+            f"({rejected} rejected for limits, force or clearance; {len(errors)} did not converge)",
+            rejected=rejected,
+            errors=errors[:3],
+        )
+    return CompensatedGoals(out_t, out_l, comps, rejected)

@@ -1,0 +1,99 @@
+"""Deflection compensation in the pipeline: plans carry the deflection, the gate holds the command to it."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from planner.dynamics.stiffness import StiffnessModel, deflected_pose
+from planner.exceptions import InvalidInput
+from planner.kinematics.so3 import pose_error
+from planner.pipeline import Planner, PlanResult, gate_requirements
+from planner.plot import profile_png
+from planner.scenario import ResolvedScenario, resolve_scenario, scenario_from_dict
+from planner.validate import validate_profile
+
+SCENARIOS = Path(__file__).parent.parent / "scenarios"
+
+
+def _scenario(**options: Any) -> ResolvedScenario:
+    raw = yaml.safe_load((SCENARIOS / "aisle-bay-insert.yaml").read_text())
+    raw.setdefault("options", {}).update(options)
+    return resolve_scenario(scenario_from_dict(raw), base_dir=SCENARIOS)
+
+
+@pytest.fixture(scope="module")
+def plans() -> dict[str, tuple[ResolvedScenario, Planner, PlanResult]]:
+    out = {}
+    for name, opts in (("compensated", {}), ("rigid", {"compensate_deflection": False})):
+        sc = _scenario(**opts)
+        planner = Planner(sc)
+        out[name] = (sc, planner, planner.plan())
+    return out
+
+
+def _final(sc: ResolvedScenario, res: PlanResult) -> tuple[np.ndarray, np.ndarray]:
+    q = res.profile.joints[-1]
+    assert sc.payload is not None
+    T = sc.robot.fk(q) @ sc.payload.T_tool_payload
+    x = StiffnessModel(sc.robot).deflection(q, sc.payload.rigid_payload(), sc.payload.T_tool_payload)
+    return T, deflected_pose(T, x.twist)
+
+
+def test_compensated_plan_lands_the_sagging_payload_on_the_request(plans: dict) -> None:
+    sc, _, res = plans["compensated"]
+    assert res.gate.passed, res.gate.summary()
+    T_rigid, T_sagged = _final(sc, res)
+    e = pose_error(sc.T_base_payload_goal, T_sagged)
+    assert np.linalg.norm(e[:3]) < 1e-5 and np.linalg.norm(e[3:]) < 1e-5
+    # The rigid pose is off the request by the sag it compensates (about 1.7 mm and 2.5 mrad here).
+    off = pose_error(sc.T_base_payload_goal, T_rigid)
+    assert np.linalg.norm(off[:3]) > 1e-3 and np.linalg.norm(off[3:]) > 1e-3
+    rep = res.report
+    assert rep["deflection"]["compensated"] is True
+    assert rep["goal"]["residual_m"] < 1e-5 and len(rep["goal"]["iterations"]) >= 2
+    np.testing.assert_allclose(rep["goal"]["compensated"]["position"], T_rigid[:3, 3], atol=1e-9)
+    assert res.deflection is not None and res.deflection.shape == (len(res.profile.t), 6)
+    assert rep["deflection"]["max_translation_m"] >= rep["deflection"]["at_goal"]["translation_norm_m"] > 1e-3
+
+
+def test_rigid_plan_misses_by_the_sag_and_the_gate_knows(plans: dict) -> None:
+    sc, planner, res = plans["rigid"]
+    assert res.gate.passed and "goal" not in res.report
+    T_rigid, T_sagged = _final(sc, res)
+    np.testing.assert_allclose(T_rigid, sc.T_base_payload_goal, atol=1e-9)
+    assert np.linalg.norm(pose_error(sc.T_base_payload_goal, T_sagged)[:3]) > 1e-3
+    # Under compensating requirements the same profile fails: it ends at the nominal pose, not the command,
+    # and inserts along the nominal line, 1.7 mm off the commanded one.
+    req = dataclasses.replace(gate_requirements(sc, planner.payload), compensate_deflection=True)
+    gate = validate_profile(res.profile, sc.robot, planner.world, req, planner.dynamics)
+    assert {c.name for c in gate.failures} == {"goal", "approach"}
+
+
+def test_gate_recomputes_the_command_when_not_given(plans: dict) -> None:
+    """`cabinplan check` has only the scenario: the gate derives the command itself and still passes."""
+    sc, planner, res = plans["compensated"]
+    req = gate_requirements(sc, planner.payload)
+    assert req.compensate_deflection and req.T_base_payload_commanded is None
+    gate = validate_profile(res.profile, sc.robot, planner.world, req, planner.dynamics)
+    assert gate.passed, gate.summary()
+
+
+def test_plot_gets_a_deflection_panel(plans: dict) -> None:
+    sc, _, res = plans["compensated"]
+    plain = Image.open(io.BytesIO(profile_png(res.profile, sc.robot)))
+    with_panel = Image.open(io.BytesIO(profile_png(res.profile, sc.robot, deflection=res.deflection)))
+    assert with_panel.size[1] > plain.size[1]
+
+
+def test_option_is_validated() -> None:
+    with pytest.raises(InvalidInput) as err:
+        _scenario(compensate_deflection="sometimes")
+    assert "options.compensate_deflection" in err.value.message
