@@ -209,3 +209,16 @@ def test_batched_joint_rates_match_the_single_route(
     # And G q_dot is the drive velocity (the map inverts the drive Jacobian).
     G = np.array([robot.drive_map_jacobian(qi)[0] for qi in q])
     np.testing.assert_allclose(np.einsum("nij,nj->ni", G, qd), ud, atol=1e-12)
+
+
+@pytest.mark.parametrize("n", [1, 30, 33, 300])
+def test_static_forces_are_the_inverse_dynamics_at_rest(
+    dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray, n: int
+) -> None:
+    """The gravity-only map equals tau_u(q, 0, 0) for batch sizes on both sides of each chunk."""
+    q = np.resize(configs, (n, 8))
+    z = np.zeros_like(q)
+    static = dyn.static_forces_batch(q, payload)
+    full = np.array([dyn.id_vm(q[i], z[i], z[i], payload.params())[1] for i in range(n)])
+    assert static.shape == (n, 8)
+    np.testing.assert_allclose(static, full, rtol=0, atol=1e-9 * np.abs(full).max())

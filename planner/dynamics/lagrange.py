@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain, parallel
-from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
+from planner.kinematics.compiled import CHUNK, SMALL_CHUNK, FastFunction, dense_function, evaluate_mapped
 from planner.kinematics.native import native
 from planner.robots.cabin8 import Cabin8
 
@@ -145,7 +145,23 @@ class Cabin8Dynamics:
         id_fn = dense_function("inverse_dynamics", [q, qd, qdd, par], [tau, tau_u], {"cse": True})
         #: The CasADi virtual-machine evaluation (the reference the native build is tested against).
         self.id_vm = FastFunction(id_fn)
-        id_native, self._id_map = native([id_fn, id_fn.map(CHUNK)], "cabin8_dynamics")
+        # Holding forces at rest (q_dot = q_ddot = 0): the gravity part only, a fraction of the work.
+        zero = ca.SX.zeros(8)
+        static_fn = ca.Function(
+            "static_drive_forces",
+            [q, par],
+            [ca.substitute(tau_u, ca.vertcat(qd, qdd), ca.vertcat(zero, zero))],
+        )
+        id_native, self._id_map, self._id_map_small, self._static_map, self._static_map_small = native(
+            [
+                id_fn,
+                id_fn.map(CHUNK),
+                id_fn.map(SMALL_CHUNK),
+                static_fn.map(CHUNK),
+                static_fn.map(SMALL_CHUNK),
+            ],
+            "cabin8_dynamics",
+        )
         self._id = FastFunction(id_native)
         lagrange_tau = ca.mtimes(M, qdd) + bias + grav
         self._id_lagrange = FastFunction(dense_function("id_lagrange", [q, qd, qdd, par], [lagrange_tau]))
@@ -174,7 +190,13 @@ class Cabin8Dynamics:
         if q2.shape[0] <= SMALL_BATCH:  # a mapped call evaluates a whole chunk: cheaper one by one
             return np.array([self._id(q2[i], qd2[i], qdd2[i], p)[1] for i in range(q2.shape[0])])
         par = np.repeat(p[None, :], q2.shape[0], axis=0)
-        return evaluate_mapped(self._id_map, q2, qd2, qdd2, par)[1]
+        return evaluate_mapped(self._id_map, q2, qd2, qdd2, par, small=self._id_map_small)[1]
+
+    def static_forces_batch(self, q: Array, payload: RigidPayload | None = None) -> Array:
+        """Drive forces/torques (N, 8) that hold joint configurations q (N, 8) at rest [N, N m]."""
+        q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        par = np.repeat(_params(payload)[None, :], q2.shape[0], axis=0)
+        return evaluate_mapped(self._static_map, q2, par, small=self._static_map_small)[0]
 
     def drive_efforts(self, u: Array, ud: Array, udd: Array, payload: RigidPayload | None = None) -> Array:
         """Drive forces/torques for drive trajectories, (N, 8) arrays -> (N, 8) [N, N m].

@@ -73,16 +73,25 @@ class FastFunction:
 
 #: Grid points per call of the mapped CasADi functions (inputs are padded to a multiple).
 CHUNK = 256
+#: The chunk of the small mapped variants, for batches of a few dozen points (less padding).
+SMALL_CHUNK = 32
 
 
-def evaluate_mapped(fn: ca.Function, *columns: Array) -> list[Array]:
-    """Evaluate a mapped function (``fn.map(CHUNK)``) on (N, k) row-stacked inputs; (N, m) outputs."""
+def evaluate_mapped(fn: ca.Function, *columns: Array, small: ca.Function | None = None) -> list[Array]:
+    """Evaluate a mapped function (``fn.map(k)``) on (N, m_i) row-stacked inputs; (N, p_j) outputs.
+
+    The chunk size k is read from ``fn``; inputs are padded (with their last row) to a multiple of it.
+    ``small``, the same function mapped over fewer points, evaluates batches no longer than its chunk.
+    """
     n = columns[0].shape[0]
-    pad = (-n) % CHUNK
+    if small is not None and n <= small.size2_in(0):
+        fn = small
+    chunk = fn.size2_in(0)
+    pad = (-n) % chunk
     padded = [np.vstack([c, np.repeat(c[-1:], pad, axis=0)]).T if pad else c.T for c in columns]
     outs: list[list[Array]] = [[] for _ in range(fn.n_out())]
-    for start in range(0, n + pad, CHUNK):
-        raw = fn(*[p[:, start : start + CHUNK] for p in padded])
+    for start in range(0, n + pad, chunk):
+        raw = fn(*[p[:, start : start + chunk] for p in padded])
         results = raw if isinstance(raw, list | tuple) else [raw]
         for k, r in enumerate(results):
             outs[k].append(np.asarray(r))

@@ -46,9 +46,7 @@ class StaticForceCheck:
 
     def ratios(self, qs: Array) -> Array:
         """Largest |static force| / limit of each configuration (N,) for (N, 8) joints."""
-        qs = np.atleast_2d(qs)
-        z = np.zeros_like(qs)
-        tau = self.dynamics.drive_forces_batch(qs, z, z, self.payload)
+        tau = self.dynamics.static_forces_batch(qs, self.payload)
         return np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max, axis=1)
 
     def ok(self, q: Array) -> bool:

@@ -214,9 +214,7 @@ class ToppraStage:
         """The refusal for the first grid point whose forces at rest exceed a (scaled) limit, if any."""
         lim = self.robot.limits
         sf = self.safety[2]
-        q = path.evaluate(grid)[0]
-        z = np.zeros_like(q)
-        tau = self.dynamics.drive_forces_batch(q, z, z, self.payload)
+        tau = self.dynamics.static_forces_batch(path.evaluate(grid)[0], self.payload)
         over = np.abs(tau) > sf * lim.effort_max
         if not over.any():
             return None
