@@ -4,6 +4,10 @@
 * certified motion check of a typical planner edge (joint step of norm 0.15)      [<= 1 ms]
 * exact minimum-distance queries (reports and clearance profiles)
 
+Each figure is also measured, in the same run and on the same inputs, on the reference route
+(``CollisionWorld(..., reference=True)``: CasADi poses, the motion walk in Python with the original
+always-probe policy), so the speed-up is not blurred by the load of a shared machine.
+
 Configurations: random admissible joints along the whole rail, payload 0.45 x 0.35 x 0.50 m held 0.30 m
 along the tool z axis; validity is timed on valid and invalid states alike (both occur in planning).
 Run: ``python -m bench.collision``.
@@ -55,9 +59,12 @@ def main() -> None:
         mesh = load_mesh(MESHES / f"{cabin['name']}.stl", units="m")
         world = CollisionWorld(robot, mesh, payload)
         build_s = time.perf_counter() - t0
+        ref = CollisionWorld(robot, mesh, payload, reference=True)
         valid = [world.is_valid(q) for q in qs]  # warm-up: compiled kernels, FCL objects, caches
         timed(world.is_valid, qs)
         t_valid = timed(world.is_valid, qs)
+        timed(ref.is_valid, qs)
+        t_valid_ref = timed(ref.is_valid, qs)
         per_s = 1e6 / statistics.median(t_valid)
         starts = [q for q, v in zip(qs, valid, strict=True) if v]
         edges = []
@@ -67,16 +74,26 @@ def main() -> None:
             edges.append((q, q + step))
         timed(lambda e, w=world: w.check_motion(*e), edges[:20])
         t_edge = timed(lambda e, w=world: w.check_motion(*e), edges[:150])
-        certified = sum(world.check_motion(*e).valid for e in edges[:150])
+        timed(lambda e, w=ref: w.check_motion(*e), edges[:20])
+        t_edge_ref = timed(lambda e, w=ref: w.check_motion(*e), edges[:150])
+        reports = [world.check_motion(*e) for e in edges[:150]]
+        certified = sum(r.valid for r in reports)
+        certified_ref = sum(ref.check_motion(*e).valid for e in edges[:150])
+        states = statistics.mean(r.states_checked for r in reports)
+        queries = statistics.mean(r.fcl_queries for r in reports)
         t_dist = timed(world.min_distance, starts[:60])
         print(
             f"{cabin['name']} ({len(mesh.faces)} faces, world built in {build_s:.2f} s, "
             f"{sum(valid)}/{len(qs)} states valid)"
         )
         print(f"  validity check         {summary(t_valid)}  ({per_s:,.0f} checks/s)  [<= 50 us]")
+        print(f"    reference route      {summary(t_valid_ref)}")
         print(
-            f"  motion check, edge     {summary(t_edge)}  ({certified}/{len(edges[:150])} certified)"
-            "  [<= 1 ms]"
+            f"  motion check, edge     {summary(t_edge)}  ({certified}/{len(edges[:150])} certified, "
+            f"{states:.1f} states, {queries:.1f} FCL queries per edge)  [<= 1 ms]"
+        )
+        print(
+            f"    reference route      {summary(t_edge_ref)}  ({certified_ref}/{len(edges[:150])} certified)"
         )
         print(
             f"  min distance (exact)   {summary(t_dist)}  ({1e6 / statistics.median(t_dist):,.0f} queries/s)"

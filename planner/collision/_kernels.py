@@ -1007,8 +1007,9 @@ def segment_reach(
 WALK_DONE, WALK_PROBE, WALK_FAIL, WALK_GROW = 0, 1, 2, 3
 #: Slots of the walk's integer (``ci``) and float (``cf``) context arrays.
 CI_TASK, CI_I, CI_PHASE, CI_N, CI_COUNT, CI_SLOT, CI_LEVELS, CI_CABIN = 0, 1, 2, 3, 4, 5, 6, 7
-CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_LEVEL0 = range(9)
-CI_SIZE, CF_SIZE = 8, 12
+CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_PROBE_PROVEN = range(9)
+CF_LEVEL0 = 9
+CI_SIZE, CF_SIZE = 8, 13
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -1151,7 +1152,7 @@ def motion_walk(
             free = _walk_bound(s, is_cabin, idx, cf, fbuf, ibuf, grid, poses, cabin, pairs) - base
             E = free if free >= mm else 0.0
             m = 0
-            if D > 0.0 and not exact:
+            if D > 0.0 and not exact and (E == 0.0 or cf[CF_PROBE_PROVEN] != 0.0):
                 level = min(0.3, max(2.0 * cf[CF_LAST], 2.0 * E, 4.0 * mm))
                 if level > E:
                     cf[CF_LEVEL0 + m] = level

@@ -89,28 +89,55 @@ def test_state_verdicts_equal_the_reference_route(robot: Cabin8, worlds: tuple[C
         fast.is_valid(np.zeros(7))
 
 
-def test_motion_reports_equal_the_reference_walk(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
-    """Compiled and Python walks: the same report (verdict, states, FCL queries, t_fail, contact)."""
+@pytest.mark.parametrize("probe_when_proven", [False, True])
+def test_motion_reports_equal_the_reference_walk(
+    robot: Cabin8, worlds: tuple[CollisionWorld, ...], probe_when_proven: bool
+) -> None:
+    """Compiled and Python walks, either probe policy: the same report, field for field."""
     fast, ref = worlds
     rng = np.random.default_rng(41)
-    starts = [q for q in along_rail(robot, 160, seed=41) if ref.is_valid(q)]
+    starts = [q for q in along_rail(robot, 120, seed=41) if ref.is_valid(q)]
     reports = []
-    for k, q in enumerate(starts):
-        step = rng.normal(size=8)
-        step *= (0.15 if k % 3 else 0.8) / np.linalg.norm(step)  # typical edges and long ones
-        for clearance, margin in ((0.01, 0.005), (0.03, 0.002)):
-            expected = ref.check_motion(q, q + step, clearance, margin)
-            assert fast.check_motion(q, q + step, clearance, margin) == expected
-            reports.append(expected)
-    assert len(reports) > 100
+    saved = (fast.probe_when_proven, ref.probe_when_proven)
+    fast.probe_when_proven = ref.probe_when_proven = probe_when_proven
+    try:
+        for k, q in enumerate(starts):
+            step = rng.normal(size=8)
+            step *= (0.15 if k % 3 else 0.8) / np.linalg.norm(step)  # typical edges and long ones
+            for clearance, margin in ((0.01, 0.005), (0.03, 0.002)):
+                expected = ref.check_motion(q, q + step, clearance, margin)
+                assert fast.check_motion(q, q + step, clearance, margin) == expected
+                reports.append(expected)
+    finally:
+        fast.probe_when_proven, ref.probe_when_proven = saved
+    assert len(reports) > 80
     assert {r.valid for r in reports} == {True, False}
     assert any(r.contacts and r.contacts[0].kind == "limit" for r in reports)
     assert any(r.contacts and r.contacts[0].kind in ("cabin", "self") for r in reports)
     assert max(r.states_checked for r in reports) > 32  # the state store had to grow
 
 
+def test_default_probe_policy_certifies_as_much_with_fewer_queries(
+    robot: Cabin8, worlds: tuple[CollisionWorld, ...]
+) -> None:
+    """Probing only where the bounds prove nothing: the same verdicts here, fewer FCL queries."""
+    fast, ref = worlds
+    assert not fast.probe_when_proven and ref.probe_when_proven
+    rng = np.random.default_rng(43)
+    queries = [0, 0]
+    for q in [q for q in along_rail(robot, 120, seed=43) if ref.is_valid(q)]:
+        step = rng.normal(size=8)
+        step *= 0.15 / np.linalg.norm(step)
+        a, b = fast.check_motion(q, q + step), ref.check_motion(q, q + step)
+        assert a.valid == b.valid
+        queries[0] += a.fcl_queries
+        queries[1] += b.fcl_queries
+    assert queries[0] < 0.75 * queries[1]
+
+
 def test_self_only_world_motion_equals_the_reference(robot: Cabin8, payload: PayloadGeometry) -> None:
     fast, ref = CollisionWorld(robot, None, payload), CollisionWorld(robot, None, payload, reference=True)
+    fast.probe_when_proven = True  # the reference walk's policy (pairs: the bounds decide the probes)
     rng = np.random.default_rng(51)
     for q in admissible_joints(robot, 40, seed=51):
         step = rng.normal(size=8) * 0.4
