@@ -64,7 +64,7 @@ log = logging.getLogger(__name__)
 Progress = Callable[[str, float], None]
 
 #: Blend half-length as a fraction of the shorter neighbouring segment, then the shrink sequence.
-BLEND_FRACTIONS = (0.45, 0.2, 0.08, 0.0)
+BLEND_FRACTIONS = (0.45, 0.2, 0.08, 0.03, 0.01, 0.0)
 #: Limit scalings tried when the gate finds a limit exceeded on the sampled profile.
 SAFETY_LEVELS = ((0.995, 0.97, 0.97), (0.98, 0.92, 0.92), (0.95, 0.85, 0.85))
 LIMIT_CHECKS = {"velocity", "acceleration", "effort", "consistency"}
