@@ -377,7 +377,12 @@ class ProcessJobRunner:
         r.process.join(timeout=5.0)
 
     def _end(self, r: _Running, status: str, **values: Any) -> None:
-        """Write the terminal state (only over ``running``: a cancellation is never overwritten)."""
+        """Write the terminal state (only over ``running``: a cancellation is never overwritten).
+
+        The slot is released first, so that whoever reads the terminal state also sees the slot free.
+        """
+        with self._lock:
+            self._running.pop(r.job_id, None)
         with self.db.session() as s:
             s.execute(
                 update(Job)
@@ -389,8 +394,6 @@ class ProcessJobRunner:
                     **values,
                 )
             )
-        with self._lock:
-            self._running.pop(r.job_id, None)
         r.process.join(timeout=5.0)
         r.conn.close()
         try:

@@ -1,11 +1,15 @@
 """Property-based fuzzing of every operation of the OpenAPI schema (schemathesis): never a 5xx.
 
-Bounded so that it stays fast: a few examples per operation, no shrinking deadline, jobs never run (idle
-runner). Every answer is checked: a status below 500, and errors are problem+json.
+Bounded so that it stays fast: a few examples per operation, no deadline, jobs never run (idle runner).
+Every answer is checked: a status below 500, and every error is problem+json with its status.
+
+The app is built at import because schemathesis reads the schema when the module is collected
+(``schemathesis.pytest.from_fixture`` fails under pytest 9); its data folder is removed afterwards.
 """
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,15 +22,8 @@ from api.app import create_app
 from api.auth import create_key
 from tests.api.conftest import IdleRunner, make_settings
 
-
-def _app():  # built at import: schemathesis reads the schema when the module is collected
-    import tempfile
-
-    data_dir = Path(tempfile.mkdtemp(prefix="cabinplan-fuzz-"))
-    return create_app(make_settings(data_dir, max_upload_bytes=64 * 1024), runner=IdleRunner())
-
-
-APP = _app()
+_DATA = tempfile.TemporaryDirectory(prefix="cabinplan-fuzz-")
+APP = create_app(make_settings(Path(_DATA.name), max_upload_bytes=64 * 1024), runner=IdleRunner())
 schema = schemathesis.openapi.from_asgi("/openapi.json", APP)
 KEY: dict[str, str] = {}
 
@@ -36,6 +33,7 @@ def _lifespan() -> Iterator[None]:
     with TestClient(APP):  # creates the tables and starts the (idle) runner
         KEY["alpha"] = create_key(APP.state.ctx, "alpha", "fuzz")[1]
         yield
+    _DATA.cleanup()
 
 
 @schema.parametrize()

@@ -101,9 +101,7 @@ def test_sigkill_mid_run_then_restart_loses_nothing(server: Server) -> None:
     key = (server.data_dir / "local-api-key").read_text().strip()
     assert key in server.log.read_text()  # the local default key is printed at start-up
     h = {"X-API-Key": key}
-    running = httpx.post(
-        f"{server.url}/api/v1/plans", json=scenario("aisle-bay-insert"), headers=h, timeout=30
-    )
+    running = httpx.post(f"{server.url}/api/v1/plans", json=scenario("aisle-transfer"), headers=h, timeout=30)
     queued = httpx.post(f"{server.url}/api/v1/plans", json=free_transfer(), headers=h, timeout=30)
     assert running.status_code == queued.status_code == 202
     a, b = running.json()["id"], queued.json()["id"]

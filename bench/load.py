@@ -1,0 +1,191 @@
+"""Load check of the HTTP service: concurrent clients submitting the reference scenarios.
+
+Starts the real server (``python -m api``, temp data dir, SQLite), then ``--clients`` threads each submit
+one reference scenario (round robin over the suite's succeeding scenarios) and poll it to the end, while a
+prober calls ``/health`` every 50 ms. Prints throughput, p50/p95/max latency of ``/health`` and of
+``GET /plans/{id}`` under load, and how many results pass the validation gate: the gate report stored
+with each plan, and an independent re-run of the gate through ``POST /plans:validate``.
+
+    python -m bench.load [--clients 20] [--workers 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "tests" / "scenarios"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def reference_scenarios() -> list[dict[str, Any]]:
+    expected = yaml.safe_load((SCENARIOS / "expected.yaml").read_text())
+    names = [n for n, e in expected.items() if e["status"] == "succeeded"]
+    return [yaml.safe_load((SCENARIOS / f"{n}.yaml").read_text()) for n in names]
+
+
+def probe(url: str, headers: dict[str, str], job_id: str, stop: Any, out: Any) -> None:
+    """Separate process: time GET /health and GET /plans/{job_id} every 50 ms until ``stop`` is set.
+
+    A process of its own, so that the clients' JSON parsing (their GIL) does not distort the figures.
+    """
+    health: list[float] = []
+    status: list[float] = []
+    with httpx.Client(base_url=url, timeout=10, headers=headers) as c:
+        while not stop.is_set():
+            t = time.perf_counter()
+            c.get("/api/v1/health").raise_for_status()
+            health.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            c.get(f"/api/v1/plans/{job_id}").raise_for_status()
+            status.append(time.perf_counter() - t)
+            time.sleep(0.05)
+    out.put((health, status))
+
+
+def _pct(values: list[float]) -> str:
+    a = 1e3 * np.asarray(values)
+    p50, p95 = np.percentile(a, 50), np.percentile(a, 95)
+    return f"p50 {p50:7.1f} ms  p95 {p95:7.1f} ms  max {a.max():7.1f} ms  (n={len(a)})"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--clients", type=int, default=20)
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+
+    data = Path(tempfile.mkdtemp(prefix="cabinplan-load-"))
+    port = _free_port()
+    url = f"http://127.0.0.1:{port}"
+    env = {
+        **os.environ,
+        "CABINPLAN_DATA_DIR": str(data),
+        "CABINPLAN_PORT": str(port),
+        "CABINPLAN_WORKERS": str(args.workers),
+        "CABINPLAN_TENANT_MAX_ACTIVE_JOBS": str(args.clients),
+    }
+    log = (data / "server.log").open("wb")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "api"], cwd=ROOT, env=env, stdout=log, stderr=log, start_new_session=True
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                if httpx.get(f"{url}/api/v1/ready", timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise SystemExit(f"server did not start; see {data / 'server.log'}")
+            time.sleep(0.1)
+        headers = {"X-API-Key": (data / "local-api-key").read_text().strip()}
+        scenarios = reference_scenarios()
+        status_s: list[float] = []
+        results: list[dict[str, Any]] = []
+        lock = threading.Lock()
+        # the prober's status calls go to a job of their own (cancelled at once: a small document)
+        probe_job = httpx.post(f"{url}/api/v1/plans", json=scenarios[0], headers=headers, timeout=30).json()[
+            "id"
+        ]
+        httpx.delete(f"{url}/api/v1/plans/{probe_job}", headers=headers, timeout=30)
+        mp = multiprocessing.get_context("spawn")
+        stop, out = mp.Event(), mp.Queue()
+        prober = mp.Process(target=probe, args=(url, headers, probe_job, stop, out))
+        prober.start()
+        time.sleep(2.0)  # the prober's interpreter is up before the load starts
+
+        def client(k: int) -> None:
+            sc = scenarios[k % len(scenarios)]
+            with httpx.Client(base_url=url, timeout=60, headers=headers) as c:
+                r = c.post("/api/v1/plans", json=sc, headers={"Idempotency-Key": f"load-{k}"})
+                r.raise_for_status()
+                job_id = r.json()["id"]
+                while True:
+                    t = time.perf_counter()
+                    doc = c.get(f"/api/v1/plans/{job_id}").json()
+                    with lock:
+                        status_s.append(time.perf_counter() - t)
+                    if doc["status"] not in ("queued", "running"):
+                        break
+                    time.sleep(0.25)
+            with lock:
+                results.append({"scenario": sc, "doc": doc})
+
+        t0 = time.perf_counter()
+        threads = [threading.Thread(target=client, args=(k,)) for k in range(args.clients)]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join()
+        wall = time.perf_counter() - t0
+        stop.set()
+        health_s, probe_status_s = out.get(timeout=30)
+        prober.join()
+
+        ok = [r for r in results if r["doc"]["status"] == "succeeded"]
+        stored_pass = sum(bool(r["doc"]["result"]["report"]["gate"]["passed"]) for r in ok)
+        regate = 0
+        with httpx.Client(base_url=url, timeout=300, headers=headers) as c:
+            for r in ok:
+                rep = c.post(
+                    "/api/v1/plans:validate", json={"scenario": r["scenario"], "profile": r["doc"]["result"]}
+                )
+                regate += bool(rep.status_code == 200 and rep.json()["passed"])
+        by_name: dict[str, list[float]] = {}
+        for r in ok:
+            d = r["doc"]
+            by_name.setdefault(d["scenario"]["name"], []).append(d["finished_at"] - d["started_at"])
+        print(f"clients {args.clients}, workers {args.workers}, scenarios {len(scenarios)} (round robin)")
+        print(
+            f"wall {wall:.1f} s, {len(ok)}/{len(results)} succeeded, "
+            f"throughput {60 * len(results) / wall:.1f} plans/min"
+        )
+        for name, ts in sorted(by_name.items()):
+            print(f"  {name:<22} run time {np.mean(ts):6.2f} s (n={len(ts)})")
+        failed = [
+            (r["doc"]["scenario"]["name"], r["doc"]["reason"])
+            for r in results
+            if r["doc"]["status"] != "succeeded"
+        ]
+        if failed:
+            print(f"  not succeeded: {failed}")
+        print(f"GET /health under load (prober process):       {_pct(health_s)}")
+        print(f"GET /plans/{{id}} under load (prober process):  {_pct(probe_status_s)}")
+        print(f"GET /plans/{{id}} polls of the 20 clients:      {_pct(status_s)}")
+        print(
+            f"gate: {stored_pass}/{len(ok)} stored reports passed, "
+            f"{regate}/{len(ok)} passed POST /plans:validate"
+        )
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+        log.close()
+
+
+if __name__ == "__main__":
+    main()
