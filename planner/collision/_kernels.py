@@ -960,8 +960,8 @@ def end_ratio(q_a: np.ndarray, q_b: np.ndarray, fbuf: np.ndarray) -> float:
     stage = fbuf[40:44]  # after T_tool_box (16) and mdh (24), see ``pack``
     c = np.empty(N_CONSTRAINTS)
     out = -math.inf
-    for q in (q_a, q_b):
-        constraints(q, stage, c)
+    for end in range(2):
+        constraints(q_a if end == 0 else q_b, stage, c)
         for i in range(N_CONSTRAINTS - 3, N_CONSTRAINTS):
             if not math.isfinite(c[i]):
                 return 1.0

@@ -613,7 +613,7 @@ class CollisionWorld:
 
     def _states(self, qs: Array, threshold: float) -> list[_State]:
         """Poses and certified bounds for (N, 8) configurations."""
-        qs = np.ascontiguousarray(np.atleast_2d(qs), dtype=float)
+        qs = np.array(np.atleast_2d(qs), dtype=float)  # a writeable, contiguous copy
         return [self._state(q, threshold) for q in qs]
 
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> _State:
@@ -1052,8 +1052,13 @@ def _cover_table(shapes: tuple[Shape, ...], centres: tuple[Array, ...]) -> tuple
 
 
 def _joints(q: Array) -> Array:
-    """A joint vector as the kernels need it: contiguous float64 of shape (8,)."""
+    """A joint vector as the kernels need it: contiguous, writeable float64 of shape (8,).
+
+    (A read-only array would be another type to the compiled kernels: a new compilation, not a new result.)
+    """
     q = np.ascontiguousarray(q, dtype=float)
+    if not q.flags.writeable:
+        q = q.copy()
     if q.shape != (8,):
         raise InvalidInput(f"q: a joint vector of 8 values expected, got shape {q.shape}", field="q")
     return q

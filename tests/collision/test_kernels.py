@@ -87,6 +87,10 @@ def test_state_verdicts_equal_the_reference_route(robot: Cabin8, worlds: tuple[C
     assert not fast.is_valid(np.full(8, np.nan)) and not fast.check_state(np.full(8, np.inf)).valid
     with pytest.raises(InvalidInput):
         fast.is_valid(np.zeros(7))
+    frozen = qs[:2].copy()
+    frozen.flags.writeable = False  # read-only inputs (e.g. from buffers) work like any other
+    assert fast.is_valid(frozen[0]) == ref.is_valid(frozen[0])
+    assert fast.check_motion(frozen[0], frozen[1]).valid == ref.check_motion(frozen[0], frozen[1]).valid
 
 
 @pytest.mark.parametrize("probe_when_proven", [False, True])
