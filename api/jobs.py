@@ -297,6 +297,7 @@ class ProcessJobRunner:
                         "meshes": dict(row.meshes),
                         "empty_dir": str(self.empty_dir),
                         "time_limit_s": row.time_limit_s,
+                        "nice": self.settings.worker_nice,
                     }
         return None
 

@@ -32,6 +32,9 @@ class Settings(BaseSettings):
         None, pattern=r"^[a-z_][a-z0-9_]{0,62}$", description="PostgreSQL schema of the tables (created)."
     )
     workers: int = Field(2, ge=1, le=64, description="Planning jobs run at the same time (one process each).")
+    worker_nice: int = Field(
+        5, ge=0, le=19, description="Niceness added to job processes, so the API stays responsive under load."
+    )
     job_grace_s: float = Field(
         15.0,
         ge=0.0,

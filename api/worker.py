@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,8 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
     """Plan one job; returns the outcome ``{"status", "reason", "message", "document", "csv", "png"}``.
 
     Args:
-        job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}``.
+        job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}`` (and ``nice``,
+            the niceness :func:`run_job` adds to the process).
         send: Called with ``(stage, fraction)`` as the planner's stages start.
     """
     sc: ResolvedScenario | None = None
@@ -62,6 +64,9 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
 
     def progress(stage: str, fraction: float) -> None:
         conn.send(("progress", str(stage), float(fraction)))
+
+    if job.get("nice"):
+        os.nice(int(job["nice"]))  # planning yields the CPU to the service's event loop
 
     try:
         outcome = plan_job(job, progress)

@@ -51,16 +51,20 @@ def probe(url: str, headers: dict[str, str], job_id: str, stop: Any, out: Any) -
     """
     health: list[float] = []
     status: list[float] = []
+    slow: list[tuple[float, float]] = []
+    t_start = time.perf_counter()
     with httpx.Client(base_url=url, timeout=10, headers=headers) as c:
         while not stop.is_set():
             t = time.perf_counter()
             c.get("/api/v1/health").raise_for_status()
             health.append(time.perf_counter() - t)
+            if health[-1] > 0.05:
+                slow.append((t - t_start, health[-1]))
             t = time.perf_counter()
             c.get(f"/api/v1/plans/{job_id}").raise_for_status()
             status.append(time.perf_counter() - t)
             time.sleep(0.05)
-    out.put((health, status))
+    out.put((health, status, slow))
 
 
 def _pct(values: list[float]) -> str:
@@ -141,7 +145,7 @@ def main() -> None:
             th.join()
         wall = time.perf_counter() - t0
         stop.set()
-        health_s, probe_status_s = out.get(timeout=30)
+        health_s, probe_status_s, slow = out.get(timeout=30)
         prober.join()
 
         ok = [r for r in results if r["doc"]["status"] == "succeeded"]
@@ -173,6 +177,9 @@ def main() -> None:
             print(f"  not succeeded: {failed}")
         print(f"GET /health under load (prober process):       {_pct(health_s)}")
         print(f"GET /plans/{{id}} under load (prober process):  {_pct(probe_status_s)}")
+        late = ", ".join(f"{1e3 * dt:.0f} ms at {t:.1f} s" for t, dt in slow[:8])
+        more = " ..." if len(slow) > 8 else ""
+        print(f"  /health calls above 50 ms: {len(slow)} of {len(health_s)} ({late}{more})")
         print(f"GET /plans/{{id}} polls of the 20 clients:      {_pct(status_s)}")
         print(
             f"gate: {stored_pass}/{len(ok)} stored reports passed, "
