@@ -78,6 +78,9 @@ from planner.schemas import Finite, Pose
 
 Array = NDArray[np.float64]
 
+#: Input bounds of :func:`stiffness_document` (beyond them the linear model means nothing and overflows).
+MAX_PAYLOAD_KG = 1e5
+MAX_WRENCH = 1e9
 #: Compensation tolerances of the issue: 0.01 mm and 1e-5 rad.
 COMPENSATION_TOL_M = 1e-5
 COMPENSATION_TOL_RAD = 1e-5
@@ -633,7 +636,7 @@ class PayloadInput(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    mass: Finite = Field(ge=0, description="kg")
+    mass: Finite = Field(ge=0, le=MAX_PAYLOAD_KG, description="kg")
     com: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
     inertia: (
         tuple[tuple[Finite, Finite, Finite], tuple[Finite, Finite, Finite], tuple[Finite, Finite, Finite]]
@@ -665,10 +668,10 @@ def _wrench_vector(wrench: Any) -> Array:
         out = np.array(w, dtype=float)
     except (TypeError, ValueError):
         out = np.full(1, np.nan)
-    if out.shape != (6,) or not np.all(np.isfinite(out)):
+    if out.shape != (6,) or not np.all(np.isfinite(out)) or np.any(np.abs(out) > MAX_WRENCH):
         raise InvalidInput(
             "wrench: expected [fx, fy, fz, mx, my, mz] or {force: [3], moment: [3]} of finite numbers "
-            "(N, N m)",
+            f"(N, N m) of magnitude at most {MAX_WRENCH:g}",
             field="wrench",
         )
     return out
@@ -723,6 +726,8 @@ def stiffness_document(
             first = exc.errors()[0]
             where = ".".join(["payload", *(str(p) for p in first["loc"])])
             raise InvalidInput(f"{where}: {first['msg']}", field=where) from exc
+        except ArithmeticError as exc:  # e.g. a quaternion whose squared norm overflows
+            raise InvalidInput(f"payload: out of range ({exc})", field="payload") from exc
     if frame == "payload" and pay is None:
         raise InvalidInput("frame: 'payload' needs a payload (its grasp is the frame)", field="frame")
     w = None if wrench is None else _wrench_vector(wrench)

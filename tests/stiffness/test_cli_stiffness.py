@@ -65,6 +65,19 @@ def test_cli_prints_k_c_and_deflection() -> None:
         (["--joints", json.dumps(JOINTS), "--payload", '{"mass": -1}'], 2, "payload.mass"),
         (["--joints", json.dumps(JOINTS | {"y": 0.5})], 3, "limit_violation"),
         (["--joints", "{nope"], 2, "--joints"),
+        (["--joints", json.dumps(JOINTS), "--wrench", "[1e300, 0, 0, 0, 0, 0]"], 2, "wrench"),
+        (["--joints", json.dumps(JOINTS), "--payload", '{"mass": 1e300}'], 2, "payload.mass"),
+        (
+            [
+                "--joints",
+                json.dumps(JOINTS),
+                "--payload",
+                '{"mass": 1, "grasp": {"position": [0, 0, 0], '
+                '"orientation": {"w": 0, "x": 0, "y": 0, "z": 1.3e154}}}',
+            ],
+            2,
+            "payload",
+        ),
     ],
 )
 def test_cli_failures_exit_with_the_documented_codes(args: list[str], code: int, message: str) -> None:
