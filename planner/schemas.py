@@ -35,7 +35,7 @@ class Quaternion(BaseModel):
 
     @model_validator(mode="after")
     def _unit(self) -> Quaternion:
-        n = math.sqrt(self.w**2 + self.x**2 + self.y**2 + self.z**2)
+        n = math.hypot(self.w, self.x, self.y, self.z)  # no overflow for huge components (inf)
         if abs(n - 1.0) > 1e-3:
             raise ValueError(f"quaternion norm is {n:.6g}; a rotation needs a unit quaternion (w, x, y, z)")
         return self

@@ -357,6 +357,11 @@ SCHEMA_REFUSALS = [
         _set("goal.pose.orientation", {"w": 1, "x": 1, "y": 0, "z": 0}),
         "goal.pose.orientation",
     ),
+    (
+        "huge quaternion (its squares overflow)",
+        _set("goal.pose.orientation", {"w": 1e200, "x": 1e200, "y": 0, "z": 0}),
+        "goal.pose.orientation",
+    ),
     ("negative mass", _set("payload.mass", -1.0), "payload.mass"),
     ("inf mass", _set("payload.mass", float("inf")), "payload.mass"),
     ("numeric string", _set("payload.mass", "100"), "payload.mass"),
