@@ -256,9 +256,16 @@ class ProcessJobRunner:
         return float(limit or 0.0) + self.settings.job_grace_s
 
     def _apply_cancels(self) -> None:
+        """Kill the running jobs asked for; keep requests for jobs still being launched."""
         with self._lock:
             cancels, self._cancel = self._cancel, set()
             targets = [self._running[j] for j in cancels if j in self._running]
+            pending = [j for j in cancels if j not in self._running]
+        if pending:
+            with self.db.session() as s:
+                launching = set(s.scalars(select(Job.id).where(Job.id.in_(pending), Job.status == "running")))
+            with self._lock:
+                self._cancel |= launching
         for r in targets:
             self._kill(r)
             self._end(r, "cancelled", reason="cancelled", message="cancelled by the client while running")

@@ -87,7 +87,7 @@ def main() -> None:
         "CABINPLAN_DATA_DIR": str(data),
         "CABINPLAN_PORT": str(port),
         "CABINPLAN_WORKERS": str(args.workers),
-        "CABINPLAN_TENANT_MAX_ACTIVE_JOBS": str(args.clients),
+        "CABINPLAN_TENANT_MAX_ACTIVE_JOBS": str(args.clients + 1),
     }
     log = (data / "server.log").open("wb")
     proc = subprocess.Popen(

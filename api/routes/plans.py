@@ -323,8 +323,11 @@ def get_plot_png(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Respons
 
 
 @router.delete("/plans/{plan_id}", summary="Cancel a plan")
-def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str, Any]:
-    """Queued -> cancelled; running -> its worker is killed, cancelled. Finished plans give 409."""
+def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal, response: Response) -> dict[str, Any]:
+    """Queued -> cancelled; running -> its worker is killed, cancelled. Finished plans give 409.
+
+    200 with the cancelled job; 202 when the kill of a running job is still pending after 10 s.
+    """
     row = _tenant_job(ctx, principal.tenant, plan_id)
     if row.status == "cancelled":
         return job_document(row)
@@ -352,7 +355,9 @@ def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str
                 break
             time.sleep(0.05)
     row = _tenant_job(ctx, principal.tenant, plan_id)
-    if row.status != "cancelled":
+    if row.status in ACTIVE_STATES:  # the kill is still pending (e.g. the process is being started)
+        response.status_code = 202
+    elif row.status != "cancelled":
         raise Problem(409, "already_finished", f"plan {plan_id} {row.status} before it could be cancelled")
     return job_document(row)
 

@@ -112,3 +112,38 @@ def test_cancel_running_job_kills_it_and_health_stays_fast(svc: Service) -> None
         doc = svc.client.delete(f"/api/v1/plans/{i}", headers=svc.h()).json()
         assert doc["status"] == "cancelled", doc
     assert svc.client.get("/api/v1/ready").json()["workers"]["running"] == 0
+
+
+def test_cancel_of_a_job_still_being_launched_is_kept_until_it_runs(tmp_path) -> None:
+    import uuid
+
+    from api.db import Database, Job, now_s
+    from api.jobs import ProcessJobRunner
+
+    settings = make_settings(tmp_path)
+    settings.data_dir.mkdir(parents=True)
+    db = Database(settings.resolved_database_url())
+    db.create_all()
+    ids = {status: uuid.uuid4().hex for status in ("running", "failed")}
+    with db.session() as s:
+        for status, job_id in ids.items():
+            s.add(
+                Job(
+                    id=job_id,
+                    tenant="t",
+                    status=status,
+                    scenario={},
+                    scenario_name="x",
+                    request_sha256="0" * 64,
+                    meshes={},
+                    provenance={},
+                    time_limit_s=1.0,
+                    created_at=now_s(),
+                )
+            )
+    runner = ProcessJobRunner(db, settings)  # not started: no job is registered as running yet
+    for job_id in ids.values():
+        runner.cancel(job_id)
+    runner._apply_cancels()
+    assert runner._cancel == {ids["running"]}  # claimed, process not yet up: the request waits for it
+    db.dispose()
