@@ -845,7 +845,12 @@ def packed_check(
 @njit(cache=True, fastmath=False, error_model="numpy")
 def cabin_bound_one(b: int, poses: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, grid: np.ndarray) -> float:
     """Entry b of the cabin bounds of :func:`state_bounds` (sphere cover on the grid, carriage table)."""
-    u = _unpack(fbuf, ibuf)
+    return _cabin_bound(b, poses, _unpack(fbuf, ibuf), grid)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _cabin_bound(b, poses, u, grid):  # type: ignore[no-untyped-def]
+    """:func:`cabin_bound_one` on unpacked data ``u`` (:func:`_unpack`), without allocations."""
     fine_local, fine_frac, fine_r, fine_bounds = u[5], u[6], u[7], u[8]
     origin, inv_step, shape, has_grid = u[9], u[10], u[11], u[12]
     carriage, table, table_z0, table_dz = u[24], u[25], u[26], u[27]
@@ -853,16 +858,24 @@ def cabin_bound_one(b: int, poses: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarra
     if has_grid:
         sy = shape[1] * shape[2]
         sz = shape[2]
-        centre = np.empty(3)
         for s in range(fine_bounds[b], fine_bounds[b + 1]):
-            for i in range(3):
-                v = poses[b, 9 + i] + fine_frac[s] * poses[b, 12] * poses[b, 6 + i]
-                for j in range(3):
-                    v += poses[b, 3 * j + i] * fine_local[s, j]
-                centre[i] = v
-            i0 = int(math.floor((centre[0] - origin[0]) * inv_step + 0.5))
-            j0 = int(math.floor((centre[1] - origin[1]) * inv_step + 0.5))
-            k0 = int(math.floor((centre[2] - origin[2]) * inv_step + 0.5))
+            # The arithmetic of :func:`cover_centres`, component by component.
+            lx, ly, lz, fl = fine_local[s, 0], fine_local[s, 1], fine_local[s, 2], fine_frac[s] * poses[b, 12]
+            cx = poses[b, 9] + fl * poses[b, 6]
+            cx += poses[b, 0] * lx
+            cx += poses[b, 3] * ly
+            cx += poses[b, 6] * lz
+            cy = poses[b, 10] + fl * poses[b, 7]
+            cy += poses[b, 1] * lx
+            cy += poses[b, 4] * ly
+            cy += poses[b, 7] * lz
+            cz = poses[b, 11] + fl * poses[b, 8]
+            cz += poses[b, 2] * lx
+            cz += poses[b, 5] * ly
+            cz += poses[b, 8] * lz
+            i0 = int(math.floor((cx - origin[0]) * inv_step + 0.5))
+            j0 = int(math.floor((cy - origin[1]) * inv_step + 0.5))
+            k0 = int(math.floor((cz - origin[2]) * inv_step + 0.5))
             i0 = min(max(i0, 0), shape[0] - 1)
             j0 = min(max(j0, 0), shape[1] - 1)
             k0 = min(max(k0, 0), shape[2] - 1)
@@ -880,44 +893,61 @@ def cabin_bound_one(b: int, poses: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarra
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _coarse_box(
-    b: int, poses: np.ndarray, local: np.ndarray, frac: np.ndarray, r: np.ndarray, bounds: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Coarse cover centres of body b (as :func:`cover_centres`) and their bounding box (lo, hi)."""
-    n = bounds[b + 1] - bounds[b]
-    centres = np.empty((n, 3))
-    lo = np.full(3, math.inf)
-    hi = np.full(3, -math.inf)
-    for m in range(n):
+def _coarse_box(b, poses, local, frac, r, bounds, out):  # type: ignore[no-untyped-def]
+    """Coarse cover centres of body b into ``out`` (as :func:`cover_centres`); their box (lo, hi) x 3."""
+    lo0 = lo1 = lo2 = math.inf
+    hi0 = hi1 = hi2 = -math.inf
+    for m in range(bounds[b + 1] - bounds[b]):
         s = bounds[b] + m
         for i in range(3):
             v = poses[b, 9 + i] + frac[s] * poses[b, 12] * poses[b, 6 + i]
             for j in range(3):
                 v += poses[b, 3 * j + i] * local[s, j]
-            centres[m, i] = v
-        for d in range(3):
-            lo[d] = min(lo[d], centres[m, d] - r[s])
-            hi[d] = max(hi[d], centres[m, d] + r[s])
-    return centres, lo, hi
+            out[m, i] = v
+        lo0 = min(lo0, out[m, 0] - r[s])
+        lo1 = min(lo1, out[m, 1] - r[s])
+        lo2 = min(lo2, out[m, 2] - r[s])
+        hi0 = max(hi0, out[m, 0] + r[s])
+        hi1 = max(hi1, out[m, 1] + r[s])
+        hi2 = max(hi2, out[m, 2] + r[s])
+    return lo0, lo1, lo2, hi0, hi1, hi2
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def pair_bound_one(k: int, poses: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, threshold: float) -> float:
     """Entry k of the pair bounds of :func:`state_bounds` (box separation, sphere gaps, exact distances)."""
     u = _unpack(fbuf, ibuf)
+    n = 0
+    for b in range(u[17].shape[0] - 1):
+        n = max(n, u[17][b + 1] - u[17][b])
+    return _pair_bound(k, poses, u, threshold, np.empty((2 * n, 3)))
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _pair_bound(k, poses, u, threshold, scratch):  # type: ignore[no-untyped-def]
+    """:func:`pair_bound_one` on unpacked data; ``scratch`` holds two bodies' coarse centres."""
     coarse_local, coarse_frac, coarse_r, coarse_bounds = u[14], u[15], u[16], u[17]
     pair_a, pair_b, radius, capsule_pair, half, capsule_box = u[18], u[19], u[20], u[21], u[22], u[23]
     a, b = pair_a[k], pair_b[k]
-    ca_, lo_a, hi_a = _coarse_box(a, poses, coarse_local, coarse_frac, coarse_r, coarse_bounds)
-    cb_, lo_b, hi_b = _coarse_box(b, poses, coarse_local, coarse_frac, coarse_r, coarse_bounds)
+    na = coarse_bounds[a + 1] - coarse_bounds[a]
+    nb = coarse_bounds[b + 1] - coarse_bounds[b]
+    ca_ = scratch[:na]
+    cb_ = scratch[na : na + nb]
+    la0, la1, la2, ha0, ha1, ha2 = _coarse_box(
+        a, poses, coarse_local, coarse_frac, coarse_r, coarse_bounds, ca_
+    )
+    lb0, lb1, lb2, hb0, hb1, hb2 = _coarse_box(
+        b, poses, coarse_local, coarse_frac, coarse_r, coarse_bounds, cb_
+    )
     sep = -math.inf
-    for d in range(3):
-        sep = max(sep, lo_b[d] - hi_a[d], lo_a[d] - hi_b[d])
+    sep = max(sep, lb0 - ha0, la0 - hb0)
+    sep = max(sep, lb1 - ha1, la1 - hb1)
+    sep = max(sep, lb2 - ha2, la2 - hb2)
     if sep <= threshold:
         gap = math.inf
-        for s in range(ca_.shape[0]):
+        for s in range(na):
             rs = coarse_r[coarse_bounds[a] + s]
-            for t in range(cb_.shape[0]):
+            for t in range(nb):
                 dx = ca_[s, 0] - cb_[t, 0]
                 dy = ca_[s, 1] - cb_[t, 1]
                 dz = ca_[s, 2] - cb_[t, 2]
@@ -1013,21 +1043,8 @@ CI_SIZE, CF_SIZE = 8, 13
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _walk_state(
-    i: int,
-    ci: np.ndarray,
-    cf: np.ndarray,
-    q_a: np.ndarray,
-    dq: np.ndarray,
-    fbuf: np.ndarray,
-    ibuf: np.ndarray,
-    grid: np.ndarray,
-    slot_of: np.ndarray,
-    poses: np.ndarray,
-    cabin: np.ndarray,
-    pairs: np.ndarray,
-) -> int:
-    """Slot of state i (t = i / n), evaluated on first use; -1 when the store is full."""
+def _walk_state(i, ci, q_a, dq, u, slot_of, poses, cabin, pairs):  # type: ignore[no-untyped-def]
+    """Slot of state i (t = i / n), its poses evaluated on first use; -1 when the store is full."""
     s = slot_of[i]
     if s >= 0:
         return s
@@ -1038,7 +1055,6 @@ def _walk_state(
     q = np.empty(q_a.shape[0])
     for j in range(q.shape[0]):
         q[j] = q_a[j] + t * dq[j]
-    u = _unpack(fbuf, ibuf)
     body_poses(q, u[0], u[1], u[2], u[3], poses[s], np.empty(N_CONSTRAINTS))
     cabin[s, :] = math.nan  # bounds are evaluated on demand (:func:`_walk_bound`)
     pairs[s, :] = math.nan
@@ -1048,27 +1064,16 @@ def _walk_state(
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _walk_bound(
-    s: int,
-    is_cabin: bool,
-    idx: int,
-    cf: np.ndarray,
-    fbuf: np.ndarray,
-    ibuf: np.ndarray,
-    grid: np.ndarray,
-    poses: np.ndarray,
-    cabin: np.ndarray,
-    pairs: np.ndarray,
-) -> float:
+def _walk_bound(s, is_cabin, idx, threshold, u, grid, poses, cabin, pairs, scratch):  # type: ignore[no-untyped-def]
     """The bound of body/pair idx at slot s (NaN in the store: not yet evaluated)."""
     if is_cabin:
         v = cabin[s, idx]
         if math.isnan(v):
-            v = cabin[s, idx] = cabin_bound_one(idx, poses[s], fbuf, ibuf, grid)
+            v = cabin[s, idx] = _cabin_bound(idx, poses[s], u, grid)
         return v
     v = pairs[s, idx]
     if math.isnan(v):
-        v = pairs[s, idx] = pair_bound_one(idx, poses[s], fbuf, ibuf, cf[CF_THRESHOLD])
+        v = pairs[s, idx] = _pair_bound(idx, poses[s], u, threshold, scratch)
     return v
 
 
@@ -1105,6 +1110,11 @@ def motion_walk(
     u = _unpack(fbuf, ibuf)
     capsule_pair, capsule_box, carriage = u[21], u[23], u[24]
     table, z0, dz = u[25], u[26], u[27]
+    most = 0
+    for b in range(u[17].shape[0] - 1):
+        most = max(most, u[17][b + 1] - u[17][b])
+    scratch = np.empty((2 * most, 3))
+    threshold = cf[CF_THRESHOLD]
     n_b = reach.shape[0]
     n_cabin = n_b if ci[CI_CABIN] else 0
     n_tasks = n_cabin + pair_reach.shape[0]
@@ -1119,14 +1129,14 @@ def motion_walk(
         exact = (not is_cabin) and (capsule_pair[idx] != 0 or capsule_box[idx] > 0)
         phase = ci[CI_PHASE]
         if phase == 0:  # a new task: both end states
-            s0 = _walk_state(0, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
+            s0 = _walk_state(0, ci, q_a, dq, u, slot_of, poses, cabin, pairs)
             if s0 < 0:
                 return WALK_GROW
-            s1 = _walk_state(n, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
+            s1 = _walk_state(n, ci, q_a, dq, u, slot_of, poses, cabin, pairs)
             if s1 < 0:
                 return WALK_GROW
-            f0 = _walk_bound(s0, is_cabin, idx, cf, fbuf, ibuf, grid, poses, cabin, pairs) - base
-            f1 = _walk_bound(s1, is_cabin, idx, cf, fbuf, ibuf, grid, poses, cabin, pairs) - base
+            f0 = _walk_bound(s0, is_cabin, idx, threshold, u, grid, poses, cabin, pairs, scratch) - base
+            f1 = _walk_bound(s1, is_cabin, idx, threshold, u, grid, poses, cabin, pairs, scratch) - base
             if f0 >= mm and f1 >= mm and f0 + f1 >= D:
                 ci[CI_TASK] += 1
                 continue
@@ -1146,10 +1156,10 @@ def motion_walk(
             ci[CI_PHASE] = phase = 2
         i = ci[CI_I]
         if phase == 2:  # at state i: the bound's spare clearance, then probes if they can prove more
-            s = _walk_state(i, ci, cf, q_a, dq, fbuf, ibuf, grid, slot_of, poses, cabin, pairs)
+            s = _walk_state(i, ci, q_a, dq, u, slot_of, poses, cabin, pairs)
             if s < 0:
                 return WALK_GROW
-            free = _walk_bound(s, is_cabin, idx, cf, fbuf, ibuf, grid, poses, cabin, pairs) - base
+            free = _walk_bound(s, is_cabin, idx, threshold, u, grid, poses, cabin, pairs, scratch) - base
             E = free if free >= mm else 0.0
             m = 0
             if D > 0.0 and not exact and (E == 0.0 or cf[CF_PROBE_PROVEN] != 0.0):
