@@ -25,7 +25,9 @@ SCENARIOS = Path(__file__).parent.parent / "scenarios"
 
 def _scenario(**options: Any) -> ResolvedScenario:
     raw = yaml.safe_load((SCENARIOS / "aisle-bay-insert.yaml").read_text())
-    raw.setdefault("options", {}).update(options)
+    # A generous wall-clock budget: on a cold numba cache the first plan of a process compiles the
+    # collision kernels inside it (the seeded search itself is budgeted in motion checks).
+    raw.setdefault("options", {}).update({"time_limit_s": 300, **options})
     return resolve_scenario(scenario_from_dict(raw), base_dir=SCENARIOS)
 
 
