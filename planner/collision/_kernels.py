@@ -1,8 +1,16 @@
-"""Compiled (numba) kernels of the collision hot path: certified lower bounds from sphere covers.
+"""Compiled (numba) kernels of the collision hot path.
 
-The same bounds as the numpy reference implementation in :class:`planner.collision.world.CollisionWorld`
-(``cabin_lower_bounds`` / ``pair_lower_bounds``; the tests check they agree), in one pass without
-temporaries: a validity check spends a few microseconds here instead of a few dozen numpy calls.
+* Certified lower bounds from sphere covers (:func:`state_bounds`): the same bounds as the numpy
+  reference in :class:`planner.collision.world.CollisionWorld` (``cabin_lower_bounds`` /
+  ``pair_lower_bounds``; the tests check they agree), in one pass without temporaries.
+* Body poses and admissibility in closed form (:func:`body_poses`, :func:`constraints`: paper eq. 4 and
+  the MDH chain eq. 10-12), equal to the CasADi model to 1e-12.
+* A world's constant data packed into two flat buffers (:func:`pack`), so one state check is one call
+  with a handful of arguments (:func:`packed_check`, :func:`packed_state`), and certain contacts from the
+  grid's upper bound (:func:`certain_cabin_contact`).
+* The certified motion walk (:func:`motion_walk`), resumable around the FCL probes that stay in Python,
+  with states and per-body / per-pair bounds evaluated on demand (:func:`cabin_bound_one`,
+  :func:`pair_bound_one`: the numbers of :func:`state_bounds`).
 """
 
 from __future__ import annotations
