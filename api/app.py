@@ -20,7 +20,7 @@ from api import problems
 from api.context import AppContext
 from api.db import Database
 from api.jobs import JobRunner, ProcessJobRunner, recover_jobs
-from api.routes import cabins, health, keys, kinematics, plans, robots
+from api.routes import cabins, health, keys, kinematics, plans, pprs6, robots, stiffness
 from api.settings import Settings
 from api.store import MeshStore
 from planner import __version__
@@ -130,7 +130,7 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         max_body_bytes=settings.max_body_bytes,
         max_upload_bytes=settings.max_upload_bytes,
     )
-    for module in (health, robots, cabins, plans, kinematics, keys):
+    for module in (health, robots, cabins, plans, kinematics, pprs6, stiffness, keys):
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
     return app

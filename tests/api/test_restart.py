@@ -114,8 +114,8 @@ def test_sigkill_mid_run_then_restart_loses_nothing(server: Server) -> None:
     assert states == {a: "running", b: "queued"}
 
     server.start()
-    done_a = _poll(server.url, h, a, {"succeeded", "failed", "cancelled"}, 90)
-    done_b = _poll(server.url, h, b, {"succeeded", "failed", "cancelled"}, 60)
+    done_a = _poll(server.url, h, a, {"succeeded", "failed", "cancelled"}, 240)
+    done_b = _poll(server.url, h, b, {"succeeded", "failed", "cancelled"}, 120)
     assert done_a["status"] == "succeeded" and done_a["attempts"] == 2, (
         done_a["reason"],
         done_a["message"],
