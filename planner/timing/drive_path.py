@@ -171,7 +171,13 @@ def sample_legs(paths: list[DrivePath], laws: list[TimeLaw], period_s: float) ->
         u, du, ddu = path.evaluate(s)
         ts.append(t0 + np.arange(0 if k == 0 else 1, n + 1) * period_s)
         us.append(u)
-        vs.append(du * sd[:, None])
+        v = du * sd[:, None]
+        # Every leg runs rest to rest: its end (and the first leg's start) is exactly at rest, not at the
+        # rounding residue of TOPP-RA's terminal path velocity.
+        v[-1] = 0.0
+        if k == 0:
+            v[0] = 0.0
+        vs.append(v)
         accs.append(du * sdd[:, None] + ddu * (sd**2)[:, None])
         legs.append(np.full(len(local), k, dtype=np.int64))
         ss.append(s)
