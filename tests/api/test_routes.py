@@ -297,3 +297,23 @@ def test_fk_ik_round_trip(idle: Service) -> None:
 def test_unknown_route_and_method_are_problems(idle: Service) -> None:
     _problem(idle.client.get("/api/v1/nothing-here", headers=idle.h()), 404)
     _problem(idle.client.put("/api/v1/health"), 405)
+
+
+def test_face_cap_of_uploads_is_the_loaders_face_count_check(tmp_path) -> None:
+    for svc in start_idle_service(make_settings(tmp_path, max_mesh_faces=10)):
+        r = svc.client.post("/api/v1/cabins", files={"file": ("box.stl", box_stl())}, headers=svc.h())
+        assert _problem(r, 422)["details"]["check"] == "face_count"  # a box has 12 triangles
+
+
+def test_settings_come_from_the_environment(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    from api.settings import Settings
+
+    monkeypatch.setenv("CABINPLAN_WORKERS", "3")
+    monkeypatch.setenv("CABINPLAN_DATA_DIR", str(tmp_path))
+    monkeypatch.setenv("CABINPLAN_TIME_LIMIT_CEILING_S", "45")
+    s = Settings()
+    assert (s.workers, s.data_dir, s.time_limit_ceiling_s, s.host) == (3, tmp_path, 45.0, "127.0.0.1")
+    assert s.resolved_database_url() == f"sqlite:///{(tmp_path / 'cabinplan.db').resolve()}"
+    monkeypatch.setenv("CABINPLAN_WORKERS", "0")
+    with pytest.raises(ValueError, match="workers"):
+        Settings()
