@@ -83,6 +83,8 @@ PLANNER_RANGE = 1.0
 GATE_MOTION_MARGIN_M = 0.001
 #: Extra clearance the planner keeps beyond the requested one [m] (see Planner.__init__).
 GATE_SLACK_M = 0.003
+#: Samples of a profile at which the deflection is predicted for the report (interpolated in between).
+DEFLECTION_SAMPLES = 300
 #: Fraction of the time limit kept for timing and validation.
 TIME_RESERVE = 0.15
 
@@ -624,7 +626,12 @@ class Planner:
             return None
         sc = self.sc
         T_tool_payload = sc.payload.T_tool_payload if sc.payload is not None else np.eye(4)
-        x = stiffness_model(self.robot).deflection_along(profile.joints, self.payload, T_tool_payload)
+        # The deflection is a smooth function of the configuration: predicted at up to DEFLECTION_SAMPLES
+        # evenly spaced samples (and the last) and interpolated in between, for the report and the plot.
+        n = len(profile.joints)
+        idx = np.unique(np.concatenate([np.arange(0, n, max(1, n // DEFLECTION_SAMPLES)), [n - 1]]))
+        x_at = stiffness_model(self.robot).deflection_along(profile.joints[idx], self.payload, T_tool_payload)
+        x = np.column_stack([np.interp(np.arange(n), idx, x_at[:, j]) for j in range(6)])
         tr, rot = np.linalg.norm(x[:, :3], axis=1), np.linalg.norm(x[:, 3:], axis=1)
         self.report["deflection"] = {
             "frame": "payload" if sc.payload is not None else "tool",

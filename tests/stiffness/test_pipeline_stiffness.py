@@ -99,3 +99,22 @@ def test_option_is_validated() -> None:
     with pytest.raises(InvalidInput) as err:
         _scenario(compensate_deflection="sometimes")
     assert "options.compensate_deflection" in err.value.message
+
+
+def test_reported_deflection_matches_the_model_at_every_sample(plans: dict) -> None:
+    """Predicted at a subsample and interpolated: within 1% of the peak (and 2 um) of the model anywhere."""
+    sc, _, res = plans["compensated"]
+    assert res.deflection is not None and res.deflection.shape == (len(res.profile.t), 6)
+    model = StiffnessModel(sc.robot)
+    rng = np.random.default_rng(3)
+    picks = np.unique(np.concatenate([rng.integers(0, len(res.profile.t), 40), [len(res.profile.t) - 1]]))
+    exact = model.deflection_along(
+        res.profile.joints[picks], sc.payload.rigid_payload(), sc.payload.T_tool_payload
+    )
+    peak = np.abs(res.deflection).max(axis=0)
+    assert np.all(np.abs(res.deflection[picks] - exact) <= 0.01 * peak + 2e-6)
+    np.testing.assert_allclose(res.deflection[-1], exact[-1], rtol=0, atol=1e-12)  # the goal: exact
+    rep = res.report["deflection"]
+    assert rep["max_translation_m"] == pytest.approx(
+        float(np.linalg.norm(res.deflection[:, :3], axis=1).max())
+    )
