@@ -137,6 +137,7 @@ def gate_requirements(
         payload=payload,
         compensate_deflection=compensates_deflection(sc),
         T_base_payload_commanded=T_base_payload_commanded,
+        sample_period_s=sc.options.sample_period_s,
     )
 
 

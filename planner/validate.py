@@ -58,6 +58,8 @@ LIMIT_TOLERANCE = 0.01  # 1% above velocity / acceleration / force limits
 GOAL_POSITION_TOL_M = 1e-3
 GOAL_ANGLE_TOL_RAD = np.deg2rad(0.1)
 LINE_TOL_M = 1e-3
+#: Along the insertion the payload may not step back out of the bay by more than this [m] (rounding).
+APPROACH_BACKOUT_TOL_M = 1e-9
 START_TOL = 1e-9
 #: Largest extra clearance a run of samples may cost in the certified collision check [m].
 GATE_MAX_EXTRA_M = 0.0005
@@ -85,6 +87,9 @@ class GateRequirements:
     #: planner's; without it the gate recomputes it from the final sample's redundant coordinates.
     compensate_deflection: bool = False
     T_base_payload_commanded: Array | None = field(default=None, repr=False)
+    #: The controller period the scenario asks for [s]: the profile must be sampled at exactly it (a
+    #: profile timed at another period runs faster or slower on the controller than it was checked).
+    sample_period_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -191,13 +196,11 @@ def validate_profile(
         and bool(np.all(dt > 0))
         and bool(np.all(np.abs(dt - period) < 1e-9 * max(1.0, t[-1])))
     )
-    checks.append(
-        Check(
-            "time",
-            time_ok,
-            f"{n} samples every {period} s" if time_ok else "t must start at 0 and step by the sample period",
-        )
-    )
+    detail = f"{n} samples every {period} s" if time_ok else "t must start at 0 and step by the sample period"
+    if req.sample_period_s is not None and abs(period - req.sample_period_s) > 1e-12:
+        time_ok = False
+        detail = f"sampled every {period} s, but the controller period is {req.sample_period_s} s"
+    checks.append(Check("time", time_ok, detail))
     err0 = float(np.max(np.abs(u[0] - req.start_u)))
     checks.append(
         Check(
@@ -209,7 +212,16 @@ def validate_profile(
         )
     )
     vend = float(np.max(np.abs(ud[-1])))
-    checks.append(Check("end_at_rest", vend == 0.0, f"final velocity {vend:.3g}", vend, n - 1))
+    aend = float(np.max(np.abs(udd[-1])))
+    checks.append(
+        Check(
+            "end_at_rest",
+            vend == 0.0 and aend == 0.0,
+            f"final velocity {vend:.3g}, final acceleration {aend:.3g}",
+            max(vend, aend),
+            n - 1,
+        )
+    )
     # Workspace and margins at every sample. A sample that does not assemble leaves no joint trajectory:
     # the checks that need one fail as not evaluated, the drive-space checks still run.
     q: Array | None = None
@@ -380,12 +392,21 @@ def _approach_check(T_pay: Array, req: GateRequirements, T_goal: Array | None = 
     Rg = T_goal[:3, :3]
     ang = np.array([np.linalg.norm(rotation_log(Rg.T @ T[:3, :3])) for T in T_pay[k:]])
     worst_off, worst_ang = float(off.max()), float(ang.max())
-    ok = worst_off <= LINE_TOL_M and worst_ang <= GOAL_ANGLE_TOL_RAD
+    # Along the line the payload only moves in: never past the goal, never back out.
+    overshoot = float(max(0.0, -float(along[k:].min())))
+    backout = float(max(0.0, float(np.max(np.diff(along[k:]), initial=0.0))))
+    ok = (
+        worst_off <= LINE_TOL_M
+        and worst_ang <= GOAL_ANGLE_TOL_RAD
+        and overshoot <= LINE_TOL_M
+        and backout <= APPROACH_BACKOUT_TOL_M
+    )
     return Check(
         "approach",
         ok,
         f"from sample {k}: {1e3 * worst_off:.3f} mm off the line, "
-        f"{np.rad2deg(worst_ang):.4f} deg off the goal orientation",
+        f"{np.rad2deg(worst_ang):.4f} deg off the goal orientation, {1e3 * overshoot:.3f} mm past the goal, "
+        f"{1e3 * backout:.4f} mm back out in one step",
         worst_off,
         k,
     )

@@ -390,3 +390,63 @@ def test_csv_has_a_header_and_one_row_per_sample_that_parse_back(plan: Plan) -> 
     data = np.array(body, dtype=float)
     expected = np.column_stack([p.t, p.position, p.velocity, p.acceleration, p.effort])
     np.testing.assert_allclose(data, expected, rtol=1e-8, atol=0.0)
+
+
+def test_a_profile_sampled_at_another_period_than_the_controllers_is_refused(plan: Plan) -> None:
+    """10x slower, sampled every 40 ms: within every limit, but a 4 ms controller would run it 10x fast."""
+    p = plan.profile
+    k = 10.0
+    slow = dataclasses.replace(
+        p,
+        t=p.t * k,
+        sample_period_s=p.sample_period_s * k,
+        velocity=p.velocity / k,
+        acceleration=p.acceleration / k**2,
+        effort=plan.planner.dynamics.drive_efforts(
+            p.position, p.velocity / k, p.acceleration / k**2, plan.planner.payload
+        ),
+    )
+    report = plan.gate(slow)
+    failed, _ = outcome(report)
+    assert "time" in failed
+    assert "controller period" in next(c for c in report.checks if c.name == "time").detail
+    # The same profile is fine where the controller period is 40 ms.
+    relaxed = dataclasses.replace(plan.req, sample_period_s=p.sample_period_s * k)
+    assert "time" not in outcome(plan.gate(slow, relaxed))[0]
+
+
+def test_a_final_sample_still_accelerating_is_not_at_rest(plan: Plan) -> None:
+    udd = plan.profile.acceleration.copy()
+    udd[-1, 0] = 0.01
+    report = plan.gate(dataclasses.replace(plan.profile, acceleration=udd))
+    assert "end_at_rest" in outcome(report)[0]
+
+
+def test_approach_check_refuses_overshooting_the_goal_and_backing_out() -> None:
+    """Poses on the insertion line (x into the bay): straight in passes; past the goal or back out fails."""
+    from planner.validate import _approach_check
+
+    goal = np.eye(4)
+    goal[:3, 3] = [0.8, 0.7, 2.7]
+    req = GateRequirements(
+        start_u=np.zeros(8),
+        clearance_m=0.01,
+        motion_margin_m=0.001,
+        T_base_payload_goal=goal,
+        approach_direction=np.array([1.0, 0.0, 0.0]),
+        approach_distance_m=0.3,
+    )
+
+    def poses(xs: np.ndarray) -> np.ndarray:
+        T = np.repeat(goal[None], len(xs), axis=0)
+        T[:, 0, 3] = goal[0, 3] + xs
+        return T
+
+    straight = np.concatenate([np.linspace(-0.3, 0.0, 50)])
+    assert _approach_check(poses(straight), req).passed
+    past = np.concatenate([np.linspace(-0.3, 0.05, 50), np.linspace(0.05, 0.0, 10)])
+    assert not _approach_check(poses(past), req).passed
+    back = np.concatenate(
+        [np.linspace(-0.3, -0.1, 30), np.linspace(-0.1, -0.15, 5), np.linspace(-0.15, 0, 20)]
+    )
+    assert not _approach_check(poses(back), req).passed
