@@ -35,6 +35,7 @@ from planner.exceptions import (
     ApproachInfeasible,
     GoalInCollision,
     GoalUnreachable,
+    InvalidInput,
     NoPathFound,
     PlannerError,
     StartInvalid,
@@ -110,10 +111,19 @@ def single_drive_lower_bound(robot: Any, u0: Array, u1: Array) -> float:
 
 
 def compensates_deflection(sc: ResolvedScenario) -> bool:
-    """Whether a scenario's pose goal is deflection-compensated (option, default: with a payload)."""
+    """Whether a scenario's pose goal is deflection-compensated (option, default: with a payload).
+
+    Raises:
+        InvalidInput: compensation asked for explicitly on a robot without stiffness data.
+    """
+    option = sc.options.compensate_deflection
+    if option and sc.robot.desc.stiffness is None:
+        raise InvalidInput(
+            f"options.compensate_deflection: robot {sc.robot.name!r} has no stiffness data",
+            field="options.compensate_deflection",
+        )
     if sc.T_base_payload_goal is None or sc.robot.desc.stiffness is None:
         return False
-    option = sc.options.compensate_deflection
     return sc.payload is not None if option is None else bool(option)
 
 
@@ -234,6 +244,18 @@ class Planner:
                 )
             if rep.contacts:
                 raise GoalInCollision(f"goal: {rep.contacts[0].detail}", contacts=contacts)
+        # Every motion is certified with GATE_SLACK_M beyond the requested clearance: an end state inside
+        # that band can never be left or reached, so say so now rather than search until the time limit.
+        slack = self.world.check_state(q, self.plan_clearance)
+        if not slack.valid:
+            msg = (
+                f"{what}: {slack.contacts[0].detail}: the planner keeps {1e3 * GATE_SLACK_M:.0f} mm beyond "
+                f"the requested {self.opts.clearance_m} m so that the gate can certify the motion; "
+                f"ask for a smaller clearance or move the {what}"
+            )
+            if what == "start":
+                raise StartInvalid(msg, contacts=[c.to_dict() for c in slack.contacts])
+            raise GoalInCollision(msg, contacts=[c.to_dict() for c in slack.contacts])
         ratio = float(self.forces.ratios(q)[0])
         if ratio > self.forces.fraction:
             msg = (
@@ -263,6 +285,7 @@ class Planner:
                 self.forces,
             )
             self.report["approach"] = {"method": "fixed_redundancy", "lines": len(lines), **line_stats}
+            lines = [c for c in lines if c.line is not None]  # targets and their lines stay aligned
             if lines:
                 return [c.line[0] for c in lines if c.line is not None], list(lines)
         cands, stats = goal_configurations(

@@ -584,6 +584,11 @@ def resolve_scenario(
         InvalidMesh: a mesh file cannot be used (message prefixed with the field, e.g. ``cabin.mesh: ``).
     """
     robot = _robot(spec)
+    if spec.options.compensate_deflection and robot.desc.stiffness is None:
+        raise InvalidInput(
+            f"options.compensate_deflection: robot {robot.name!r} has no stiffness data",
+            field="options.compensate_deflection",
+        )
     cabin: LoadedMesh | None = None
     cabin_source = "none"
     if spec.cabin is not None:

@@ -128,3 +128,16 @@ def test_a_seeded_plan_is_reproducible() -> None:
     b = Planner(sc).plan()
     assert np.array_equal(a.profile.position, b.profile.position)
     assert np.array_equal(a.waypoints, b.waypoints)
+
+
+def test_a_start_inside_the_planning_margin_is_refused_at_once_with_the_reason() -> None:
+    """aisle-transfer's start is 40 mm from the cabin: asking 38.5 mm leaves it inside the planner's 3 mm."""
+    import dataclasses
+
+    sc = load_scenario(HERE / "aisle-transfer.yaml")
+    options = sc.options.model_copy(update={"clearance_m": 0.0385})
+    tight = dataclasses.replace(sc, options=options, spec=sc.spec.model_copy(update={"options": options}))
+    with pytest.raises(PlannerError) as info:
+        Planner(tight).plan()
+    assert info.value.reason == "start_in_collision"
+    assert "beyond the requested" in info.value.message
