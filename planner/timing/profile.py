@@ -89,14 +89,14 @@ class DriveProfile:
             raise InvalidInput(msg, field="profile.drives") from None
         try:
             period = float(data["sample_period_s"])
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise InvalidInput(
                 "profile.sample_period_s: must be a number [s]", field="profile.sample_period_s"
             ) from None
         for key in ("t", "position", "velocity", "acceleration", "effort"):
             try:
                 arrays[key] = np.asarray(data[key], dtype=float)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 shape = "list of numbers" if key == "t" else "list of rows of 8 numbers"
                 raise InvalidInput(
                     f"profile.{key}: must be a {shape} (ragged or non-numeric)",

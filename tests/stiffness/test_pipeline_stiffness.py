@@ -60,7 +60,7 @@ def test_compensated_plan_lands_the_sagging_payload_on_the_request(plans: dict) 
     assert np.linalg.norm(off[:3]) > 1e-3 and np.linalg.norm(off[3:]) > 1e-3
     rep = res.report
     assert rep["deflection"]["compensated"] is True
-    assert rep["goal"]["residual_m"] < 1e-5 and len(rep["goal"]["iterations"]) >= 2
+    assert rep["goal"]["residual_m"] < 1e-6 and len(rep["goal"]["iterations"]) >= 2  # 10x inside the gate
     np.testing.assert_allclose(rep["goal"]["compensated"]["position"], T_rigid[:3, 3], atol=1e-9)
     assert res.deflection is not None and res.deflection.shape == (len(res.profile.t), 6)
     assert rep["deflection"]["max_translation_m"] >= rep["deflection"]["at_goal"]["translation_norm_m"] > 1e-3
