@@ -369,6 +369,9 @@ class ProcessJobRunner:
                 message=f"the worker process ended without a result (exit code {code})",
             )
             return
+        values: dict[str, Any] = {}
+        if out.get("provenance"):  # what really made the plan (the submit-time hashes are a forecast)
+            values["provenance"] = out["provenance"]
         self._end(
             r,
             str(out["status"]),
@@ -377,6 +380,7 @@ class ProcessJobRunner:
             result_json=out.get("document"),
             profile_csv=out.get("csv"),
             plot_png=out.get("png"),
+            **values,
         )
 
     def _kill(self, r: _Running) -> None:

@@ -29,7 +29,7 @@ _LOG = logging.getLogger(__name__)
 
 
 def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
-    """Plan one job; returns the outcome ``{"status", "reason", "message", "document", "csv", "png"}``.
+    """Plan one job; the outcome ``{"status", "reason", "message", "document", "provenance", "csv", "png"}``.
 
     Args:
         job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}`` (and ``nice``,
@@ -47,13 +47,20 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
     except PlannerError as exc:
         name = job["scenario"].get("name") if isinstance(job["scenario"], dict) else None
         doc = refusal_document(exc, sc, name=name)
-        return {"status": "failed", "reason": exc.reason, "message": exc.message, "document": json.dumps(doc)}
+        return {
+            "status": "failed",
+            "reason": exc.reason,
+            "message": exc.message,
+            "document": json.dumps(doc),
+            "provenance": doc.get("provenance"),
+        }
     doc = result_document(sc, result)
     return {
         "status": "succeeded",
         "reason": None,
         "message": f"{sc.spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
         "document": json.dumps(doc),
+        "provenance": doc["provenance"],
         "csv": result.profile.to_csv(),
         "png": plan_png(sc, result, planner.world),
     }

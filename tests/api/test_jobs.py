@@ -26,9 +26,13 @@ def transfer(svc: Service) -> dict[str, Any]:
     """The reference aisle transfer planned through the API (the job document with its result)."""
     r = svc.client.post("/api/v1/plans", json=scenario("aisle-transfer"), headers=svc.h())
     assert r.status_code == 202
+    submitted = r.json()["provenance"]
     # the first job waits for the forkserver's warm-up: on a fresh machine numba compiles the kernels there
     doc = wait_for(svc.client, svc.h(), r.json()["id"], timeout_s=240)
     assert doc["status"] == "succeeded", doc
+    # the scene hashes known at submit are those the worker planned against
+    for key in ("scenario_sha256", "robot_description_sha256", "cabin_mesh_sha256", "cabin_source"):
+        assert doc["provenance"][key] == submitted[key]
     return doc
 
 
@@ -36,7 +40,7 @@ def test_lifecycle_profile_respects_the_limits(svc: Service, transfer: dict[str,
     result = transfer["result"]
     assert result["report"]["gate"]["passed"] is True
     assert transfer["progress"] == 1.0 and transfer["attempts"] == 1
-    assert transfer["provenance"] == result["provenance"]  # stored at submit = computed by the planner
+    assert transfer["provenance"] == result["provenance"]  # the job stores what really made the plan
     robot = load_robot("cabin8")
     v = np.array(result["velocity"])
     assert np.all(np.abs(v) <= 1.01 * robot.limits.v_max)
