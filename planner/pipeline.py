@@ -148,6 +148,7 @@ def gate_requirements(
         compensate_deflection=compensates_deflection(sc),
         T_base_payload_commanded=T_base_payload_commanded,
         sample_period_s=sc.options.sample_period_s,
+        deflection_check=sc.payload is not None and sc.robot.desc.stiffness is not None,
     )
 
 

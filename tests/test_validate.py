@@ -450,3 +450,67 @@ def test_approach_check_refuses_overshooting_the_goal_and_backing_out() -> None:
         [np.linspace(-0.3, -0.1, 30), np.linspace(-0.1, -0.15, 5), np.linspace(-0.15, 0, 20)]
     )
     assert not _approach_check(poses(back), req).passed
+
+
+def _carry(d1_goal: float) -> ResolvedScenario:
+    from planner.scenario import resolve_scenario, scenario_from_dict
+
+    home = {"x1": -0.46, "x2": 0.46, "x3": -0.09, "theta3": 1.2, "theta4": -0.8, "d5": -0.25, "theta6": 0.0}
+    return resolve_scenario(
+        scenario_from_dict(
+            {
+                "name": "carry",
+                "robot": "cabin8",
+                "payload": {"box": [0.45, 0.35, 0.3], "mass": 100, "grasp": {"position": [0, 0, 0.2]}},
+                "start": {"drives": {"d1": 1.0, **home}},
+                "goal": {"drives": {"d1": d1_goal, **home}},
+                "options": {"seed": 1, "time_limit_s": 60},
+            }
+        )
+    )
+
+
+def test_deflected_joints_put_the_payload_where_it_sags_to() -> None:
+    from planner.dynamics.stiffness import deflected_pose, stiffness_model
+    from planner.validate import deflected_joints
+
+    sc = _carry(1.3)
+    res = Planner(sc).plan()
+    assert sc.payload is not None
+    q = res.profile.joints
+    q_def, sag = deflected_joints(sc.robot, q, sc.payload.rigid_payload(), sc.payload.T_tool_payload)
+    assert 1e-3 < sag < 1e-2  # a 100 kg payload sags by millimetres
+    for i in (0, len(q) // 2, len(q) - 1):
+        x = stiffness_model(sc.robot).deflection(q[i], sc.payload.rigid_payload(), sc.payload.T_tool_payload)
+        want = deflected_pose(sc.robot.fk(q[i]) @ sc.payload.T_tool_payload, x.twist)
+        got = sc.robot.fk(q_def[i]) @ sc.payload.T_tool_payload
+        np.testing.assert_allclose(got, want, atol=2e-6)
+
+
+def test_a_plate_the_rigid_robot_clears_but_the_sagging_payload_touches_is_refused() -> None:
+    """A plate 3.8 mm under the payload's lowest corner: certified for the rigid robot, not sagging ~2 mm."""
+    import trimesh
+
+    from planner.collision.mesh_loader import load_mesh
+    from planner.collision.world import CollisionWorld
+
+    sc = _carry(1.3)
+    res = Planner(sc).plan()
+    assert sc.payload is not None
+    q = res.profile.joints
+    corners = np.array([[sx, sy, sz, 1.0] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    corners[:, :3] *= np.array(sc.payload.size) / 2
+    P = (corners @ (sc.robot.fk(q[-1]) @ sc.payload.T_tool_box).T)[:, :3]
+    low = P[np.argmin(P[:, 1])]
+    plate = trimesh.creation.box(extents=(0.04, 0.01, 0.04))
+    plate.apply_translation([low[0], low[1] - 0.0038 - 0.005, low[2]])
+    world = CollisionWorld(
+        sc.robot, load_mesh(plate.export(file_type="stl"), units="m", name="p.stl"), sc.payload
+    )
+    assert world.min_distance(q[-1], include_self=False).distance_m == pytest.approx(0.0038, abs=1e-6)
+    req = dataclasses.replace(gate_requirements(sc, sc.payload.rigid_payload()), clearance_m=0.0005)
+    rigid = validate_profile(res.profile, sc.robot, world, dataclasses.replace(req, deflection_check=False))
+    assert next(c for c in rigid.checks if c.name == "collision").passed
+    report = validate_profile(res.profile, sc.robot, world, req)
+    check = next(c for c in report.checks if c.name == "collision")
+    assert not check.passed and "sag" in check.detail
