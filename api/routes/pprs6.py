@@ -9,7 +9,6 @@ against time, paper Fig. 7) instead of the JSON document.
 
 from __future__ import annotations
 
-import json
 from functools import lru_cache
 from typing import Annotated, Any, Literal
 
@@ -17,6 +16,7 @@ from fastapi import APIRouter, Query, Response
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
+from api.problems import SafeJSONResponse
 from planner.robots import pprs6_tools
 
 router = APIRouter(tags=["pprs6"])
@@ -67,9 +67,9 @@ class PosePath(BaseModel):
 
     name: Annotated[str | None, Field(max_length=100)] = None
     closed: bool = False
-    max_condition: Annotated[float | None, Field(gt=1.0, description="Refuse worse-conditioned poses.")] = (
-        None
-    )
+    max_condition: Annotated[
+        Finite | None, Field(gt=1.0, le=1e6, description="Refuse worse-conditioned poses.")
+    ] = None
     sample_period_s: Annotated[float | None, Field(gt=0.0, le=0.1, description="Controller period [s].")] = (
         None
     )
@@ -85,17 +85,20 @@ class ProfileRequest(BaseModel):
 
 
 @lru_cache(maxsize=32)
-def _workspace(body: WorkspaceRequest) -> tuple[dict[str, Any], bytes]:
-    return pprs6_tools.workspace_document(body.orientation.model_dump(), body.step_m, png=True)
+def _workspace(body: WorkspaceRequest, png: bool) -> tuple[dict[str, Any], bytes]:
+    return pprs6_tools.workspace_document(body.orientation.model_dump(), body.step_m, png=png)
 
 
 @router.post("/robots/pprs6/workspace", summary="pprs6 workspace at an orientation (JSON or PNG)")
 def workspace(body: WorkspaceRequest, _principal: CurrentPrincipal, format: Format = "json") -> Response:
-    """Volume [m^3], extents [m], sizes and conditioning over the reachable grid; or the three views."""
-    doc, png = _workspace(body)
+    """Volume [m^3], extents [m], sizes and conditioning over the reachable grid; or the three views.
+
+    An orientation with no reachable position gives a volume of 0 (and an empty picture), not an error.
+    """
     if format == "png":
-        return Response(png, media_type="image/png")
-    return Response(json.dumps(doc, allow_nan=False), media_type="application/json")
+        return Response(_workspace(body, True)[1], media_type="image/png")
+    doc = _workspace(body, False)[0]
+    return SafeJSONResponse(doc)
 
 
 @router.post("/robots/pprs6/profiles", summary="pprs6 pose path -> validated drive profile (JSON or PNG)")
@@ -109,4 +112,4 @@ def profile(body: ProfileRequest, _principal: CurrentPrincipal, format: Format =
     doc = pprs6_tools.profile_document(spec)
     if format == "png":
         return Response(pprs6_tools.profile_png(doc), media_type="image/png")
-    return Response(json.dumps(doc, allow_nan=False), media_type="application/json")
+    return SafeJSONResponse(doc)

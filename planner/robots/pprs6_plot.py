@@ -30,7 +30,11 @@ def workspace_png(ws: Workspace, title: str = "") -> bytes:
         extent = (ax_mm[i][0] - half, ax_mm[i][-1] + half, ax_mm[j][0] - half, ax_mm[j][-1] + half)
         ax.imshow(proj.T, origin="lower", extent=extent, cmap="Blues", vmin=0, vmax=1.6, aspect="equal")
         ax.plot(1e3 * ws.boundary[:, i], 1e3 * ws.boundary[:, j], ",", color="navy", alpha=0.4)
-        (lo_i, hi_i), (lo_j, hi_j) = 1e3 * ws.extents_m[i], 1e3 * ws.extents_m[j]
+        if ws.n_inside:
+            (lo_i, hi_i), (lo_j, hi_j) = 1e3 * ws.extents_m[i], 1e3 * ws.extents_m[j]
+        else:  # nothing reachable at this orientation: show the searched box, empty
+            (lo_i, hi_i), (lo_j, hi_j) = extent[:2], extent[2:]
+            ax.text(0.5, 0.5, "no reachable position", transform=ax.transAxes, ha="center", va="center")
         ax.set_xlim(lo_i - 10, hi_i + 10)
         ax.set_ylim(lo_j - 10, hi_j + 10)
         ax.set_xlabel(f"{a} [mm]")

@@ -95,8 +95,8 @@ def pose_path_from_spec(spec: Mapping[str, Any]) -> PosePath:
     if not isinstance(closed, bool):
         raise InvalidInput("closed: expected true or false", field="closed")
     max_cond = spec.get("max_condition", 1000.0)
-    if isinstance(max_cond, bool) or not isinstance(max_cond, int | float) or not max_cond > 1:
-        raise InvalidInput("max_condition: expected a number above 1", field="max_condition")
+    if isinstance(max_cond, bool) or not isinstance(max_cond, int | float) or not 1 < max_cond <= 1e6:
+        raise InvalidInput("max_condition: expected a finite number in (1, 1e6]", field="max_condition")
     poses, labels = [], []
     for k, wp in enumerate(wps):
         if not isinstance(wp, Mapping):

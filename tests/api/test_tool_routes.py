@@ -91,6 +91,13 @@ def test_pprs6_workspace_json_and_png(svc: Service) -> None:
         "step_m",
     )
     assert svc.client.post("/api/v1/robots/pprs6/workspace", json=body).status_code == 401
+    # Nothing reachable at a 1 rad yaw: a volume of 0 (extents null) and an empty picture, never a 500.
+    empty = {"orientation": {"phi": 1.0}, "step_m": 0.01}
+    r = svc.client.post("/api/v1/robots/pprs6/workspace", json=empty, headers=svc.h())
+    assert r.status_code == 200, r.text
+    assert r.json()["volume_m3"] == 0.0 and r.json()["extents_m"]["x"] == [None, None]
+    r = svc.client.post("/api/v1/robots/pprs6/workspace?format=png", json=empty, headers=svc.h())
+    assert r.status_code == 200 and r.content.startswith(PNG)
 
 
 def test_pprs6_profile_of_the_paper_path_is_within_limits(svc: Service) -> None:
