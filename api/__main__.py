@@ -7,7 +7,6 @@ Settings come from ``CABINPLAN_*`` environment variables (see :class:`api.settin
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 import os
 import sys
@@ -15,19 +14,8 @@ import sys
 import uvicorn
 
 from api.app import create_app
-from api.auth import ensure_key, new_key
+from api.auth import LOCAL_TENANT, ensure_key, is_loopback, new_key
 from api.settings import Settings
-
-LOCAL_TENANT = "local"
-
-
-def _loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def local_key(settings: Settings) -> str:
@@ -48,7 +36,7 @@ def main() -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     settings = Settings()
     app = create_app(settings)
-    if _loopback(settings.host):
+    if is_loopback(settings.host):
         key = local_key(settings)
         ctx = app.state.ctx
         ctx.db.create_all()

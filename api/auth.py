@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import ipaddress
 import secrets
 import uuid
 from dataclasses import dataclass
@@ -82,6 +83,20 @@ def _unauthorized(detail: str) -> Problem:
     )
 
 
+#: The tenant of the local default key that ``make serve`` creates on a loopback address.
+LOCAL_TENANT = "local"
+
+
+def is_loopback(host: str) -> bool:
+    """Whether a host name or address is this machine's loopback."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 def authenticate(
     request: Request,
     key: Annotated[str | None, Security(_header)],
@@ -102,6 +117,8 @@ def authenticate(
         row = s.scalar(select(ApiKey).where(ApiKey.key_sha256 == digest, ApiKey.revoked_at.is_(None)))
         if row is None:
             raise _unauthorized("invalid or revoked API key")
+        if row.tenant == LOCAL_TENANT and not is_loopback(request.client.host if request.client else ""):
+            raise _unauthorized("the local default key is accepted from this machine (loopback) only")
         return Principal(tenant=row.tenant, key_id=row.id)
 
 
@@ -117,6 +134,7 @@ AdminPrincipal = Annotated[Principal, Depends(require_admin)]
 
 __all__ = [
     "ADMIN_TENANT",
+    "LOCAL_TENANT",
     "API_KEY_HEADER",
     "AdminPrincipal",
     "CurrentPrincipal",
@@ -124,6 +142,7 @@ __all__ = [
     "authenticate",
     "create_key",
     "ensure_key",
+    "is_loopback",
     "key_digest",
     "new_key",
     "require_admin",

@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 from sqlalchemy import func, select
 
-from api.db import Database, Mesh, now_s
+from api.db import ACTIVE_STATES, Database, Job, Mesh, now_s
 from api.problems import Problem
 from meshes import reference_cabin_path
 from planner.collision.mesh_loader import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
@@ -62,6 +62,15 @@ def mesh_document(row: Mesh) -> dict[str, Any]:
         "reference": False,
         "created_at": row.created_at,
     }
+
+
+class MeshInUse(Exception):
+    """A mesh cannot be deleted while active jobs plan in it."""
+
+    def __init__(self, mesh_id: str, job_ids: list[str]) -> None:
+        super().__init__(f"cabin {mesh_id!r} is used by active plan(s) {', '.join(job_ids)}")
+        self.mesh_id = mesh_id
+        self.job_ids = job_ids
 
 
 class MeshStore:
@@ -161,12 +170,21 @@ class MeshStore:
         return list(rows), int(total)
 
     def delete(self, tenant: str, mesh_id: str) -> bool:
-        """Forget the tenant's mesh; the file goes when no tenant refers to it. ``False`` if unknown."""
+        """Forget the tenant's mesh; the file goes when no tenant refers to it. ``False`` if unknown.
+
+        Raises:
+            MeshInUse: a queued or running job of the tenant plans in this cabin (deleting it would fail
+                the job): cancel the job or wait for it.
+        """
         with self.db.session() as s:
             row = s.scalar(select(Mesh).where(Mesh.tenant == tenant, Mesh.sha256 == mesh_id))
             if row is None:
                 return False
             path = self.path_of(row)
+            active = s.scalars(select(Job).where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))).all()
+            users = sorted(j.id for j in active if str(path) in {str(v) for v in (j.meshes or {}).values()})
+            if users:
+                raise MeshInUse(mesh_id, users)
             s.delete(row)
             s.flush()
             others = s.scalar(select(func.count()).select_from(Mesh).where(Mesh.sha256 == mesh_id)) or 0

@@ -14,7 +14,7 @@ from fastapi import APIRouter, File, Form, Query, Response, UploadFile
 from api.auth import CurrentPrincipal
 from api.problems import Problem
 from api.routes.deps import Ctx
-from api.store import mesh_document
+from api.store import MeshInUse, mesh_document
 from meshes import reference_cabins, reference_manifest
 
 router = APIRouter(tags=["cabins"])
@@ -68,7 +68,7 @@ def list_cabins(
     ctx: Ctx,
     principal: CurrentPrincipal,
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
 ) -> dict[str, Any]:
     """``{"references": [...], "items": [...], "total", "limit", "offset"}`` (uploads newest first)."""
     limit = min(limit, ctx.settings.page_size_max)
@@ -95,9 +95,13 @@ def get_cabin(cabin_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str,
 
 @router.delete("/cabins/{cabin_id}", status_code=204, summary="Delete an uploaded cabin")
 def delete_cabin(cabin_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
-    """Forget the tenant's cabin (204); reference cabins cannot be deleted (409)."""
+    """Forget the tenant's cabin (204); reference cabins and those of active plans stay (409)."""
     if cabin_id in reference_cabins():
         raise Problem(409, "reference_cabin", f"{cabin_id!r} is a reference cabin and cannot be deleted")
-    if not ctx.store.delete(principal.tenant, cabin_id):
+    try:
+        deleted = ctx.store.delete(principal.tenant, cabin_id)
+    except MeshInUse as exc:
+        raise Problem(409, "cabin_in_use", f"{exc}: cancel them or wait until they finish") from None
+    if not deleted:
         raise Problem(404, "not_found", f"no cabin {cabin_id!r}")
     return Response(status_code=204)

@@ -122,16 +122,20 @@ def test_cabin_upload_by_content_hash_and_tenant_scoped(idle: Service) -> None:
     _problem(idle.client.delete("/api/v1/cabins/cabin-aisle", headers=idle.h()), 409)
     # a scenario may name the uploaded cabin by id; the other tenant may not
     sc = {**free_transfer(), "cabin": {"mesh": doc["id"], "units": "m"}}
-    assert idle.client.post("/api/v1/plans", json=sc, headers=idle.h()).status_code == 202
+    job = idle.client.post("/api/v1/plans", json=sc, headers=idle.h())
+    assert job.status_code == 202
     body = _problem(idle.client.post("/api/v1/plans", json=sc, headers=idle.h("beta")), 422)
     assert body["errors"][0]["field"] == "cabin.mesh"
     mm = {**sc, "cabin": {"mesh": doc["id"], "units": "mm"}}
     assert _problem(idle.client.post("/api/v1/plans", json=mm, headers=idle.h()), 422)["errors"][0][
         "field"
     ] == ("cabin.units")
+    # The queued plan needs the cabin: it cannot be deleted under it (the job would fail), until cancelled.
+    busy = _problem(idle.client.delete(f"/api/v1/cabins/{doc['id']}", headers=idle.h()), 409)
+    assert busy["type"].endswith("cabin_in_use") and job.json()["id"] in busy["detail"]
+    _cancel_all(idle)
     assert idle.client.delete(f"/api/v1/cabins/{doc['id']}", headers=idle.h()).status_code == 204
     _problem(idle.client.get(f"/api/v1/cabins/{doc['id']}", headers=idle.h()), 404)
-    _cancel_all(idle)
 
 
 @pytest.mark.parametrize(
@@ -317,3 +321,20 @@ def test_settings_come_from_the_environment(monkeypatch: pytest.MonkeyPatch, tmp
     monkeypatch.setenv("CABINPLAN_WORKERS", "0")
     with pytest.raises(ValueError, match="workers"):
         Settings()
+
+
+def test_the_local_default_key_works_from_loopback_only(idle: Service) -> None:
+    from fastapi.testclient import TestClient
+
+    from api.auth import LOCAL_TENANT, create_key
+
+    app = idle.client.app
+    _, key = create_key(app.state.ctx, LOCAL_TENANT, "local default key")
+    h = {"X-API-Key": key}
+    local = TestClient(app, client=("127.0.0.1", 50001), raise_server_exceptions=False)
+    assert local.get("/api/v1/robots", headers=h).status_code == 200
+    remote = TestClient(app, client=("192.0.2.7", 50002), raise_server_exceptions=False)
+    body = _problem(remote.get("/api/v1/robots", headers=h), 401)
+    assert "loopback" in body["detail"]
+    # An ordinary tenant key is accepted from anywhere.
+    assert remote.get("/api/v1/robots", headers=idle.h()).status_code == 200
