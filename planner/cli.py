@@ -108,6 +108,9 @@ def fk(
     robot: RobotArg,
     drives: Annotated[str | None, typer.Option(help="JSON object: drive name -> position [m, rad]")] = None,
     joints: Annotated[str | None, typer.Option(help="JSON object: joint name -> value [m, rad]")] = None,
+    guess: Annotated[
+        str | None, typer.Option(help="pprs6: JSON pose to start from (the assembly mode connected to it)")
+    ] = None,
 ) -> None:
     """Forward kinematics: drives (or joints) -> joints, drives and T_base_tool (row-major 4x4)."""
     if robot == "pprs6":
@@ -115,10 +118,13 @@ def fk(
 
         if drives is None or joints is not None:
             _fail("fk pprs6: give --drives (w1, w2, beta, s1, s2, s3)", EXIT_INVALID)
-        _emit(pprs6_tools.fk_document(_json_arg(drives, "--drives")))
+        start = None if guess is None else _json_arg(guess, "--guess")
+        _emit(pprs6_tools.fk_document(_json_arg(drives, "--drives"), start))
         return
     from planner.tools import fk_document
 
+    if guess is not None:
+        _fail(f"--guess: robot {robot!r} has one forward kinematics solution", EXIT_INVALID)
     _cabin8(robot)
     if (drives is None) == (joints is None):
         _fail("fk: give exactly one of --drives or --joints", EXIT_INVALID)
@@ -142,6 +148,8 @@ def ik(
     if robot == "pprs6":  # pose {"x","y","z","phi","theta","psi"} of the platform centre
         from planner.robots import pprs6_tools
 
+        if near is not None or seed != 0:
+            _fail("--near/--seed: pprs6's inverse kinematics has one solution (closed form)", EXIT_INVALID)
         _emit(pprs6_tools.ik_document(_json_arg(pose, "--pose")))
         return
     from planner.tools import ik_document
@@ -262,6 +270,11 @@ def plan(
     except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
         _write(output, json.dumps(refusal_document(exc, sc), indent=1) + "\n", "--output")
         _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
+    except InvalidInput:
+        raise
+    except PlannerError as exc:  # any other failure still leaves its reason in --output, never a stale file
+        _write(output, json.dumps(refusal_document(exc, sc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", 1)
     doc = result_document(sc, result)
     _write(output, json.dumps(doc) + "\n", "--output")
     if csv is not None:

@@ -213,6 +213,14 @@ class GoalSpec(BaseModel):
         None, description="Optional straight final motion onto the goal pose (pose goals only)."
     )
 
+    @field_validator("pose")
+    @classmethod
+    def _explicit_orientation(cls, value: Pose | None) -> Pose | None:
+        # A goal the payload must reach is never silently "unrotated": the orientation is part of it.
+        if value is not None and "orientation" not in value.model_fields_set:
+            raise ValueError("a goal pose needs its orientation {w, x, y, z} (the identity is [1, 0, 0, 0])")
+        return value
+
     @field_validator("approach")
     @classmethod
     def _approach_needs_pose(cls, value: ApproachSpec | None, info: ValidationInfo) -> ApproachSpec | None:

@@ -362,6 +362,7 @@ SCHEMA_REFUSALS = [
         _set("goal.pose.orientation", {"w": 1e200, "x": 1e200, "y": 0, "z": 0}),
         "goal.pose.orientation",
     ),
+    ("goal pose without orientation", _set("goal.pose", {"position": [0.885, 0.675, 2.7]}), "goal.pose"),
     ("negative mass", _set("payload.mass", -1.0), "payload.mass"),
     ("inf mass", _set("payload.mass", float("inf")), "payload.mass"),
     ("numeric string", _set("payload.mass", "100"), "payload.mass"),

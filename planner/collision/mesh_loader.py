@@ -36,6 +36,7 @@ import math
 import os
 import stat
 import struct
+import warnings
 from array import array
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
@@ -696,7 +697,11 @@ def _parse_with_trimesh(
 ) -> tuple[list[tuple[Array, IntArray]], int]:
     """Parse with trimesh and flatten the scene graph: one (vertices, faces) per geometry instance."""
     try:
-        scene = trimesh.load_scene(io.BytesIO(data), file_type=fmt, process=False)
+        # Bad numbers (inf, nan) are found and refused below with the file's name; trimesh's own numpy
+        # warnings about them would only add lines to a one-line error.
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            scene = trimesh.load_scene(io.BytesIO(data), file_type=fmt, process=False)
         instances = []
         n_ignored = 0
         n_faces = 0

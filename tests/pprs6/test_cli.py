@@ -37,6 +37,20 @@ def test_exit_codes() -> None:
     assert res.exit_code == 2 and "w9" in res.stderr
     res = runner.invoke(app, ["workspace", "cabin8"])
     assert res.exit_code == 2
+    res = runner.invoke(app, ["ik", "pprs6", "--pose", POSE, "--near", '{"w1": 0.1}'])
+    assert res.exit_code == 2 and "--near" in res.stderr
+    res = runner.invoke(app, ["fk", "cabin8", "--drives", "{}", "--guess", POSE])
+    assert res.exit_code == 2 and "--guess" in res.stderr
+
+
+def test_fk_from_a_guess_returns_that_assembly_mode() -> None:
+    pose = {"x": -0.03, "y": -0.03, "z": 0.19, "phi": 0.0, "theta": 0.0, "psi": 0.2}
+    drives = json.loads(runner.invoke(app, ["ik", "pprs6", "--pose", json.dumps(pose)]).stdout)["drives"]
+    guess = {**pose, "x": -0.027, "psi": 0.18}
+    res = runner.invoke(app, ["fk", "pprs6", "--drives", json.dumps(drives), "--guess", json.dumps(guess)])
+    assert res.exit_code == 0, res.output
+    got = json.loads(res.stdout)["pose"]
+    assert max(abs(got[k] - pose[k]) for k in pose) < 1e-9
 
 
 def test_robot_summary() -> None:
