@@ -535,9 +535,21 @@ class Planner:
     def time_and_validate(
         self, legs: list[JointPath], req: GateRequirements
     ) -> tuple[DriveProfile, GateReport, list[TimedPath]]:
-        """Time every leg, sample and gate; re-time with tighter limits when only a limit check fails."""
+        """Time every leg, sample and gate; re-time with tighter limits when only a limit check fails.
+
+        Only the limits that failed are tightened (velocity, acceleration, force: the next of
+        :data:`SAFETY_LEVELS` for each; a consistency failure tightens the acceleration): the others keep
+        their margin, so a drive holding a heavy payload near its force limit is not refused because an
+        acceleration peak had to come down.
+        """
         last: GateReport | None = None
-        for attempt, safety in enumerate(SAFETY_LEVELS):
+        level = [0, 0, 0]  # velocity, acceleration, force
+        for attempt in range(len(SAFETY_LEVELS)):
+            safety = (
+                SAFETY_LEVELS[level[0]][0],
+                SAFETY_LEVELS[level[1]][1],
+                SAFETY_LEVELS[level[2]][2],
+            )
             stage = self._timing_factory(self.robot, self.payload, safety)
             t1 = time.perf_counter()
             timed = [stage.time_path(leg) for leg in legs]
@@ -553,8 +565,13 @@ class Planner:
             if gate.passed:
                 return profile, gate, timed
             last = gate
-            if not {c.name for c in gate.failures} <= LIMIT_CHECKS:
+            failed = {c.name for c in gate.failures}
+            if not failed <= LIMIT_CHECKS:
                 break
+            for name, k in (("velocity", 0), ("acceleration", 1), ("consistency", 1), ("effort", 2)):
+                if name in failed:
+                    level[k] = min(level[k] + 1, len(SAFETY_LEVELS) - 1)
+            self.report.setdefault("retimed", []).append({"failed": sorted(failed), "safety": list(safety)})
         assert last is not None
         raise ValidationFailed(f"validation gate: {last.summary()}", report=last.to_dict())
 

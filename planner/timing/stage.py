@@ -137,11 +137,22 @@ class _DriveForceConstraint(toppra.constraint.LinearConstraint):
         return canlinear_colloc_to_interpolate(a, b, c, F, g, None, None, gridpoints)
 
 
+#: Offset of the grid points on either side of a piece boundary (fraction of the path length).
+BREAK_OFFSET = 1e-7
+
+
 def _grid(path: JointPath, step: float, min_points: int, max_points: int) -> Array:
-    """Uniform grid with every piece boundary, refined inside blends and splines."""
+    """Uniform grid with every piece boundary, refined inside blends and splines.
+
+    A boundary also gets a point just inside each neighbouring piece: the path's second derivative jumps
+    there (a line entering a blend), and a constraint evaluated at the boundary alone sees only one side,
+    letting the blend's curvature at the line's speed exceed the acceleration limits after it.
+    """
     length = path.length
     n = int(np.clip(np.ceil(length / step), min_points, max_points))
-    pts = [np.linspace(0.0, length, n + 1), path.breaks]
+    inner = np.asarray(path.breaks, dtype=float)[1:-1]
+    eps = BREAK_OFFSET * max(length, 1.0)
+    pts = [np.linspace(0.0, length, n + 1), path.breaks, inner - eps, inner + eps]
     for k, piece in enumerate(path.pieces):
         if isinstance(piece, BlendPiece | SplinePiece):
             a = path.breaks[k]
