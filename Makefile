@@ -37,6 +37,8 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.kinematics
 	$(BIN)/python -m bench.collision
 	$(BIN)/python -m bench.planning
+	$(BIN)/python -m bench.stiffness
+	$(BIN)/python -m bench.pprs6
 
 lock:  ## re-pin requirements.lock from a fresh resolve of pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock
