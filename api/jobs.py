@@ -18,6 +18,10 @@ state between jobs). A dispatcher thread, never the event loop:
 On start-up (:func:`recover_jobs`) a job left ``running`` by a dead process is re-queued once (the
 attempt counter) and failed with reason ``interrupted`` if it was already retried; queued jobs simply
 run. On a clean shutdown running jobs are killed and re-queued without counting the attempt.
+
+One service instance per database: recovery treats every ``running`` row as left by a dead process, and
+a cancellation reaches only this instance's processes (jobs carry no owner lease yet), so two instances
+must not share a database.
 """
 
 from __future__ import annotations
@@ -140,6 +144,10 @@ def _mp_context(preload: bool) -> ForkServerContext:
         if preload:
             ctx.set_forkserver_preload(["api.warmup"])
         return ctx
+
+
+#: Tries of a job's terminal-state write (a busy SQLite file, a dropped PostgreSQL connection).
+END_WRITE_ATTEMPTS = 5
 
 
 class ProcessJobRunner:
@@ -395,23 +403,33 @@ class ProcessJobRunner:
         """
         with self._lock:
             self._running.pop(r.job_id, None)
-        with self.db.session() as s:
-            s.execute(
-                update(Job)
-                .where(Job.id == r.job_id, Job.status == "running")
-                .values(
-                    status=status,
-                    finished_at=now_s(),
-                    progress=1.0 if status == "succeeded" else Job.progress,
-                    **values,
-                )
-            )
-        r.process.join(timeout=5.0)
-        r.conn.close()
         try:
-            r.process.close()
-        except ValueError:
-            pass
+            for attempt in range(END_WRITE_ATTEMPTS):
+                try:
+                    with self.db.session() as s:
+                        s.execute(
+                            update(Job)
+                            .where(Job.id == r.job_id, Job.status == "running")
+                            .values(
+                                status=status,
+                                finished_at=now_s(),
+                                progress=1.0 if status == "succeeded" else Job.progress,
+                                **values,
+                            )
+                        )
+                    break
+                except Exception:  # a busy or dropped database: retry, then leave it to start-up recovery
+                    if attempt == END_WRITE_ATTEMPTS - 1:
+                        _LOG.exception("job %s: terminal state %s not written", r.job_id, status)
+                    else:
+                        time.sleep(0.5 * (attempt + 1))
+        finally:
+            r.process.join(timeout=5.0)
+            r.conn.close()
+            try:
+                r.process.close()
+            except ValueError:
+                pass
         _LOG.info("job %s %s (%s)", r.job_id, status, values.get("reason"))
         self._wake.set()
 
