@@ -675,12 +675,19 @@ class Planner:
         x_at = stiffness_model(self.robot).deflection_along(profile.joints[idx], self.payload, T_tool_payload)
         x = np.column_stack([np.interp(np.arange(n), idx, x_at[:, j]) for j in range(6)])
         tr, rot = np.linalg.norm(x[:, :3], axis=1), np.linalg.norm(x[:, 3:], axis=1)
+        every = -(-len(idx) // 100)  # at most 100 points of the series in the report
         self.report["deflection"] = {
             "frame": "payload" if sc.payload is not None else "tool",
             "max_translation_m": float(tr.max()),
             "max_rotation_rad": float(rot.max()),
             "at_goal": StaticDeflection(x[-1, :3], x[-1, 3:]).to_dict(),
             "compensated": comp is not None,
+            # The predicted deflection along the trajectory, at up to 100 evenly spaced samples.
+            "along": {
+                "t_s": profile.t[idx[::every]].round(4).tolist(),
+                "translation_m": x_at[::every, :3].tolist(),
+                "rotation_rad": x_at[::every, 3:].tolist(),
+            },
         }
         if comp is not None:
             doc = comp.to_dict()

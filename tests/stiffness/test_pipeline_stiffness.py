@@ -115,6 +115,10 @@ def test_reported_deflection_matches_the_model_at_every_sample(plans: dict) -> N
     assert np.all(np.abs(res.deflection[picks] - exact) <= 0.01 * peak + 2e-6)
     np.testing.assert_allclose(res.deflection[-1], exact[-1], rtol=0, atol=1e-12)  # the goal: exact
     rep = res.report["deflection"]
+    along = rep["along"]
+    assert 2 <= len(along["t_s"]) <= 101 and len(along["translation_m"]) == len(along["t_s"])
+    k = np.searchsorted(res.profile.t, along["t_s"][1] - 1e-9)
+    np.testing.assert_allclose(along["translation_m"][1], res.deflection[k, :3], atol=1e-9)
     assert rep["max_translation_m"] == pytest.approx(
         float(np.linalg.norm(res.deflection[:, :3], axis=1).max())
     )
