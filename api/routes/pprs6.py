@@ -17,6 +17,7 @@ from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
 from api.problems import SafeJSONResponse
+from api.routes.kinematics import PlatformPose
 from planner.robots import pprs6_tools
 
 router = APIRouter(tags=["pprs6"])
@@ -46,18 +47,10 @@ class WorkspaceRequest(BaseModel):
     step_m: Annotated[float, Field(ge=0.004, le=0.02, description="Grid step of the fine pass [m].")] = 0.005
 
 
-class Waypoint(BaseModel):
-    """A platform pose on the path: centre [m] and angles [rad], with an optional label."""
-
-    model_config = ConfigDict(extra="forbid")
+class Waypoint(PlatformPose):
+    """A platform pose on the path (centre [m], angles [rad]) with an optional label."""
 
     name: Annotated[str | None, Field(max_length=40)] = None
-    x: Finite
-    y: Finite
-    z: Finite
-    phi: Finite = 0.0
-    theta: Finite = 0.0
-    psi: Finite = 0.0
 
 
 class PosePath(BaseModel):

@@ -11,7 +11,7 @@ import math
 from collections.abc import Mapping
 from functools import cached_property
 from pathlib import Path
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 import yaml
@@ -21,6 +21,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from planner.exceptions import InvalidRobotDescription
 
 Array = NDArray[np.float64]
+
+
+DescriptionT = TypeVar("DescriptionT", bound=BaseModel)
 
 
 class _Frozen(BaseModel):
@@ -209,8 +212,8 @@ def description_hash(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def load_description(path: Path) -> Hybrid8Description:
-    """Load and validate a description file.
+def load_description_file(path: Path, model: type[DescriptionT]) -> DescriptionT:
+    """Load a YAML description file and validate it with the pydantic ``model`` (any robot's schema).
 
     Raises:
         InvalidRobotDescription: the file is missing, not YAML, or fails the schema (the message names
@@ -223,10 +226,15 @@ def load_description(path: Path) -> Hybrid8Description:
     if not isinstance(raw, Mapping):
         raise InvalidRobotDescription(f"robot description {path} is not a mapping", path=str(path))
     try:
-        return Hybrid8Description.model_validate(raw)
+        return model.model_validate(raw)
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "<root>"
         raise InvalidRobotDescription(
             f"robot description {path.name}: {where}: {first['msg']}", path=str(path), field=where
         ) from exc
+
+
+def load_description(path: Path) -> Hybrid8Description:
+    """Load and validate a cabin8-type (hybrid 8-DOF) description file (see :func:`load_description_file`)."""
+    return load_description_file(path, Hybrid8Description)

@@ -17,21 +17,19 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping
 from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from planner.exceptions import InvalidInput, InvalidRobotDescription, OutsideWorkspace
+from planner.exceptions import InvalidInput, OutsideWorkspace
 from planner.kinematics import pprs6 as kin
 from planner.robots.base import DriveLimits, RobotModel
-from planner.robots.description import DriveSpec
+from planner.robots.description import DriveSpec, load_description_file
 
 BoolArray = NDArray[np.bool_]
 
@@ -99,20 +97,7 @@ def load_pprs6_description(path: Path) -> Pprs6Description:
     Raises:
         InvalidRobotDescription: missing file, not YAML, or a schema failure (the message names the field).
     """
-    try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
-        raise InvalidRobotDescription(f"cannot read robot description {path}: {exc}", path=str(path)) from exc
-    if not isinstance(raw, Mapping):
-        raise InvalidRobotDescription(f"robot description {path} is not a mapping", path=str(path))
-    try:
-        return Pprs6Description.model_validate(raw)
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(p) for p in first["loc"]) or "<root>"
-        raise InvalidRobotDescription(
-            f"robot description {path.name}: {where}: {first['msg']}", path=str(path), field=where
-        ) from exc
+    return load_description_file(path, Pprs6Description)
 
 
 def default_description_path() -> Path:
