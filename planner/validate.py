@@ -468,15 +468,9 @@ def deflected_joints(
     x = stiffness_model(robot).deflection_along(q[idx], payload, T_tool_payload)
     T_pay = robot.fk_batch(q[idx]) @ T_tool_payload
     T_payload_tool = np.linalg.inv(T_tool_payload)
-    dq = np.empty((len(idx), 8))
-    for k, i in enumerate(idx):
-        T_tool = deflected_pose(T_pay[k], x[k]) @ T_payload_tool
-        qk = redundant_family(
-            robot.desc.serial_chain, T_tool, np.array([q[i, chain.GAMMA]]), np.array([q[i, chain.D5]])
-        )[0]
-        d = qk - q[i]
-        d[chain.THETA6] = np.arctan2(np.sin(d[chain.THETA6]), np.cos(d[chain.THETA6]))
-        dq[k] = d
+    T_tool = np.array([deflected_pose(T_pay[k], x[k]) @ T_payload_tool for k in range(len(idx))])
+    dq = redundant_family(robot.desc.serial_chain, T_tool, q[idx, chain.GAMMA], q[idx, chain.D5]) - q[idx]
+    dq[:, chain.THETA6] = np.arctan2(np.sin(dq[:, chain.THETA6]), np.cos(dq[:, chain.THETA6]))
     steps = np.arange(n)
     correction = np.column_stack([np.interp(steps, idx, dq[:, j]) for j in range(8)])
     return q + correction, float(np.linalg.norm(x[:, :3], axis=1).max())

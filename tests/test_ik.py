@@ -43,6 +43,13 @@ def test_redundant_family_is_exact_and_complete(robot: Cabin8, configs: np.ndarr
             np.testing.assert_allclose(robot.fk(member), T, atol=1e-12)
 
 
+def test_redundant_family_of_many_poses_at_once(robot: Cabin8, configs: np.ndarray) -> None:
+    """One pose per (gamma, d5) pair (a batch): each configuration is recovered from its own pose."""
+    q = configs[:50]
+    T = robot.fk_batch(q)
+    np.testing.assert_allclose(redundant_family(robot.desc.serial_chain, T, q[:, 3], q[:, 6]), q, atol=1e-12)
+
+
 def test_near_selects_between_distinct_solutions(robot: Cabin8) -> None:
     """One pose, two admissible configurations far apart on the self-motion manifold: near decides."""
     q_a = robot.joints_from_drives(robot.home_drives)

@@ -33,7 +33,7 @@ def redundant_family(links: Sequence[MDHSpec], T: Array, gamma: Array, d5: Array
 
     Args:
         links: The four MDH links (theta3, theta4, d5, theta6).
-        T: Tool pose in the base frame (4x4).
+        T: Tool pose in the base frame (4x4), or one pose per pair (K, 4, 4).
         gamma: Platform angles [rad], shape (K,).
         d5: Slide positions [m], shape (K,).
 
@@ -46,7 +46,9 @@ def redundant_family(links: Sequence[MDHSpec], T: Array, gamma: Array, d5: Array
     cg, sg = np.cos(gamma), np.sin(gamma)
     Rz = np.zeros((k, 3, 3))
     Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = cg, -sg, sg, cg, 1.0
-    R26 = np.swapaxes(Rz, 1, 2) @ T[:3, :3]
+    Tb = np.asarray(T, dtype=float)
+    Tb = Tb if Tb.ndim == 3 else Tb[None]  # (K or 1, 4, 4)
+    R26 = np.swapaxes(Rz, 1, 2) @ Tb[:, :3, :3]
     a = R26[:, :, 2]
     theta4 = -np.arcsin(np.clip(a[:, 1], -1.0, 1.0)) - links[1].theta
     theta3 = np.arctan2(-a[:, 2], a[:, 0]) - links[0].theta
@@ -64,9 +66,9 @@ def redundant_family(links: Sequence[MDHSpec], T: Array, gamma: Array, d5: Array
     p26 = T25[:, :3, 3] + d5[:, None] * R25[:, :, 2] + np.einsum("kij,kj->ki", R25, T56[:, :3, 3])
     p_world = np.einsum("kij,kj->ki", Rz, p26)
     q = np.empty((k, 8))
-    q[:, 0] = T[2, 3] - p_world[:, 2]
-    q[:, 1] = T[0, 3] - p_world[:, 0]
-    q[:, 2] = T[1, 3] - p_world[:, 1]
+    q[:, 0] = Tb[:, 2, 3] - p_world[:, 2]
+    q[:, 1] = Tb[:, 0, 3] - p_world[:, 0]
+    q[:, 2] = Tb[:, 1, 3] - p_world[:, 1]
     q[:, 3] = gamma
     q[:, 4] = theta3
     q[:, 5] = theta4
