@@ -48,7 +48,7 @@ from planner.dynamics.stiffness import (
     stiffness_model,
 )
 from planner.exceptions import DeflectionNotCompensated, OutsideWorkspace
-from planner.kinematics.so3 import rotation_log
+from planner.kinematics.so3 import rotation_angles, rotation_log
 from planner.robots.cabin8 import Cabin8
 from planner.timing.profile import DriveProfile
 
@@ -418,7 +418,7 @@ def _approach_check(T_pay: Array, req: GateRequirements, T_goal: Array | None = 
     seg = rel[k:]
     off = np.linalg.norm(seg - np.outer(seg @ d, d), axis=1)
     Rg = T_goal[:3, :3]
-    ang = np.array([np.linalg.norm(rotation_log(Rg.T @ T[:3, :3])) for T in T_pay[k:]])
+    ang = rotation_angles(Rg.T[None] @ T_pay[k:, :3, :3])
     worst_off, worst_ang = float(off.max()), float(ang.max())
     # Along the line the payload only moves in: never past the goal, never back out.
     overshoot = float(max(0.0, -float(along[k:].min())))

@@ -105,3 +105,19 @@ def test_drive_joint_maps_round_trip(robot: Cabin8, configs: np.ndarray) -> None
 def test_batch_shapes(robot: Cabin8, configs: np.ndarray, n: int) -> None:
     assert robot.fk_batch(configs[:n]).shape == (n, 4, 4)
     assert robot.frames(configs[:n]).shape == (n, 7, 4, 4)
+
+
+def test_rotation_angles_match_the_rotation_log_over_the_whole_range() -> None:
+    """The vectorised angle equals |log R| from 0 to pi (near 0 and near pi included)."""
+    from scipy.spatial.transform import Rotation
+
+    from planner.kinematics.so3 import rotation_angles, rotation_log
+
+    rng = np.random.default_rng(4)
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    angles = np.concatenate([[0.0, 1e-9, 1e-4, np.pi - 1e-7, np.pi], rng.uniform(0.0, np.pi, 195)])
+    R = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
+    got = rotation_angles(R)
+    np.testing.assert_allclose(got, angles, atol=1e-7)
+    np.testing.assert_allclose(got, [np.linalg.norm(rotation_log(r)) for r in R], atol=1e-7)

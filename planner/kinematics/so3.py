@@ -11,6 +11,18 @@ from scipy.spatial.transform import Rotation
 Array = NDArray[np.float64]
 
 
+def rotation_angles(R: Array) -> Array:
+    """Rotation angles [rad] in [0, pi] of (N, 3, 3) rotation matrices, shape (N,) (vectorised).
+
+    ``atan2(|axial part| / 2, (trace - 1) / 2)``: accurate over the whole range (the angle is; only the
+    axis is ill-conditioned near pi, and it is not needed here).
+    """
+    R = np.asarray(R, dtype=float)
+    w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    cos_t = np.clip(0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
+    return np.arctan2(0.5 * np.linalg.norm(w, axis=1), cos_t)
+
+
 def rotation_log(R: Array) -> Array:
     """Rotation vector (axis * angle [rad], angle in [0, pi]) of a 3x3 rotation matrix.
 
