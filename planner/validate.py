@@ -459,7 +459,9 @@ def deflected_joints(
     Returns:
         (q', the largest predicted payload-frame translation [m]).
     """
-    from planner.dynamics.stiffness import deflected_pose, stiffness_model
+    from scipy.spatial.transform import Rotation
+
+    from planner.dynamics.stiffness import stiffness_model
     from planner.kinematics import chain
     from planner.kinematics.closed_form import redundant_family
 
@@ -468,7 +470,10 @@ def deflected_joints(
     x = stiffness_model(robot).deflection_along(q[idx], payload, T_tool_payload)
     T_pay = robot.fk_batch(q[idx]) @ T_tool_payload
     T_payload_tool = np.linalg.inv(T_tool_payload)
-    T_tool = np.array([deflected_pose(T_pay[k], x[k]) @ T_payload_tool for k in range(len(idx))])
+    T_def = T_pay.copy()  # the payload frames displaced by their small twists (as deflected_pose, batched)
+    T_def[:, :3, :3] = Rotation.from_rotvec(x[:, 3:]).as_matrix() @ T_pay[:, :3, :3]
+    T_def[:, :3, 3] += x[:, :3]
+    T_tool = T_def @ T_payload_tool
     dq = redundant_family(robot.desc.serial_chain, T_tool, q[idx, chain.GAMMA], q[idx, chain.D5]) - q[idx]
     dq[:, chain.THETA6] = np.arctan2(np.sin(dq[:, chain.THETA6]), np.cos(dq[:, chain.THETA6]))
     steps = np.arange(n)
