@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
 import time
 import uuid
 from typing import Annotated, Any, Literal
@@ -178,6 +179,15 @@ def _replay(
     return job_document(row)
 
 
+_TENANT_LOCKS: dict[str, threading.Lock] = {}
+_TENANT_LOCKS_GUARD = threading.Lock()
+
+
+def _tenant_lock(tenant: str) -> threading.Lock:
+    with _TENANT_LOCKS_GUARD:
+        return _TENANT_LOCKS.setdefault(tenant, threading.Lock())
+
+
 @router.post("/plans", status_code=202, summary="Submit a scenario for planning")
 def submit(
     ctx: Ctx,
@@ -203,45 +213,50 @@ def submit(
     spec, resolved, meshes = _resolve(ctx, tenant, body)
     from planner.output import provenance
 
-    with ctx.db.session() as s:
-        active = s.scalar(
-            select(func.count()).select_from(Job).where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
-        )
-    limit = ctx.settings.tenant_max_active_jobs
-    if (active or 0) >= limit:
-        raise Problem(
-            429,
-            "quota_exceeded",
-            f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
-            headers={"Retry-After": str(ctx.settings.retry_after_s)},
-            active_jobs=int(active or 0),
-            limit=limit,
-        )
-    row = Job(
-        id=uuid.uuid4().hex,
-        tenant=tenant,
-        status="queued",
-        progress=0.0,
-        scenario=spec.model_dump(mode="json"),
-        scenario_name=spec.name,
-        request_sha256=request_sha256,
-        idempotency_key=idempotency_key,
-        meshes=meshes,
-        provenance=provenance(resolved),
-        time_limit_s=float(spec.options.time_limit_s),
-        attempts=0,
-        created_at=now_s(),
-    )
-    try:
+    # Count and insert under the tenant's lock, so concurrent submissions cannot pass the quota together
+    # (one service instance per database, see api.jobs).
+    with _tenant_lock(tenant):
         with ctx.db.session() as s:
-            s.add(row)
-    except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
-        if idempotency_key is None:
-            raise
-        replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
-        if replay is None:
-            raise
-        return replay
+            active = s.scalar(
+                select(func.count())
+                .select_from(Job)
+                .where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
+            )
+        limit = ctx.settings.tenant_max_active_jobs
+        if (active or 0) >= limit:
+            raise Problem(
+                429,
+                "quota_exceeded",
+                f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
+                headers={"Retry-After": str(ctx.settings.retry_after_s)},
+                active_jobs=int(active or 0),
+                limit=limit,
+            )
+        row = Job(
+            id=uuid.uuid4().hex,
+            tenant=tenant,
+            status="queued",
+            progress=0.0,
+            scenario=spec.model_dump(mode="json"),
+            scenario_name=spec.name,
+            request_sha256=request_sha256,
+            idempotency_key=idempotency_key,
+            meshes=meshes,
+            provenance=provenance(resolved),
+            time_limit_s=float(spec.options.time_limit_s),
+            attempts=0,
+            created_at=now_s(),
+        )
+        try:
+            with ctx.db.session() as s:
+                s.add(row)
+        except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
+            if idempotency_key is None:
+                raise
+            replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
+            if replay is None:
+                raise
+            return replay
     ctx.runner.wake()
     response.headers["Location"] = f"/api/v1/plans/{row.id}"
     return job_document(row)

@@ -338,3 +338,22 @@ def test_the_local_default_key_works_from_loopback_only(idle: Service) -> None:
     assert "loopback" in body["detail"]
     # An ordinary tenant key is accepted from anywhere.
     assert remote.get("/api/v1/robots", headers=idle.h()).status_code == 200
+
+
+def test_concurrent_submissions_never_exceed_the_quota(idle: Service) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    from api.auth import create_key
+
+    _, key = create_key(idle.client.app.state.ctx, "gamma", "quota race")
+    h = {"X-API-Key": key}
+    limit = idle.client.app.state.ctx.settings.tenant_max_active_jobs
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        codes = list(
+            pool.map(lambda _: idle.client.post("/api/v1/plans", json=free_transfer(), headers=h), range(8))
+        )
+    statuses = [r.status_code for r in codes]
+    assert statuses.count(202) == limit and statuses.count(429) == 8 - limit, statuses
+    for r in codes:
+        if r.status_code == 202:
+            assert idle.client.delete(f"/api/v1/plans/{r.json()['id']}", headers=h).status_code in (200, 202)
