@@ -252,7 +252,11 @@ class PlanOptions(BaseModel):
     time_limit_s: Number = Field(30.0, gt=0.0, le=600.0, description="Planning time budget in s.")
     seed: int = Field(0, ge=0, strict=True, description="Random seed; the same seed gives the same plan.")
     sample_period_s: Number = Field(
-        0.004, ge=0.0005, le=0.1, description="Controller period in s at which the profile is sampled."
+        0.004,
+        ge=0.0005,
+        le=0.05,
+        description="Controller period in s at which the profile is sampled (at most 50 ms: over longer "
+        "samples the time law changes within a sample and its positions no longer integrate exactly).",
     )
     planner: PlannerName = Field("RRTConnect", description="OMPL geometric planner of the global search.")
     motion_margin_m: Number = Field(

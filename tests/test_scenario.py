@@ -350,6 +350,7 @@ SCHEMA_REFUSALS = [
     ),
     ("negative clearance (alias key)", _set("options.clearance", -0.01), "options.clearance"),
     ("zero time limit", _set("options.time_limit_s", 0), "options.time_limit_s"),
+    ("100 ms controller period", _set("options.sample_period_s", 0.1), "options.sample_period_s"),
     ("unknown planner", _set("options.planner", "RRTsharp"), "options.planner"),
     ("bad cabin units", _set("cabin", {"mesh": "cabin-aisle", "units": "cm"}), "cabin.units"),
     (
