@@ -152,3 +152,55 @@ def test_cancel_of_a_job_still_being_launched_is_kept_until_it_runs(tmp_path) ->
     runner._apply_cancels()
     assert runner._cancel == {ids["running"]}  # claimed, process not yet up: the request waits for it
     db.dispose()
+
+
+def test_a_failed_terminal_write_is_retried_and_the_process_reaped(tmp_path, monkeypatch) -> None:
+    """The database refuses the first two writes of a finished job: the third lands, nothing is leaked."""
+    import multiprocessing as mp
+    from contextlib import contextmanager
+
+    from sqlalchemy.exc import OperationalError
+
+    from api.db import Database, Job, now_s
+    from api.jobs import ProcessJobRunner, _Running
+
+    db = Database(f"sqlite:///{tmp_path / 'jobs.db'}")
+    db.create_all()
+    with db.session() as s:
+        s.add(
+            Job(
+                id="j1",
+                tenant="t",
+                status="running",
+                scenario={},
+                scenario_name="x",
+                request_sha256="0" * 64,
+                meshes={},
+                provenance={},
+                time_limit_s=1.0,
+                created_at=now_s(),
+            )
+        )
+    runner = ProcessJobRunner(db, make_settings(tmp_path, forkserver_preload=False))
+    process = mp.get_context("fork").Process(target=int)
+    process.start()
+    parent, _child = mp.Pipe()
+    job = _Running("j1", process, parent, deadline=time.monotonic() + 10)
+    real, fails = db.session, [2]
+
+    @contextmanager
+    def flaky() -> Iterator[Any]:
+        if fails[0] > 0:
+            fails[0] -= 1
+            raise OperationalError("UPDATE jobs", {}, Exception("database is locked"))
+        with real() as s:
+            yield s
+
+    monkeypatch.setattr(db, "session", flaky)
+    runner._end(job, "succeeded")
+    monkeypatch.setattr(db, "session", real)
+    with db.session() as s:
+        assert s.get(Job, "j1").status == "succeeded"
+    assert fails[0] == 0 and parent.closed
+    with pytest.raises(ValueError):
+        process.is_alive()  # closed: the process object was reaped
