@@ -24,9 +24,8 @@ from planner.exceptions import (
     OutsideWorkspace,
     PlannerError,
 )
-from planner.robots import available_robots, load_robot
+from planner.robots import available_robots, kinematics_tools, load_robot
 from planner.robots.cabin8 import Cabin8
-from planner.schemas import Pose
 
 app = typer.Typer(
     add_completion=False,
@@ -113,25 +112,15 @@ def fk(
     ] = None,
 ) -> None:
     """Forward kinematics: drives (or joints) -> joints, drives and T_base_tool (row-major 4x4)."""
-    if robot == "pprs6":
-        from planner.robots import pprs6_tools
-
-        if drives is None or joints is not None:
-            _fail("fk pprs6: give --drives (w1, w2, beta, s1, s2, s3)", EXIT_INVALID)
-        start = None if guess is None else _json_arg(guess, "--guess")
-        _emit(pprs6_tools.fk_document(_json_arg(drives, "--drives"), start))
-        return
-    from planner.tools import fk_document
-
-    if guess is not None:
-        _fail(f"--guess: robot {robot!r} has one forward kinematics solution", EXIT_INVALID)
-    _cabin8(robot)
-    if (drives is None) == (joints is None):
-        _fail("fk: give exactly one of --drives or --joints", EXIT_INVALID)
-    if drives is not None:
-        _emit(fk_document(robot, drives=_json_arg(drives, "--drives")))
-    else:
-        _emit(fk_document(robot, joints=_json_arg(joints or "", "--joints")))
+    tools = kinematics_tools(robot)
+    _emit(
+        tools.fk(
+            robot,
+            None if drives is None else _json_arg(drives, "--drives"),
+            None if joints is None else _json_arg(joints, "--joints"),
+            None if guess is None else _json_arg(guess, "--guess"),
+        )
+    )
 
 
 @app.command()
@@ -145,22 +134,9 @@ def ik(
     seed: Annotated[int, typer.Option(help="seed of the random restarts")] = 0,
 ) -> None:
     """Inverse kinematics of a tool pose (base frame): one admissible solution, or exit 3 if unreachable."""
-    if robot == "pprs6":  # pose {"x","y","z","phi","theta","psi"} of the platform centre
-        from planner.robots import pprs6_tools
-
-        if near is not None or seed != 0:
-            _fail("--near/--seed: pprs6's inverse kinematics has one solution (closed form)", EXIT_INVALID)
-        _emit(pprs6_tools.ik_document(_json_arg(pose, "--pose")))
-        return
-    from planner.tools import ik_document
-
-    _cabin8(robot)
-    try:
-        target = Pose.model_validate(_json_arg(pose, "--pose"))
-    except ValidationError as exc:
-        _fail(_readable(exc, "pose"), EXIT_INVALID)
+    tools = kinematics_tools(robot)
     near_drives = None if near is None else _json_arg(near, "--near")
-    _emit(ik_document(robot, target, near=near_drives, seed=seed))
+    _emit(tools.ik(robot, _json_arg(pose, "--pose"), near_drives, seed))
 
 
 @app.command()

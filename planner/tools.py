@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import ValidationError
 
 from planner.exceptions import InvalidInput
 from planner.robots import load_robot
@@ -127,3 +128,27 @@ def ik_document(
 
 
 __all__ = ["fk_document", "ik_document", "pose_document", "tool_pose_robot"]
+
+
+def fk(
+    robot_name: str,
+    drives: Mapping[str, Any] | None,
+    joints: Mapping[str, Any] | None,
+    guess: Mapping[str, Any] | None,
+) -> dict[str, Any]:
+    """:class:`~planner.robots.base.KinematicsTools` forward kinematics (see :func:`fk_document`)."""
+    if guess is not None:
+        raise InvalidInput(f"guess: robot {robot_name!r} has one forward kinematics solution", field="guess")
+    return fk_document(robot_name, drives=drives, joints=joints)
+
+
+def ik(robot_name: str, pose: Any, near: Mapping[str, Any] | None, seed: int) -> dict[str, Any]:
+    """:class:`~planner.robots.base.KinematicsTools` inverse kinematics of a tool pose (JSON form)."""
+    try:
+        target = pose if isinstance(pose, Pose) else Pose.model_validate(pose)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        field = f"pose.{where}" if where else "pose"
+        raise InvalidInput(f"{field}: {first['msg']}", field=field) from None
+    return ik_document(robot_name, target, near=near, seed=seed)

@@ -1,21 +1,20 @@
 """Single-shot kinematics tools for operator UIs: forward and inverse kinematics of a robot.
 
-Requests name the robot; the tool set is chosen by robot name (:data:`TOOLS`), so a mechanism with its
-own kinematics adds an entry (or its own router module, ``api/routes/<robot>.py``).
+Requests name the robot; its tools come from the robot registry
+(:func:`planner.robots.kinematics_tools`), so a new mechanism needs no change here. The request models
+document both pose forms (a tool pose for cabin8, a platform pose for pprs6); the robot's tools refuse the
+form they do not take, naming the field.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Annotated, Any
 
 from fastapi import APIRouter
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
-from api.problems import Problem
-from planner import tools
-from planner.robots import available_robots, pprs6_tools
+from planner.robots import kinematics_tools
 from planner.schemas import Pose
 
 router = APIRouter(tags=["kinematics"])
@@ -71,102 +70,14 @@ class IKRequest(BaseModel):
     seed: Annotated[int, Field(ge=0, le=2**31 - 1, description="Seed of the random restarts.")] = 0
 
 
-FK = Callable[[str, DriveMap | None, DriveMap | None, PlatformPose | None], dict[str, Any]]
-IK = Callable[[str, Pose | PlatformPose, DriveMap | None, int], dict[str, Any]]
-
-
-def _wrong_pose(robot: str, expected: str) -> Problem:
-    return Problem(
-        422,
-        "invalid_input",
-        f"pose: robot {robot!r} takes {expected}",
-        errors=[{"field": "pose", "reason": f"expected {expected}"}],
-    )
-
-
-def _cabin8_fk(
-    robot: str, drives: DriveMap | None, joints: DriveMap | None, guess: PlatformPose | None
-) -> dict[str, Any]:
-    if guess is not None:
-        raise Problem(
-            422,
-            "invalid_input",
-            f"guess: robot {robot!r} has one forward kinematics solution; omit guess",
-            errors=[{"field": "guess", "reason": "not used by this robot"}],
-        )
-    return tools.fk_document(robot, drives=drives, joints=joints)
-
-
-def _cabin8_ik(robot: str, pose: Pose | PlatformPose, near: DriveMap | None, seed: int) -> dict[str, Any]:
-    if not isinstance(pose, Pose):
-        raise _wrong_pose(robot, "a tool pose {position, orientation}")
-    return tools.ik_document(robot, pose, near=near, seed=seed)
-
-
-def _pprs6_fk(
-    robot: str, drives: DriveMap | None, joints: DriveMap | None, guess: PlatformPose | None
-) -> dict[str, Any]:
-    if drives is None:
-        raise Problem(
-            422,
-            "invalid_input",
-            "joints: pprs6 takes drives (w1, w2, beta, s1, s2, s3)",
-            errors=[{"field": "joints", "reason": "pprs6 takes drives"}],
-        )
-    return pprs6_tools.fk_document(drives, None if guess is None else guess.model_dump())
-
-
-def _pprs6_ik(robot: str, pose: Pose | PlatformPose, near: DriveMap | None, seed: int) -> dict[str, Any]:
-    if not isinstance(pose, PlatformPose):
-        raise _wrong_pose(robot, "a platform pose {x, y, z, phi, theta, psi}")
-    if near is not None:
-        raise Problem(
-            422,
-            "invalid_input",
-            "near: pprs6's inverse kinematics has one solution (closed form); omit near",
-            errors=[{"field": "near", "reason": "not used by pprs6"}],
-        )
-    return pprs6_tools.ik_document(pose.model_dump())
-
-
-#: Kinematics tools by robot name.
-TOOLS: dict[str, tuple[FK, IK]] = {"cabin8": (_cabin8_fk, _cabin8_ik), "pprs6": (_pprs6_fk, _pprs6_ik)}
-
-
-def _tools(robot: str) -> tuple[FK, IK]:
-    if robot not in available_robots():
-        raise Problem(
-            422,
-            "unknown_robot",
-            f"robot: unknown robot {robot!r}; available: {', '.join(available_robots())}",
-            errors=[{"field": "robot", "reason": "unknown robot"}],
-        )
-    if robot not in TOOLS:
-        raise Problem(
-            422,
-            "invalid_input",
-            f"robot: {robot!r} has no kinematics tools on this route",
-            errors=[{"field": "robot", "reason": "no kinematics tools"}],
-        )
-    return TOOLS[robot]
-
-
 @router.post("/kinematics/fk", summary="Forward kinematics")
 def forward(body: FKRequest, _principal: CurrentPrincipal) -> dict[str, Any]:
     """Joints, drives, ``T_base_tool`` (row-major 4x4), pose, and every violated limit or margin."""
-    fk, _ = _tools(body.robot)
-    if (body.drives is None) == (body.joints is None):
-        raise Problem(
-            422,
-            "invalid_input",
-            "give exactly one of drives or joints",
-            errors=[{"field": "drives", "reason": "exactly one of drives and joints"}],
-        )
-    return fk(body.robot, body.drives, body.joints, body.guess)
+    guess = None if body.guess is None else body.guess.model_dump()
+    return kinematics_tools(body.robot).fk(body.robot, body.drives, body.joints, guess)
 
 
 @router.post("/kinematics/ik", summary="Inverse kinematics of a tool pose")
 def inverse(body: IKRequest, _principal: CurrentPrincipal) -> dict[str, Any]:
     """One admissible solution (drives, joints) with its residuals; unreachable poses give 422."""
-    _, ik = _tools(body.robot)
-    return ik(body.robot, body.pose, body.near, body.seed)
+    return kinematics_tools(body.robot).ik(body.robot, body.pose.model_dump(), body.near, body.seed)

@@ -1,16 +1,20 @@
 """Robot models and their registry.
 
 A robot is named in scenarios, the CLI and the API by its registry name. Adding a mechanism means adding
-its description file, its model module, and one entry in :data:`_FACTORIES`.
+its description file, its model module, one entry in :data:`_FACTORIES` and, for the CLI's ``fk`` / ``ik``
+and the API's ``/kinematics``, its tools module (a :class:`~planner.robots.base.KinematicsTools`) in
+:data:`_TOOLS`; the front ends dispatch through :func:`kinematics_tools`, never by robot name.
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from functools import lru_cache
+from typing import cast
 
 from planner.exceptions import InvalidInput, UnknownRobot
-from planner.robots.base import DriveLimits, RobotModel
+from planner.robots.base import DriveLimits, KinematicsTools, RobotModel
 
 
 def _cabin8(rail_length: float | None) -> RobotModel:
@@ -28,6 +32,28 @@ def _pprs6(rail_length: float | None) -> RobotModel:
 
 
 _FACTORIES: dict[str, Callable[[float | None], RobotModel]] = {"cabin8": _cabin8, "pprs6": _pprs6}
+
+
+#: The kinematics tools module of each robot (imported on first use).
+_TOOLS: dict[str, str] = {"cabin8": "planner.tools", "pprs6": "planner.robots.pprs6_tools"}
+
+
+def kinematics_tools(name: str) -> KinematicsTools:
+    """The FK / IK document functions of the robot registered under ``name``.
+
+    Raises:
+        UnknownRobot: no model of that name.
+        InvalidInput: the model has no kinematics tools (``details['field'] = 'robot'``).
+    """
+    if name not in _FACTORIES:
+        raise UnknownRobot(
+            f"robot: unknown robot {name!r}; available: {', '.join(available_robots())}",
+            robot=name,
+            field="robot",
+        )
+    if name not in _TOOLS:
+        raise InvalidInput(f"robot: {name!r} has no kinematics tools", field="robot", robot=name)
+    return cast(KinematicsTools, importlib.import_module(_TOOLS[name]))
 
 
 def available_robots() -> tuple[str, ...]:
@@ -51,4 +77,11 @@ def load_robot(name: str, rail_length: float | None = None) -> RobotModel:
     return factory(rail_length)
 
 
-__all__ = ["DriveLimits", "RobotModel", "available_robots", "load_robot"]
+__all__ = [
+    "DriveLimits",
+    "KinematicsTools",
+    "RobotModel",
+    "available_robots",
+    "kinematics_tools",
+    "load_robot",
+]

@@ -8,8 +8,9 @@ serial-parallel arm, a platform pose for a parallel platform) live on the concre
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -105,3 +106,27 @@ def _vector_from_dict(values: dict[str, float], names: tuple[str, ...], field: s
             raise InvalidInput(f"{field}.{n}: expected a finite number, got {v!r}", field=f"{field}.{n}")
         out[i] = float(v)
     return out
+
+
+class KinematicsTools(Protocol):
+    """Single-shot kinematics documents of one kind of robot (CLI ``fk`` / ``ik``, API ``/kinematics``).
+
+    A module with these two functions, registered beside the robot's model (``planner.robots``).
+
+    Both take parsed JSON (mappings) and raise :class:`~planner.exceptions.InvalidInput` naming the field
+    for anything the robot does not take (joints, a guess, a nearby solution, a pose of another form).
+    """
+
+    def fk(
+        self,
+        robot_name: str,
+        drives: Mapping[str, Any] | None,
+        joints: Mapping[str, Any] | None,
+        guess: Mapping[str, Any] | None,
+    ) -> dict[str, Any]:
+        """Forward kinematics document."""
+        ...
+
+    def ik(self, robot_name: str, pose: Any, near: Mapping[str, Any] | None, seed: int) -> dict[str, Any]:
+        """Inverse kinematics document."""
+        ...

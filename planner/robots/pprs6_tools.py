@@ -226,3 +226,31 @@ def profile_png(document: Mapping[str, Any]) -> bytes:
     pos = np.asarray(document["position"], dtype=float)
     name = document.get("path", {}).get("name", "")
     return drives_png(t, pos, tuple(document["drives"]), title=f"pprs6 {name}: {float(t[-1]):.2f} s")
+
+
+def fk(
+    robot_name: str,
+    drives: Mapping[str, Any] | None,
+    joints: Mapping[str, Any] | None,
+    guess: Mapping[str, Any] | None,
+) -> dict[str, Any]:
+    """:class:`~planner.robots.base.KinematicsTools` forward kinematics (see :func:`fk_document`)."""
+    if joints is not None:
+        raise InvalidInput("joints: pprs6 takes drives (w1, w2, beta, s1, s2, s3)", field="joints")
+    if drives is None:
+        raise InvalidInput(
+            "drives: pprs6 forward kinematics needs drives (w1, w2, beta, s1, s2, s3)", field="drives"
+        )
+    return fk_document(drives, guess)
+
+
+def ik(robot_name: str, pose: Any, near: Mapping[str, Any] | None, seed: int) -> dict[str, Any]:
+    """:class:`~planner.robots.base.KinematicsTools` inverse kinematics of a platform pose."""
+    if near is not None or seed != 0:
+        raise InvalidInput(
+            "near: pprs6's inverse kinematics has one solution (closed form); omit near and seed",
+            field="near",
+        )
+    if not isinstance(pose, Mapping):
+        raise InvalidInput("pose: expected {x, y, z, phi, theta, psi} (m, rad)", field="pose")
+    return ik_document(pose)

@@ -1,0 +1,58 @@
+"""The robot registry: a third mechanism plugs into the CLI and the API without changes there."""
+
+from __future__ import annotations
+
+import json
+import sys
+import types
+from typing import Any
+
+import pytest
+from typer.testing import CliRunner
+
+import planner.robots as robots
+from planner.cli import app
+from planner.exceptions import UnknownRobot
+
+
+@pytest.fixture
+def toy(monkeypatch: pytest.MonkeyPatch) -> str:
+    """Register a 'toy' robot (cabin8's model) with its own kinematics tools module."""
+    module = types.ModuleType("toy_tools")
+
+    def fk(robot_name: str, drives: Any, joints: Any, guess: Any) -> dict[str, Any]:
+        return {"robot": robot_name, "fk_of": drives}
+
+    def ik(robot_name: str, pose: Any, near: Any, seed: int) -> dict[str, Any]:
+        return {"robot": robot_name, "ik_of": pose, "seed": seed}
+
+    module.fk, module.ik = fk, ik  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "toy_tools", module)
+    monkeypatch.setitem(robots._FACTORIES, "toy", robots._FACTORIES["cabin8"])
+    monkeypatch.setitem(robots._TOOLS, "toy", "toy_tools")
+    return "toy"
+
+
+def test_builtin_tools_follow_the_protocol() -> None:
+    for name in robots.available_robots():
+        tools = robots.kinematics_tools(name)
+        assert callable(tools.fk) and callable(tools.ik)
+    with pytest.raises(UnknownRobot) as info:
+        robots.kinematics_tools("r2d2")
+    assert info.value.details["field"] == "robot"
+
+
+def test_a_registered_robot_reaches_the_cli_and_the_api(toy: str, tmp_path) -> None:
+    res = CliRunner().invoke(app, ["fk", toy, "--drives", '{"a": 1}'])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout) == {"robot": "toy", "fk_of": {"a": 1}}
+    res = CliRunner().invoke(app, ["ik", toy, "--pose", '{"p": 2}', "--seed", "3"])
+    assert json.loads(res.stdout) == {"robot": "toy", "ik_of": {"p": 2}, "seed": 3}
+
+    from tests.api.conftest import make_settings, start_idle_service
+
+    for svc in start_idle_service(make_settings(tmp_path)):
+        r = svc.client.post(
+            "/api/v1/kinematics/fk", json={"robot": toy, "drives": {"a": 1.0}}, headers=svc.h()
+        )
+        assert r.status_code == 200 and r.json() == {"robot": "toy", "fk_of": {"a": 1.0}}
