@@ -75,6 +75,16 @@ def main() -> None:
         "inverse dynamics (tau_q and tau_u)",
         per_call_us(lambda: dyn.inverse_dynamics(q, qd, qdd, payload), 3000),
     )
+    # Batched drive forces (TOPP-RA's force constraint, the gate): the native build against CasADi's
+    # virtual machine, per grid point, on the same 1024 states.
+    qb = np.resize(qs, (1024, 8))
+    qdb, qddb = rng.normal(size=qb.shape) * 0.1, rng.normal(size=qb.shape) * 0.1
+    native = per_call_us(lambda: dyn.drive_forces_batch(qb, qdb, qddb, payload), 20)
+    par = payload.params()
+    vm = per_call_us(lambda: [dyn.id_vm(qb[i], qdb[i], qddb[i], par) for i in range(len(qb))], 3)
+    n = len(qb)
+    line("batched drive forces, native build, per point", (native[0] / n, native[1] / n, native[2] / n))
+    line("the same, CasADi VM calls point by point", (vm[0] / n, vm[1] / n, vm[2] / n))
 
     cfg = Configuration(robot, q)
     T = cfg.T_base_tool.copy()
