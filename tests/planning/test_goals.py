@@ -26,17 +26,6 @@ def scenario() -> ResolvedScenario:
 
 
 @pytest.fixture(scope="module")
-def world(scenario: ResolvedScenario) -> CollisionWorld:
-    return CollisionWorld(scenario.robot, scenario.cabin, scenario.payload)
-
-
-@pytest.fixture(scope="module")
-def forces(scenario: ResolvedScenario) -> StaticForceCheck:
-    assert scenario.payload is not None
-    return StaticForceCheck(Cabin8Dynamics(scenario.robot), scenario.payload.rigid_payload())
-
-
-@pytest.fixture(scope="module")
 def lines(scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck) -> list[GoalCandidate]:
     assert scenario.T_base_tool_goal is not None and scenario.approach_direction is not None
     found, stats = approach_lines(

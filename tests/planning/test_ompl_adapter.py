@@ -28,11 +28,6 @@ def scenario() -> ResolvedScenario:
 
 
 @pytest.fixture(scope="module")
-def world(scenario: ResolvedScenario) -> CollisionWorld:
-    return CollisionWorld(scenario.robot, scenario.cabin, scenario.payload)
-
-
-@pytest.fixture(scope="module")
 def problem(scenario: ResolvedScenario, world: CollisionWorld) -> tuple[np.ndarray, np.ndarray]:
     """The scenario's start and the same posture with the column turned to theta3 = -1.2 rad.
 

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from planner.collision.world import CollisionWorld
-from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.planning.goals import StaticForceCheck
 from planner.planning.transit import Transit, compactness, find_transit
 from planner.scenario import ResolvedScenario, load_scenario
@@ -23,17 +22,6 @@ HATCH_Z_M = 2.0  # the bulkhead of cabin-hatch
 @pytest.fixture(scope="module")
 def scenario() -> ResolvedScenario:
     return load_scenario(SCENARIOS / "hatch-pass.yaml")
-
-
-@pytest.fixture(scope="module")
-def world(scenario: ResolvedScenario) -> CollisionWorld:
-    return CollisionWorld(scenario.robot, scenario.cabin, scenario.payload)
-
-
-@pytest.fixture(scope="module")
-def forces(scenario: ResolvedScenario) -> StaticForceCheck:
-    assert scenario.payload is not None
-    return StaticForceCheck(Cabin8Dynamics(scenario.robot), scenario.payload.rigid_payload())
 
 
 def _transit(
