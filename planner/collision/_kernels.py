@@ -113,6 +113,17 @@ def cover_centres(
 
 
 @njit(cache=True, fastmath=False)
+def cover_centres_batch(
+    poses: np.ndarray, body: np.ndarray, local: np.ndarray, frac: np.ndarray
+) -> np.ndarray:
+    """:func:`cover_centres` for (N, B, 13) poses: (N, S, 3)."""
+    out = np.empty((poses.shape[0], body.shape[0], 3))
+    for k in range(poses.shape[0]):
+        out[k] = cover_centres(poses[k], body, local, frac)
+    return out
+
+
+@njit(cache=True, fastmath=False)
 def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> float:
     """Exact distance between the segments p1-q1 and p2-q2 (clamped closest points, robust when parallel)."""
     d1 = q1 - p1
@@ -751,6 +762,16 @@ def packed_state(
     poses = np.empty((ibuf[0], 13))
     cabin, pairs, ok = _packed_state(q, fbuf, ibuf, grid, threshold, poses)
     return poses, cabin, pairs, ok
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def packed_poses(
+    qs: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, poses: np.ndarray, c: np.ndarray
+) -> None:
+    """:func:`body_poses` at every row of ``qs`` (N, 8) into ``poses`` (N, B, 13) and ``c`` (N, 16)."""
+    u = _unpack(fbuf, ibuf)
+    for i in range(qs.shape[0]):
+        body_poses(qs[i], u[0], u[1], u[2], u[3], poses[i], c[i])
 
 
 #: Codes of :func:`packed_check`.

@@ -60,6 +60,18 @@ def test_closed_form_poses_equal_the_casadi_model(robot: Cabin8, worlds: tuple[C
             np.testing.assert_allclose(poses, ref_poses[0], rtol=0, atol=1e-12)
 
 
+def test_batched_poses_equal_the_casadi_batch(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
+    """The batched closed-form poses (compiled route) equal CasADi's batch call (reference route)."""
+    fast, ref = worlds
+    qs = along_rail(robot, 300, seed=13)
+    poses, c = fast._evaluate(qs)
+    ref_poses, ref_c = ref._evaluate(qs)
+    assert poses.shape == ref_poses.shape and c.shape == ref_c.shape
+    np.testing.assert_allclose(c, ref_c, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(poses, ref_poses, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fast.cover_centres(qs), ref.cover_centres(qs), rtol=0, atol=1e-12)
+
+
 def test_packed_states_equal_the_reference_route(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
     fast, ref = worlds
     for threshold in (0.005, 0.065):
