@@ -51,6 +51,7 @@ from planner.planning.goals import (
 )
 from planner.planning.motion import motion_clear
 from planner.planning.ompl_adapter import plan_joint_path, simplify_waypoints
+from planner.planning.shortcut import cut_corners, segment_times
 from planner.planning.transit import find_transit
 
 if TYPE_CHECKING:
@@ -77,6 +78,11 @@ QUICK_MOTION_CHECKS = 1500
 FULL_MOTION_CHECKS = 40_000
 #: Rail moves at least this long may use a transit posture [m].
 TRANSIT_MIN_RAIL_M = 0.5
+#: Fractions of the transit ride at which a straight connection may join or leave it (see
+#: Planner._ride_connections), and the most certified checks spent looking for such a pair.
+RIDE_FRACTIONS = (0.0, 0.15, 0.3, 0.45, 0.6, 0.75, 0.9, 1.0)
+RIDE_MAX_CHECKS = 12
+RIDE_SIDE_CHECKS = 4
 #: Planner step length in OMPL's scaled joint space (about seconds of motion at full drive speed):
 #: measured on the reference bay insertions, 1.0 halves the median search time against OMPL's default.
 PLANNER_RANGE = 1.0
@@ -341,7 +347,20 @@ class Planner:
         return [c.line[0] for c in tracked if c.line is not None], list(tracked)
 
     def search(self, q_start: Array, targets: list[Array]) -> tuple[Array, int]:
-        """Certified waypoints from the start to one of the targets (and which)."""
+        """Certified waypoints from the start to one of the targets (and which), corners cut for time."""
+        waypoints, k = self._search(q_start, targets)
+        if len(waypoints) > 2 and self.opts.simplify and not self.naive:
+            waypoints, stats = cut_corners(
+                self.robot, waypoints, self._motion_ok, deadline=lambda: self._remaining() <= 0
+            )
+            self.report.setdefault("search", {})["corner_cuts"] = {
+                "cuts": stats.cuts,
+                "checks": stats.checks,
+                "estimated_saving_s": round(stats.saved_s, 3),
+            }
+        return waypoints, k
+
+    def _search(self, q_start: Array, targets: list[Array]) -> tuple[Array, int]:
         for k, q in enumerate(targets):
             if np.allclose(q, q_start, atol=1e-12):
                 return np.array([q_start, q]), k
@@ -461,13 +480,19 @@ class Planner:
         )
         if transit is None:
             return None
-        first = self._connect(q_start, [transit.q_a])
-        if first is None:
-            return None
-        second = self._connect(transit.q_b, targets)
-        if second is None:
-            return None
-        waypoints = self._shortcut(np.vstack([first[0], second[0]]))
+        head, tail = self._ride_connections(q_start, targets, transit.q_a, transit.q_b)
+        if head is None:
+            joined = self._connect(q_start, [transit.q_a])
+            if joined is None:
+                return None
+            head = joined[0]
+        if tail is None:
+            tail = self._connect(transit.q_b, targets)
+            if tail is None:
+                return None
+        # Along the ride from where the head joins it to where the tail leaves it (at most one rail move).
+        ride = [tail[0][0]] if not np.allclose(head[-1], tail[0][0], atol=1e-12) else []
+        waypoints = self._shortcut(np.vstack([head, *ride, tail[0][1:]]))
         if len(waypoints) > 2 and self._remaining() > 0:
             lo, hi = _joint_box(self.world)
             waypoints = simplify_waypoints(
@@ -488,7 +513,83 @@ class Planner:
             "transit_state_checks": transit.state_checks,
             "waypoints": len(waypoints),
         }
-        return waypoints, second[1]
+        return waypoints, tail[1]
+
+    def _ride_connections(
+        self, q_start: Array, targets: list[Array], ride_a: Array, ride_b: Array
+    ) -> tuple[Array | None, tuple[Array, int] | None]:
+        """Straight connections onto and off the transit ride, changing posture while the rail moves.
+
+        The ride is the transit posture moving along the rail from ``ride_a`` (the start's d1) to ``ride_b``
+        (the goal's). Joining it at a fraction f_in of the way and leaving it at 1 - f_out lets the posture
+        changes overlap the rail move instead of happening at a standstill. The pairs (f_in, f_out) with
+        f_in + f_out <= 1 are tried in order of estimated time (slowest drive at v_max per segment), each
+        straight connection certified, at most :data:`RIDE_MAX_CHECKS` checks in all. A side without a
+        certified connection is None: the caller joins the ride at its start, or leaves it at its end,
+        with the planner.
+
+        Returns:
+            (start -> join waypoints or None, (leave -> target waypoints, target index) or None).
+        """
+        ride = ride_b - ride_a
+        t_ride = float(segment_times(self.robot, ride_a, ride_a, ride_b)[0])
+
+        def on_ride(f: float) -> Array:
+            return ride_a + f * ride
+
+        t_in = {f: float(segment_times(self.robot, q_start, q_start, on_ride(f))[0]) for f in RIDE_FRACTIONS}
+        combos: list[tuple[float, float, float, int]] = []
+        for k, q_t in enumerate(targets):
+            for f_out in RIDE_FRACTIONS:
+                t_out = float(segment_times(self.robot, q_t, on_ride(1.0 - f_out), q_t)[0])
+                for f_in in RIDE_FRACTIONS:
+                    if f_in + f_out <= 1.0 + 1e-12:
+                        combos.append((t_in[f_in] + (1.0 - f_in - f_out) * t_ride + t_out, f_in, f_out, k))
+        combos.sort()
+        verdict: dict[tuple[str, float, int], bool] = {}
+
+        def ok(side: str, f: float, k: int) -> bool:
+            key = (side, f, k if side == "out" else 0)
+            if key not in verdict:
+                if len(verdict) >= RIDE_MAX_CHECKS + 2 * RIDE_SIDE_CHECKS:
+                    return False
+                a, b = (q_start, on_ride(f)) if side == "in" else (on_ride(1.0 - f), targets[k])
+                verdict[key] = self._motion_ok(a, b)
+            return verdict[key]
+
+        join: float | None = None
+        out: tuple[float, int] | None = None
+        for _, a, b, k in combos:
+            if len(verdict) >= RIDE_MAX_CHECKS and not (("in", a, 0) in verdict and ("out", b, k) in verdict):
+                continue
+            if ok("in", a, k) and ok("out", b, k):
+                join, out = a, (b, k)
+                break
+        else:
+            # No pair within the budget: one side alone, the other at the ride's end (f = 0), the side's
+            # fractions in order of their own estimate, with a few more checks.
+            budget = len(verdict) + RIDE_SIDE_CHECKS
+            for _, a, b, k in combos:
+                if b == 0.0 and (len(verdict) < budget or ("in", a, 0) in verdict) and ok("in", a, k):
+                    join = a
+                    break
+            if join is None:
+                budget = len(verdict) + RIDE_SIDE_CHECKS
+                for _, a, b, k in combos:
+                    if a == 0.0 and (len(verdict) < budget or ("out", b, k) in verdict) and ok("out", b, k):
+                        out = (b, k)
+                        break
+        self.report.setdefault("search_attempts", []).append(
+            {
+                "method": "ride_connections",
+                "checks": len(verdict),
+                "join_fraction": join,
+                "leave_fraction": None if out is None else 1.0 - out[0],
+            }
+        )
+        head = None if join is None else np.array([q_start, on_ride(join)])
+        tail = None if out is None else (np.array([on_ride(1.0 - out[0]), targets[out[1]]]), out[1])
+        return head, tail
 
     def smooth(self, waypoints: Array) -> list[JointPath]:
         """Blend corners where the blend is certified clear; split into legs at the remaining corners."""

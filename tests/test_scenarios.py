@@ -111,6 +111,9 @@ def test_feasible_scenario_gives_a_profile_that_respects_every_limit(name: str) 
     if sc.approach_direction is not None:  # stopping at the pre-insertion pose costs its own bound
         assert res.report["staged_lower_bound_s"] >= res.report["single_drive_lower_bound_s"] - 1e-9
         assert prof.duration_s >= res.report["staged_lower_bound_s"] - 1e-9
+    # ... and not far above it: posture changes overlap the rail move (measured 1.01-1.24 on the suite).
+    bound = res.report.get("staged_lower_bound_s", res.report["single_drive_lower_bound_s"])
+    assert prof.duration_s <= 1.3 * bound, (prof.duration_s, bound)
 
 
 @pytest.mark.parametrize("name", REFUSED)

@@ -10,8 +10,12 @@ from the start's d1 to the goal's d1. This module answers it directly:
 2. rank them by compactness: the lateral and vertical extent of the robot's sphere cover, the quantity a
    hatch opening constrains (vectorised over all candidates);
 3. sweep the best ones along the rail with cheap state checks at a few d1 values, the d1 values that
-   rejected most earlier candidates first (a pinch is found after one or two checks);
-4. certify the survivors' rail motion with the motion check and the static force check.
+   rejected most earlier candidates first (a pinch is found after one or two checks), until a few
+   postures survive (``n_riders``);
+4. rank the survivors by the posture change they need, the estimated time from the start's posture and
+   to the goal's (slowest drive at its velocity limit): the most compact posture is rarely the one the
+   robot reaches quickest;
+5. certify the survivors' rail motion, in that order, with the motion check and the static force check.
 
 The planner then connects start -> transit at the start's d1 and transit at the goal's d1 -> goal
 (short, local problems), with the certified rail motion in between.
@@ -29,6 +33,7 @@ from numpy.typing import NDArray
 from planner.collision.world import CollisionWorld
 from planner.kinematics import chain
 from planner.planning.motion import motion_clear
+from planner.planning.shortcut import segment_times
 from planner.redundancy.ik import random_admissible_joints
 
 Array = NDArray[np.float64]
@@ -67,6 +72,7 @@ def find_transit(
     n_sweep: int = 400,
     d1_step: float = 0.05,
     deadline: Callable[[], bool] = lambda: False,
+    n_riders: int = 8,
 ) -> Transit | None:
     """A posture that can ride the rail from ``q_start[0]`` to ``q_goal[0]`` (see the module docstring)."""
     robot = world.robot
@@ -86,6 +92,16 @@ def find_transit(
         if len(pool):
             yield from pool[np.argsort(compactness(world, pool), kind="stable")][: n_sweep - 2]
 
+    def change_time(posture: Array) -> float:
+        """Estimated time of the posture changes from the start and to the goal (rail excluded)."""
+        q_a, q_b = posture.copy(), posture.copy()
+        q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
+        return float(
+            segment_times(robot, q_start, q_start, q_a)[0] + segment_times(robot, q_goal, q_b, q_goal)[0]
+        )
+
+    riders: list[tuple[float, int, Array]] = []
+    tried = 0
     for tried, posture in enumerate(candidates(), start=1):
         if deadline():
             return None
@@ -98,8 +114,14 @@ def find_transit(
                 kills[k] += 1
                 ok = False
                 break
-        if not ok:
-            continue
+        if ok:
+            # The start's or the goal's own posture needs no change on that side: the best it gets.
+            riders.append((change_time(posture), tried, posture))
+            if len(riders) >= n_riders or tried <= 2:
+                break
+    for _, _, posture in sorted(riders, key=lambda r: (r[0], r[1])):
+        if deadline():
+            return None
         q_a, q_b = posture.copy(), posture.copy()
         q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
         if motion_clear(world, q_a, q_b, clearance, motion_margin) and segment_ok(q_a, q_b):

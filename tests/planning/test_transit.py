@@ -9,6 +9,7 @@ import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.planning.goals import StaticForceCheck
+from planner.planning.shortcut import segment_times
 from planner.planning.transit import Transit, compactness, find_transit
 from planner.scenario import ResolvedScenario, load_scenario
 
@@ -99,3 +100,24 @@ def test_seeded_transit_is_reproducible(
     assert again is not None
     assert np.array_equal(again.q_a, transit.q_a) and np.array_equal(again.q_b, transit.q_b)
     assert (again.candidates_tried, again.state_checks) == (transit.candidates_tried, transit.state_checks)
+
+
+def test_of_the_riding_postures_the_one_quickest_to_reach_is_taken(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, transit: Transit
+) -> None:
+    """Ranking the riders by the posture change they need beats taking the most compact one."""
+    assert scenario.goal_q is not None
+    q_start, q_goal = np.array(scenario.start_q), np.array(scenario.goal_q)
+    compact = find_transit(
+        world, q_start, q_goal, CLEARANCE_M, MOTION_MARGIN_M, forces.ok, forces.segment_ok, 1, n_riders=1
+    )
+    assert compact is not None
+
+    def change(t: Transit) -> float:
+        robot = scenario.robot
+        return float(
+            segment_times(robot, q_start, q_start, t.q_a)[0] + segment_times(robot, q_goal, t.q_b, q_goal)[0]
+        )
+
+    assert change(transit) <= change(compact)
+    assert compactness(world, compact.q_a[None, :])[0] <= compactness(world, transit.q_a[None, :])[0]
