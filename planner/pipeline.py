@@ -402,7 +402,9 @@ class Planner:
         """Time left for search, keeping a reserve for timing and validation."""
         return self.opts.time_limit_s * (1.0 - TIME_RESERVE) - self._elapsed()
 
-    def _ompl(self, q_start: Array, targets: list[Array], max_checks: int) -> tuple[Array, int] | None:
+    def _ompl(
+        self, q_start: Array, targets: list[Array], max_checks: int, simplify: bool = True
+    ) -> tuple[Array, int] | None:
         budget = self._remaining()
         if budget <= 0:
             return None
@@ -416,7 +418,7 @@ class Planner:
             time_limit_s=budget,
             seed=self.opts.seed,
             planner=self.opts.planner,
-            simplify=self.opts.simplify and not self.naive,
+            simplify=simplify and self.opts.simplify and not self.naive,
             joint_lower=lo,
             joint_upper=hi,
             state_ok=self.forces.ok,
@@ -444,8 +446,8 @@ class Planner:
                 return np.array([q_a, q]), k
             if self._motion_ok(q_a, q):
                 return np.array([q_a, q]), k
-        res = self._ompl(q_a, targets, max_checks=FULL_MOTION_CHECKS)
-        return res
+        # Not simplified here: the caller shortcuts and simplifies the whole path it is part of.
+        return self._ompl(q_a, targets, max_checks=FULL_MOTION_CHECKS, simplify=False)
 
     def _shortcut(self, waypoints: Array) -> Array:
         """Greedy, deterministic shortcut.
@@ -557,6 +559,11 @@ class Planner:
                 verdict[key] = self._motion_ok(a, b)
             return verdict[key]
 
+        # A side whose plain connection at the ride's end is not clear rarely has a longer diagonal that is
+        # (it crosses the same obstacle while the rail moves too): such sides are not tried further.
+        open_in = ok("in", 0.0, 0)
+        open_out = {k for k in range(len(targets)) if ok("out", 0.0, k)}
+        combos = [c for c in combos if (open_in or c[1] == 0.0) and (c[3] in open_out or c[2] == 0.0)]
         join: float | None = None
         out: tuple[float, int] | None = None
         for _, a, b, k in combos:

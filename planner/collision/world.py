@@ -549,7 +549,14 @@ class CollisionWorld:
 
     def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject) -> bool:
         self._fcl_queries += 1
-        return bool(fcl.collide(o1, o2, self._req, fcl.CollisionResult()) > 0)
+        try:  # one result object per thread, emptied for each query (a new one costs more than the query)
+            res: fcl.CollisionResult = self._local.result
+        except AttributeError:
+            res = self._local.result = fcl.CollisionResult()
+        res.is_collision = False
+        res.contacts.clear()
+        res.cost_sources.clear()
+        return bool(fcl.collide(o1, o2, self._req, res) > 0)
 
     # --------------------------------------------------------------- checks
     def _limit_contacts(self, q: Array) -> list[Contact]:

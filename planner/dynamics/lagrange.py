@@ -195,6 +195,9 @@ class Cabin8Dynamics:
     def static_forces_batch(self, q: Array, payload: RigidPayload | None = None) -> Array:
         """Drive forces/torques (N, 8) that hold joint configurations q (N, 8) at rest [N, N m]."""
         q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        if q2.shape[0] <= 2:  # the inverse dynamics at rest, point by point: a mapped call pads to a chunk
+            p, zero = _params(payload), np.zeros(8)
+            return np.array([self._id(qi, zero, zero, p)[1] for qi in q2])
         par = np.repeat(_params(payload)[None, :], q2.shape[0], axis=0)
         return evaluate_mapped(self._static_map, q2, par, small=self._static_map_small)[0]
 
@@ -265,5 +268,9 @@ _BUILT: weakref.WeakKeyDictionary[Cabin8, Cabin8Dynamics] = weakref.WeakKeyDicti
 SMALL_BATCH = 24
 
 
+_NO_PAYLOAD = np.zeros(10)
+_NO_PAYLOAD.flags.writeable = False
+
+
 def _params(payload: RigidPayload | None) -> Array:
-    return (payload or RigidPayload()).params()
+    return _NO_PAYLOAD if payload is None else payload.params()

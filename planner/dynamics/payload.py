@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,9 +67,13 @@ class RigidPayload:
         return cls(float(mass), com_tool, inertia_tool)
 
     def params(self) -> Array:
-        """The 10 inertial parameters (m, c_x, c_y, c_z, I_xx, I_yy, I_zz, I_xy, I_xz, I_yz)."""
+        """The 10 inertial parameters (m, c_x, c_y, c_z, I_xx, I_yy, I_zz, I_xy, I_xz, I_yz) (read-only)."""
+        return self._params
+
+    @cached_property
+    def _params(self) -> Array:
         inertia = self.inertia_tool
-        return np.array(
+        out = np.array(
             [
                 self.mass,
                 *self.com_tool,
@@ -80,3 +85,5 @@ class RigidPayload:
                 inertia[1, 2],
             ]
         )
+        out.flags.writeable = False
+        return out
