@@ -222,3 +222,24 @@ def test_static_forces_are_the_inverse_dynamics_at_rest(
     full = np.array([dyn.id_vm(q[i], z[i], z[i], payload.params())[1] for i in range(n)])
     assert static.shape == (n, 8)
     np.testing.assert_allclose(static, full, rtol=0, atol=1e-9 * np.abs(full).max())
+
+
+def test_static_forces_do_not_change_along_the_rail(
+    dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    """Gravity is normal to the rail: a posture takes the same holding forces anywhere along it.
+
+    None of them on the rail drive; the transit search checks a posture's forces once, whatever its d1.
+    """
+    base = dyn.static_forces_batch(configs, payload)
+    for d1 in (0.0, 1.7, 5.9):
+        moved = configs.copy()
+        moved[:, 0] = d1
+        np.testing.assert_allclose(
+            dyn.static_forces_batch(moved, payload), base, rtol=0, atol=1e-9 * np.abs(base).max()
+        )
+    np.testing.assert_allclose(base[:, 0], 0.0, atol=1e-9 * np.abs(base).max())
+    for i in range(3):  # the one-point route alike
+        np.testing.assert_allclose(
+            dyn.static_forces_batch(configs[i], payload)[0], base[i], rtol=0, atol=1e-9
+        )

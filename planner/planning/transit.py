@@ -74,7 +74,25 @@ def find_transit(
     deadline: Callable[[], bool] = lambda: False,
     n_riders: int = 8,
 ) -> Transit | None:
-    """A posture that can ride the rail from ``q_start[0]`` to ``q_goal[0]`` (see the module docstring)."""
+    """A posture that can ride the rail from ``q_start[0]`` to ``q_goal[0]`` (see the module docstring).
+
+    Args:
+        world: The collision world.
+        q_start: Start joints; the ride starts at its d1.
+        q_goal: Goal (or pre-insertion) joints; the ride ends at its d1.
+        clearance: Clearance every state and the ride keep [m].
+        motion_margin: Certification margin of the ride's motion check [m].
+        state_ok: An extra condition on the posture, which must not depend on the rail position d1 (it is
+            evaluated once per posture): the static force check is such, as gravity is normal to the rail
+            and no drive force changes along it (tested).
+        segment_ok: An extra condition on the ride (the static forces along it).
+        seed: Seed of the candidate pool.
+        n_candidates: Postures drawn for the pool.
+        n_sweep: Most postures swept along the rail.
+        d1_step: Spacing of the sweep's rail positions [m].
+        deadline: Returns True when the caller's time is up (then None).
+        n_riders: Postures that survive the sweep before they are ranked (1: the most compact one).
+    """
     robot = world.robot
     d1_a, d1_b = float(q_start[chain.D1]), float(q_goal[chain.D1])
     n_d1 = int(max(2, np.ceil(abs(d1_b - d1_a) / d1_step) + 1))
@@ -105,12 +123,15 @@ def find_transit(
     for tried, posture in enumerate(candidates(), start=1):
         if deadline():
             return None
-        ok = True
-        for k in np.argsort(-kills, kind="stable"):
+        # The posture condition once: it does not depend on the rail position (see Args).
+        q = posture.copy()
+        q[chain.D1] = d1_a
+        ok = bool(state_ok(q))
+        for k in np.argsort(-kills, kind="stable") if ok else ():
             q = posture.copy()
             q[chain.D1] = d1s[k]
             checks += 1
-            if not (world.is_valid(q, clearance) and state_ok(q)):
+            if not world.is_valid(q, clearance):
                 kills[k] += 1
                 ok = False
                 break
