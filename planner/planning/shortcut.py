@@ -8,11 +8,12 @@ way to the hatch.
 
 At a corner C between P and N (segments P -> C and C -> N, both certified), a cut replaces C by the chord
 A -> B with A = C + alpha (P - C) and B = C + beta (N - C), for alpha, beta in :data:`CUT_FRACTIONS`
-(1 reaches the neighbouring waypoint itself). The parts P -> A and B -> N lie on certified segments, so
-only the chord needs the certified motion check. The time of a segment is estimated as its slowest drive's
-time at its velocity limit (the drive-map Jacobian at C); the candidates with the largest estimated gain
-are tried first, at most :data:`ATTEMPTS_PER_CORNER` per corner, and the first certified one is kept.
-Deterministic (no random choices): the same path gives the same result.
+and beta in :data:`CUT_ENDS` (1 reaches the neighbouring waypoint itself). The parts P -> A and B -> N lie
+on certified segments, so only the chord needs the certified motion check. The time of a segment is
+estimated as its slowest drive's time at its velocity limit (the drive-map Jacobian at C). For each beta
+the longest certified alpha is found by bisection (a shorter cut stays nearer the certified corner, so
+validity is nearly monotone; a miss only costs time), and the cut with the largest estimated gain is
+kept: at most three checks per beta and corner. Deterministic (no random choices).
 """
 
 from __future__ import annotations
@@ -27,10 +28,10 @@ from planner.robots.cabin8 import Cabin8
 
 Array = NDArray[np.float64]
 
-#: How far back along each neighbouring segment a cut may start or end (fractions of the segment).
+#: How far back along the incoming segment a cut may start (fractions of the segment, longest first),
+#: and how far along the outgoing one it may end.
 CUT_FRACTIONS = (1.0, 0.75, 0.55, 0.4, 0.28, 0.18, 0.1)
-#: Certified motion checks tried per corner and pass (in order of estimated gain).
-ATTEMPTS_PER_CORNER = 4
+CUT_ENDS = (1.0, 0.55, 0.28)
 #: A cut must save at least this much estimated time [s].
 MIN_GAIN_S = 0.05
 #: Passes over the corners (each stops early when it changed nothing).
@@ -79,7 +80,6 @@ def cut_corners(
     """
     path = [np.asarray(q, dtype=float) for q in waypoints]
     frac = np.array(CUT_FRACTIONS)
-    alpha, beta = (g.ravel() for g in np.meshgrid(frac, frac, indexing="ij"))
     cuts = checks = 0
     saved = 0.0
     for _ in range(PASSES):
@@ -90,25 +90,39 @@ def cut_corners(
                 return np.array(path), CutStats(cuts, checks, saved)
             p, c, n = path[i - 1], path[i], path[i + 1]
             t_in, t_out = segment_times(robot, c, np.stack([p, c]), np.stack([c, n]))
-            A = c[None, :] + alpha[:, None] * (p - c)[None, :]
-            B = c[None, :] + beta[:, None] * (n - c)[None, :]
-            new = (1.0 - alpha) * t_in + segment_times(robot, c, A, B) + (1.0 - beta) * t_out
-            gain = t_in + t_out - new
-            order = [k for k in np.argsort(-gain, kind="stable") if gain[k] >= MIN_GAIN_S]
-            step = 1
-            for k in order[:ATTEMPTS_PER_CORNER]:
-                checks += 1
-                if motion_ok(A[k], B[k]):
-                    keep = [q for q, f in ((A[k], alpha[k]), (B[k], beta[k])) if f < 1.0]
-                    path[i : i + 1] = keep
-                    if alpha[k] == 1.0 and beta[k] == 1.0:
-                        step = 0  # the corner vanished: P and N are neighbours now
+            best: tuple[float, Array, Array, float, float] | None = None
+            for beta in CUT_ENDS:
+                A = c[None, :] + frac[:, None] * (p - c)[None, :]
+                B = np.repeat((c + beta * (n - c))[None, :], len(frac), axis=0)
+                gain = (
+                    t_in
+                    + t_out
+                    - ((1.0 - frac) * t_in + segment_times(robot, c, A, B) + (1.0 - beta) * t_out)
+                )
+                floor = max(MIN_GAIN_S, best[0] if best is not None else 0.0)
+                if gain.max() <= floor:
+                    continue
+                # A shorter cut stays nearer the certified corner: find the longest certified one by
+                # bisection over the fractions (longest first), then keep it if it gains the most so far.
+                lo, hi, found = 0, len(frac) - 1, -1
+                while lo <= hi:
+                    mid = (lo + hi) // 2
+                    checks += 1
+                    if motion_ok(A[mid], B[mid]):
+                        found, hi = mid, mid - 1
                     else:
-                        step = len(keep)
-                    cuts += 1
-                    saved += float(gain[k])
-                    changed = True
-                    break
+                        lo = mid + 1
+                if found >= 0 and gain[found] > floor:
+                    best = (float(gain[found]), A[found], B[found], float(frac[found]), beta)
+            step = 1
+            if best is not None:
+                g, a_pt, b_pt, alpha, beta = best
+                keep = [q for q, f in ((a_pt, alpha), (b_pt, beta)) if f < 1.0]
+                path[i : i + 1] = keep
+                step = len(keep)  # 0: the corner vanished, P and N are neighbours now
+                cuts += 1
+                saved += g
+                changed = True
             i += step
         if not changed:
             break

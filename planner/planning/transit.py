@@ -12,9 +12,10 @@ from the start's d1 to the goal's d1. This module answers it directly:
 3. sweep the best ones along the rail with cheap state checks at a few d1 values, the d1 values that
    rejected most earlier candidates first (a pinch is found after one or two checks), until a few
    postures survive (``n_riders``);
-4. rank the survivors by the posture change they need, the estimated time from the start's posture and
-   to the goal's (slowest drive at its velocity limit): the most compact posture is rarely the one the
-   robot reaches quickest;
+4. rank the survivors by the posture change they need: the estimated time from the start's posture and
+   to the goal's (slowest drive at its velocity limit) beyond what fits in the rail move before the
+   start's posture meets the narrow section and after the goal's leaves it (the planner changes posture
+   while the rail moves): the most compact posture is rarely the one the robot reaches quickest;
 5. certify the survivors' rail motion, in that order, with the motion check and the static force check.
 
 The planner then connects start -> transit at the start's d1 and transit at the goal's d1 -> goal
@@ -110,13 +111,29 @@ def find_transit(
         if len(pool):
             yield from pool[np.argsort(compactness(world, pool), kind="stable")][: n_sweep - 2]
 
+    def free_run(posture: Array, order: Array) -> float:
+        """How far [m] the posture rides from the first d1 of ``order`` before it meets the cabin."""
+        for k in order:
+            q = posture.copy()
+            q[chain.D1] = d1s[k]
+            if not world.is_valid(q, clearance):
+                return abs(float(d1s[k] - d1s[order[0]]))
+        return abs(d1_b - d1_a)
+
+    # The rail time before the start's posture meets the narrow section, and after the goal's leaves it:
+    # a posture change that fits in these windows overlaps the rail move (the planner connects onto
+    # and off the ride while the rail moves); what does not fit costs a standstill.
+    v_rail = float(robot.limits.v_max[0])
+    window_in = free_run(q_start, np.arange(n_d1)) / v_rail
+    window_out = free_run(q_goal, np.arange(n_d1)[::-1]) / v_rail
+
     def change_time(posture: Array) -> float:
-        """Estimated time of the posture changes from the start and to the goal (rail excluded)."""
+        """Estimated standstill the posture changes from the start and to the goal need (then their sum)."""
         q_a, q_b = posture.copy(), posture.copy()
         q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
-        return float(
-            segment_times(robot, q_start, q_start, q_a)[0] + segment_times(robot, q_goal, q_b, q_goal)[0]
-        )
+        t_in = float(segment_times(robot, q_start, q_start, q_a)[0])
+        t_out = float(segment_times(robot, q_goal, q_b, q_goal)[0])
+        return max(0.0, t_in - window_in) + max(0.0, t_out - window_out) + 1e-3 * (t_in + t_out)
 
     riders: list[tuple[float, int, Array]] = []
     tried = 0
