@@ -111,7 +111,7 @@ def find_transit(
         if len(pool):
             yield from pool[np.argsort(compactness(world, pool), kind="stable")][: n_sweep - 2]
 
-    def free_run(posture: Array, order: Array) -> float:
+    def free_run(posture: Array, order: NDArray[np.intp]) -> float:
         """How far [m] the posture rides from the first d1 of ``order`` before it meets the cabin."""
         for k in order:
             q = posture.copy()
