@@ -68,6 +68,8 @@ Progress = Callable[[str, float], None]
 
 #: Blend half-length as a fraction of the shorter neighbouring segment, then the shrink sequence.
 BLEND_FRACTIONS = (0.45, 0.2, 0.08, 0.03, 0.01, 0.0)
+#: Largest extra clearance of a certified run along a blend [m] (see CollisionWorld.check_path).
+BLEND_MAX_EXTRA_M = 0.01
 #: Limit scalings tried when the gate finds a limit exceeded on the sampled profile.
 SAFETY_LEVELS = ((0.995, 0.97, 0.97), (0.98, 0.92, 0.92), (0.95, 0.85, 0.85))
 LIMIT_CHECKS = {"velocity", "acceleration", "effort", "consistency"}
@@ -76,6 +78,8 @@ QUICK_MOTION_CHECKS = 1500
 #: Motion-check budget of the full attempt (the time limit applies as well; when it stops the planner
 #: first, the result depends on the machine's speed).
 FULL_MOTION_CHECKS = 40_000
+#: A connection onto or off a transit ride is first planned with the rail within this of its ends [m].
+CONNECT_RAIL_WINDOW_M = 0.3
 #: Rail moves at least this long may use a transit posture [m].
 TRANSIT_MIN_RAIL_M = 0.5
 #: Fractions of the transit ride at which a straight connection may join or leave it (see
@@ -403,12 +407,21 @@ class Planner:
         return self.opts.time_limit_s * (1.0 - TIME_RESERVE) - self._elapsed()
 
     def _ompl(
-        self, q_start: Array, targets: list[Array], max_checks: int, simplify: bool = True
+        self,
+        q_start: Array,
+        targets: list[Array],
+        max_checks: int,
+        simplify: bool = True,
+        rail_window_m: float | None = None,
     ) -> tuple[Array, int] | None:
         budget = self._remaining()
         if budget <= 0:
             return None
         lo, hi = _joint_box(self.world)
+        if rail_window_m is not None:  # a local problem: the rail kept near its two ends
+            d1s = [float(q_start[chain.D1]), *(float(q[chain.D1]) for q in targets)]
+            lo[chain.D1] = max(lo[chain.D1], min(d1s) - rail_window_m)
+            hi[chain.D1] = min(hi[chain.D1], max(d1s) + rail_window_m)
         res = plan_joint_path(
             self.world,
             q_start,
@@ -446,8 +459,13 @@ class Planner:
                 return np.array([q_a, q]), k
             if self._motion_ok(q_a, q):
                 return np.array([q_a, q]), k
-        # Not simplified here: the caller shortcuts and simplifies the whole path it is part of.
-        return self._ompl(q_a, targets, max_checks=FULL_MOTION_CHECKS, simplify=False)
+        # Not simplified here: the caller shortcuts and simplifies the whole path it is part of. First as a
+        # local problem (the rail near the connection's ends: a posture change at the end of a rail move
+        # needs no rail detour), then in the whole joint box.
+        local = self._ompl(
+            q_a, targets, max_checks=QUICK_MOTION_CHECKS, simplify=False, rail_window_m=CONNECT_RAIL_WINDOW_M
+        )
+        return local or self._ompl(q_a, targets, max_checks=FULL_MOTION_CHECKS, simplify=False)
 
     def _shortcut(self, waypoints: Array) -> Array:
         """Greedy, deterministic shortcut.
@@ -617,9 +635,13 @@ class Planner:
                 piece = path.pieces[idx]
                 s = np.linspace(0.0, piece.length, 17)
                 qs = piece.evaluate(s)[0]
-                ok = self.world.check_path(qs, self.plan_clearance + 0.001, self.opts.motion_margin_m).valid
+                ok = bool(np.all(self.robot.admissible_batch(qs)))
                 ok = ok and bool(np.all(self.forces.ratios(qs) <= self.forces.fraction))
-                ok = ok and all(not self.robot.violations(q) for q in qs)
+                # A curved run deviates from its chord: runs with up to BLEND_MAX_EXTRA_M of extra
+                # clearance (halved where that fails) take a few checks rather than one per piece.
+                ok = ok and self.world.check_path(
+                    qs, self.plan_clearance + 0.001, self.opts.motion_margin_m, max_extra_m=BLEND_MAX_EXTRA_M
+                ).valid
                 if not ok:
                     level[c] = min(level[c] + 1, len(BLEND_FRACTIONS) - 1)
                     failed = True

@@ -82,6 +82,7 @@ def cut_corners(
     frac = np.array(CUT_FRACTIONS)
     cuts = checks = 0
     saved = 0.0
+    settled: set[bytes] = set()
     for _ in range(PASSES):
         changed = False
         i = 1
@@ -89,6 +90,10 @@ def cut_corners(
             if deadline():
                 return np.array(path), CutStats(cuts, checks, saved)
             p, c, n = path[i - 1], path[i], path[i + 1]
+            key = p.tobytes() + c.tobytes() + n.tobytes()
+            if key in settled:  # this very corner found nothing before
+                i += 1
+                continue
             t_in, t_out = segment_times(robot, c, np.stack([p, c]), np.stack([c, n]))
             best: tuple[float, Array, Array, float, float] | None = None
             for beta in CUT_ENDS:
@@ -115,7 +120,9 @@ def cut_corners(
                 if found >= 0 and gain[found] > floor:
                     best = (float(gain[found]), A[found], B[found], float(frac[found]), beta)
             step = 1
-            if best is not None:
+            if best is None:
+                settled.add(key)
+            else:
                 g, a_pt, b_pt, alpha, beta = best
                 keep = [q for q, f in ((a_pt, alpha), (b_pt, beta)) if f < 1.0]
                 path[i : i + 1] = keep

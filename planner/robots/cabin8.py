@@ -282,6 +282,14 @@ class Cabin8(RobotModel):
                 out.append({"name": s.name, "value": float(v), "lower": s.lower, "upper": s.upper})
         return out
 
+    def admissible_batch(self, qs: Array, tol: float = 1e-9) -> NDArray[np.bool_]:
+        """For (N, 8) joints: True where every limit and margin holds (as :meth:`violations` is empty)."""
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        c = self.constraint_values_batch(qs)
+        with np.errstate(invalid="ignore"):
+            inside = (c >= self.c_lower - tol) & (c <= self.c_upper + tol)
+        return np.all(inside, axis=1) & np.all(np.isfinite(qs), axis=1)
+
     def margins(self, q: Array) -> Array:
         """Signed distance of each constraint to its nearest bound (positive inside), in its own unit."""
         c, _ = self.constraint_values(q)
