@@ -135,28 +135,45 @@ def find_transit(
         t_out = float(segment_times(robot, q_goal, q_b, q_goal)[0])
         return max(0.0, t_in - window_in) + max(0.0, t_out - window_out) + 1e-3 * (t_in + t_out)
 
-    riders: list[tuple[float, int, Array]] = []
-    tried = 0
-    for tried, posture in enumerate(candidates(), start=1):
-        if deadline():
-            return None
+    def rides(posture: Array) -> bool:
+        """The posture is valid at every sweep position (the ones that rejected most postures first)."""
+        nonlocal checks
         # The posture condition once: it does not depend on the rail position (see Args).
         q = posture.copy()
         q[chain.D1] = d1_a
-        ok = bool(state_ok(q))
-        for k in np.argsort(-kills, kind="stable") if ok else ():
+        if not state_ok(q):
+            return False
+        for k in np.argsort(-kills, kind="stable"):
             q = posture.copy()
             q[chain.D1] = d1s[k]
             checks += 1
             if not world.is_valid(q, clearance):
                 kills[k] += 1
-                ok = False
-                break
-        if ok:
-            # The start's or the goal's own posture needs no change on that side: the best it gets.
-            riders.append((change_time(posture), tried, posture))
-            if len(riders) >= n_riders or tried <= 2:
-                break
+                return False
+        return True
+
+    lo6, hi6 = robot.limits.lower[chain.THETA6], robot.limits.upper[chain.THETA6]
+    middle = 0.5 * (np.asarray(q_start, dtype=float) + np.asarray(q_goal, dtype=float))
+    riders: list[tuple[float, int, Array]] = []
+    tried = found = 0
+    for tried, posture in enumerate(candidates(), start=1):
+        if deadline():
+            return None
+        if not rides(posture):
+            continue
+        # The start's or the goal's own posture needs no change on that side: the best it gets.
+        riders.append((change_time(posture), tried, posture))
+        if tried <= 2:
+            break
+        # Variants nearer the start's and goal's postures (a random posture is compact for some joints and
+        # needlessly far off in others), and its twins with the wrist turned half a turn (a payload
+        # symmetric about the tool axis fits alike): each swept like any candidate.
+        for variant in _variants(posture, middle, lo6, hi6):
+            if rides(variant):
+                riders.append((change_time(variant), tried, variant))
+        found += 1
+        if found >= n_riders:
+            break
     for _, _, posture in sorted(riders, key=lambda r: (r[0], r[1])):
         if deadline():
             return None
@@ -166,3 +183,24 @@ def find_transit(
             log.info("transit posture found after %d candidates, %d state checks", tried, checks)
             return Transit(q_a, q_b, tried, checks)
     return None
+
+
+#: How far a rider's variants move toward the start's and goal's mean posture (all joints but the rail).
+VARIANT_STEPS = (0.75, 0.5, 0.25)
+
+
+def _variants(posture: Array, middle: Array, lo6: float, hi6: float) -> Iterator[Array]:
+    """Postures near a rider: toward ``middle`` (all joints, then the wrist alone), and wrist half-turns."""
+    for lam in VARIANT_STEPS:
+        v = posture + lam * (middle - posture)
+        v[chain.D1] = posture[chain.D1]
+        yield v
+    for lam in (1.0, 0.5):
+        v = posture.copy()
+        v[chain.THETA6] += lam * (middle[chain.THETA6] - posture[chain.THETA6])
+        yield v
+    for turn in (-np.pi, np.pi):
+        v = posture.copy()
+        v[chain.THETA6] += turn
+        if lo6 <= v[chain.THETA6] <= hi6:
+            yield v
