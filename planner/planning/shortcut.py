@@ -31,11 +31,11 @@ Array = NDArray[np.float64]
 #: How far back along the incoming segment a cut may start (fractions of the segment, longest first),
 #: and how far along the outgoing one it may end.
 CUT_FRACTIONS = (1.0, 0.75, 0.55, 0.4, 0.28, 0.18, 0.1)
-CUT_ENDS = (1.0, 0.55, 0.28)
+CUT_ENDS = (1.0, 0.5)
 #: A cut must save at least this much estimated time [s].
 MIN_GAIN_S = 0.05
 #: Passes over the corners (each stops early when it changed nothing).
-PASSES = 3
+PASSES = 2
 
 
 @dataclass(frozen=True)
