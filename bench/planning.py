@@ -48,6 +48,7 @@ import yaml
 from planner.collision.clearance_grid import cache_dir
 from planner.exceptions import PlannerError
 from planner.pipeline import Planner
+from planner.planning.goals import line_speed_bounds
 from planner.scenario import ResolvedScenario, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "tests" / "scenarios"
@@ -131,6 +132,63 @@ def stats(runs: list[dict[str, Any]]) -> dict[str, Any]:
             gate_pass_fraction=sum(r["gate_passed"] for r in ok) / len(ok),
         )
     return s
+
+
+def insertion_bounds(names: list[str]) -> None:
+    """Why no insertion comes near the single-drive bound: the line's own speed limit, by linear programs.
+
+    For each insertion scenario (seed 0), at 20 configurations of the executed insertion line: the fastest
+    the payload can move along the line with its orientation fixed within the drive velocity limits, and
+    the fastest the rail can move meanwhile (:func:`planner.planning.goals.line_speed_bounds`). With the
+    rail unable to move during the line, no trajectory beats the single-drive bound plus length / speed.
+    """
+    rows = []
+    for name in names:
+        sc = load_scenario(SCENARIOS / f"{name}.yaml")
+        if sc.approach_direction is None or sc.T_base_payload_goal is None or sc.payload is None:
+            continue
+        res = Planner(sc).plan()
+        d = sc.approach_direction / np.linalg.norm(sc.approach_direction)
+        q = res.profile.joints
+        p = (sc.robot.fk_batch(q) @ sc.payload.T_tool_payload)[:, :3, 3]
+        back = -((p - p[-1]) @ d)
+        k = int(np.flatnonzero(back >= sc.approach_distance_m - 1e-3)[-1])
+        b = line_speed_bounds(sc.robot, q[k :: max(1, (len(q) - k) // 20)], sc.payload.T_tool_payload, d)
+        executed = float(np.max(np.diff(p[k:] @ d) / np.diff(res.profile.t[k:])))
+        lb = float(res.report["single_drive_lower_bound_s"])
+        t_line = sc.approach_distance_m / float(b.line_m_s.max())
+        rows.append(
+            [
+                name,
+                fmt(sc.approach_distance_m, ".2f"),
+                fmt(float(b.line_m_s.max()), ".3f"),
+                fmt(executed, ".3f"),
+                fmt(float(b.rail_m_s.max()), ".3f"),
+                fmt(t_line, ".2f"),
+                fmt(lb, ".2f"),
+                fmt((lb + t_line) / lb, ".2f"),
+                fmt(res.profile.duration_s / (lb + t_line), ".2f"),
+            ]
+        )
+    if not rows:
+        return
+    print(
+        "\ninsertions: the line's own limit (linear programs at the executed line's configurations, seed 0)"
+    )
+    table(
+        [
+            "scenario",
+            "line [m]",
+            "max line speed [m/s]",
+            "executed max [m/s]",
+            "max rail speed on line [m/s]",
+            "line >= [s]",
+            "single-drive LB [s]",
+            "(LB + line) / LB",
+            "duration / (LB + line)",
+        ],
+        rows,
+    )
 
 
 def fmt(value: Any, spec: str) -> str:
@@ -357,6 +415,7 @@ def main(argv: list[str] | None = None) -> None:
         "t ratio: median planning time, every run; dur ratio: median duration, successful runs; "
         "< 1 means the product is faster / shorter"
     )
+    insertion_bounds(names)
     print(f"\n{TARGETS}")
     wall = time.perf_counter() - t_bench
     print(f"benchmark wall time {wall:.0f} s")

@@ -639,9 +639,15 @@ class Planner:
                 ok = ok and bool(np.all(self.forces.ratios(qs) <= self.forces.fraction))
                 # A curved run deviates from its chord: runs with up to BLEND_MAX_EXTRA_M of extra
                 # clearance (halved where that fails) take a few checks rather than one per piece.
-                ok = ok and self.world.check_path(
-                    qs, self.plan_clearance + 0.001, self.opts.motion_margin_m, max_extra_m=BLEND_MAX_EXTRA_M
-                ).valid
+                ok = (
+                    ok
+                    and self.world.check_path(
+                        qs,
+                        self.plan_clearance + 0.001,
+                        self.opts.motion_margin_m,
+                        max_extra_m=BLEND_MAX_EXTRA_M,
+                    ).valid
+                )
                 if not ok:
                     level[c] = min(level[c] + 1, len(BLEND_FRACTIONS) - 1)
                     failed = True

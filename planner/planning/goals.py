@@ -27,6 +27,7 @@ from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics.closed_form import redundant_family
 from planner.redundancy.ik import IKOptions, comfort_margins, family_candidates, normalised_margin, track_pose
+from planner.robots.cabin8 import Cabin8
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -217,3 +218,45 @@ def track_approach(
     probe = line[:: max(1, len(line) // 6)]
     c = float(np.min(world.clearance_profile(probe))) if world.cabin is not None else float("inf")
     return GoalCandidate(goal.q, goal.min_margin, line, distance_m - s[::-1], c)
+
+
+@dataclass(frozen=True)
+class LineSpeedBound:
+    """Fastest motions along an insertion line within the drive velocity limits, per configuration."""
+
+    line_m_s: Array  #: (N,) largest payload speed along the line (orientation fixed) [m/s]
+    rail_m_s: Array  #: (N,) largest |rail speed| while the payload moves along the line [m/s]
+
+
+def line_speed_bounds(robot: Cabin8, qs: Array, T_tool_payload: Array, direction: Array) -> LineSpeedBound:
+    """Linear programs over the drive velocity box at configurations on an insertion line.
+
+    With the payload frame's twist constrained to (v d, 0) (moving along the unit direction d at speed
+    v >= 0, orientation fixed), |G q_dot| <= v_max for the drives: the largest v, and the largest rail
+    speed |d1_dot| such a motion allows. A lower bound on the time of any insertion through these
+    configurations is the line's length over the largest v; a rail speed of 0 means the rail cannot move
+    while the payload is on the line.
+    """
+    from scipy.optimize import linprog
+
+    d = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    line, rail = [], []
+    for q in np.atleast_2d(qs):
+        T = robot.fk(q)
+        r = (T @ T_tool_payload)[:3, 3] - T[:3, 3]
+        shift = np.eye(6)  # the payload point's velocity: v_tool + omega x r = v_tool - [r]x omega
+        shift[:3, 3:] = -np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        J = shift @ robot.jacobian(q)
+        G, _ = robot.drive_map_jacobian(q)
+        # Variables (q_dot (8), v): J q_dot - v (d, 0) = 0, -v_max <= G q_dot <= v_max, v >= 0.
+        A_eq = np.hstack([J, -np.concatenate([d, np.zeros(3)])[:, None]])
+        A_ub = np.vstack([np.hstack([G, np.zeros((8, 1))]), np.hstack([-G, np.zeros((8, 1))])])
+        b_ub = np.concatenate([robot.limits.v_max, robot.limits.v_max])
+        bounds = [(None, None)] * 8 + [(0.0, None)]
+        best = []
+        for c in (np.r_[np.zeros(8), -1.0], np.r_[-1.0, np.zeros(8)], np.r_[1.0, np.zeros(8)]):
+            res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=np.zeros(6), bounds=bounds, method="highs")
+            best.append(-float(res.fun) if res.status == 0 else float("nan"))
+        line.append(best[0])
+        rail.append(max(0.0, best[1], best[2]))
+    return LineSpeedBound(np.array(line), np.array(rail))

@@ -9,7 +9,13 @@ import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
-from planner.planning.goals import GoalCandidate, StaticForceCheck, approach_lines, goal_configurations
+from planner.planning.goals import (
+    GoalCandidate,
+    StaticForceCheck,
+    approach_lines,
+    goal_configurations,
+    line_speed_bounds,
+)
 from planner.redundancy.ik import normalised_margin
 from planner.scenario import ResolvedScenario, load_scenario
 from tests.conftest import admissible_joints
@@ -156,3 +162,28 @@ def test_static_force_ratios_equal_inverse_dynamics_at_rest(
     # The payload's weight shows: holding it changes the drive forces (the check is not the bare arm's).
     bare = StaticForceCheck(dyn, None)
     assert np.max(np.abs(forces.ratios(qs) - bare.ratios(qs))) > 0.01
+
+
+def test_line_speed_bounds_hold_the_planned_line_and_the_rail(
+    scenario: ResolvedScenario, lines: list[GoalCandidate]
+) -> None:
+    """The linear programs' speeds are attainable and are upper bounds.
+
+    The planned line's own speed at full drive velocity never exceeds the bound; the rail cannot move
+    while the payload is on this line; along the rail, the rail alone moves the payload at its v_max.
+    """
+    assert scenario.payload is not None and scenario.approach_direction is not None
+    robot, T_tp = scenario.robot, scenario.payload.T_tool_payload
+    line = lines[0].line
+    assert line is not None
+    qs = line[0] + np.linspace(0.0, 1.0, 5)[:, None] * (line[1] - line[0])
+    b = line_speed_bounds(robot, qs, T_tp, scenario.approach_direction)
+    # The planned (straight joint-space) line at its fastest: the drive nearest its limit at v_max.
+    G, _ = robot.drive_map_jacobian(qs[0])
+    du = G @ (line[1] - line[0])
+    planned = scenario.approach_distance_m / float(np.max(np.abs(du) / robot.limits.v_max))
+    assert np.all(b.line_m_s >= planned - 1e-9) and np.all(b.line_m_s < 1.0)
+    np.testing.assert_allclose(b.rail_m_s, 0.0, atol=1e-9)
+    along_rail = line_speed_bounds(robot, qs[:1], T_tp, np.array([0.0, 0.0, 1.0]))
+    assert along_rail.line_m_s[0] >= robot.limits.v_max[0] - 1e-9
+    assert along_rail.rail_m_s[0] >= robot.limits.v_max[0] - 1e-9
