@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
+import weakref
 from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
@@ -140,12 +141,11 @@ class Distance:
     point_b: Array = field(repr=False)
 
 
-def _pose_function(kin: Cabin8Kinematics, bodies: BodySet) -> ca.Function:
-    """Compiled (q, T_tool_box) -> body poses and the admissibility vector c(q).
+def _pose_function(kin: Cabin8Kinematics, names: tuple[str, ...]) -> ca.Function:
+    """Compiled (q, T_tool_box) -> body poses and the admissibility vector c(q) of the named bodies.
 
     Body poses: R column-major, p, capsule length -- 13 values per body.
     """
-    names = bodies.names
     q = kin.q_sx
     T_tb = ca.SX.sym("T_tool_box", 4, 4)
     frames = kin.frames_sx
@@ -191,6 +191,24 @@ def _pose_function(kin: Cabin8Kinematics, bodies: BodySet) -> ca.Function:
         [ca.vertcat(*outs), kin.constraints_sx(q)],
         {"cse": True},
     )
+
+
+#: Compiled pose functions by kinematic model and body list (building one takes ~10 ms).
+_POSE_FUNCTIONS: weakref.WeakKeyDictionary[
+    Cabin8Kinematics, dict[tuple[str, ...], tuple[ca.Function, FastFunction]]
+]
+_POSE_FUNCTIONS = weakref.WeakKeyDictionary()
+
+
+def _pose_functions(kin: Cabin8Kinematics, names: tuple[str, ...]) -> tuple[ca.Function, FastFunction]:
+    """The pose function of :func:`_pose_function` and its buffered wrapper, built once per model."""
+    by_names = _POSE_FUNCTIONS.setdefault(kin, {})
+    key = tuple(names)
+    entry = by_names.get(key)
+    if entry is None:
+        fn = _pose_function(kin, key)
+        entry = by_names[key] = (fn, FastFunction(fn))
+    return entry
 
 
 @cache
@@ -269,8 +287,7 @@ class CollisionWorld:
         self.payload = payload
         self.bodies: BodySet = cabin8_bodies(robot, payload)
         self.names = self.bodies.names
-        self._pose_fn = _pose_function(robot.kin, self.bodies)
-        self._pose_fast = FastFunction(self._pose_fn)
+        self._pose_fn, self._pose_fast = _pose_functions(robot.kin, self.bodies.names)
         self._T_tool_box = payload.T_tool_box if payload is not None else np.eye(4)
         self._cabin_obj: fcl.CollisionObject | None = None
         self._grid: ClearanceGrid | None = None
@@ -655,10 +672,8 @@ class CollisionWorld:
 
     def _state_reference(self, q: Array, threshold: float) -> _State:
         """:meth:`_state` by the reference route: CasADi pose function, then the bound kernel."""
-        slot = self._pose_fast._slot()
-        if not getattr(slot, "bound", False):
-            slot.args[1][:] = self._T_tool_box.ravel(order="F")
-            slot.bound = True  # type: ignore[attr-defined]
+        slot = self._pose_fast._slot()  # shared by every world of this model: the payload box each time
+        slot.args[1][:] = self._T_tool_box.ravel(order="F")
         slot.args[0][:] = q
         slot.trigger()
         flat = slot.res[0].reshape(self._n_bodies, 13).copy()

@@ -208,3 +208,19 @@ def test_certain_contacts_are_real(robot: Cabin8, worlds: tuple[CollisionWorld, 
             if code == _kernels.CONTACT:
                 assert not worlds[1].is_valid(q, clearance)
     assert found > 20  # the test recognises a good share of the contacts
+
+
+def test_worlds_of_one_model_share_its_pose_function_but_not_their_payloads(robot: Cabin8) -> None:
+    """Two payloads on one robot model: one compiled pose function, each world its own payload's poses."""
+    small = PayloadGeometry((0.2, 0.2, 0.2), T_tool_payload=np.eye(4), mass=10.0)
+    grasp = np.eye(4)
+    grasp[:3, 3] = [0.0, 0.0, 0.4]
+    large = PayloadGeometry((0.5, 0.4, 0.6), T_tool_payload=grasp, mass=80.0)
+    a_ref, b_ref = (CollisionWorld(robot, None, p, reference=True) for p in (small, large))
+    a, b = (CollisionWorld(robot, None, p) for p in (small, large))
+    assert a_ref._pose_fn is b_ref._pose_fn is a._pose_fn
+    for q in along_rail(robot, 20, seed=41):  # interleaved: the shared buffers must not carry a payload over
+        for ref, fast in ((a_ref, a), (b_ref, b)):
+            np.testing.assert_allclose(
+                ref._state(q, 0.06).flat, fast._state(q, 0.06).flat, rtol=0, atol=1e-12
+            )
