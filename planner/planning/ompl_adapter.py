@@ -171,41 +171,6 @@ def _simplify(simplifier: og.PathSimplifier, path: og.PathGeometric, deadline: f
             break
 
 
-def simplify_waypoints(
-    world: CollisionWorld,
-    waypoints: Array,
-    *,
-    clearance: float,
-    motion_margin: float,
-    seed: int,
-    joint_lower: Array,
-    joint_upper: Array,
-    time_limit_s: float,
-    state_ok: Callable[[Array], bool] | None = None,
-    motion_ok: Callable[[Array, Array], bool] | None = None,
-) -> Array:
-    """Shortcut a certified polyline (N, 8) with OMPL's simplifier and the same certified checks.
-
-    Partial shortcuts move a subset of the joints earlier or later along the path -- e.g. a posture
-    change overlapping a rail move -- so the path gets shorter in (scaled) time. Endpoints are kept exactly.
-    """
-    t0 = time.perf_counter()
-    space, _, si, _, scale = _problem(
-        world, clearance, motion_margin, seed, joint_lower, joint_upper, state_ok, motion_ok
-    )
-    path = og.PathGeometric(si)
-    states = []
-    for q in waypoints:
-        st = space.allocState()
-        _set(st, q, scale)
-        path.append(st)
-        states.append(st)
-    _simplify(og.PathSimplifier(si), path, t0 + time_limit_s)
-    qs = np.array([_to_q(s, scale) for s in path.getStates()])
-    qs[0], qs[-1] = waypoints[0], waypoints[-1]
-    return qs
-
-
 def plan_joint_path(
     world: CollisionWorld,
     q_start: Array,
