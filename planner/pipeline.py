@@ -366,7 +366,7 @@ class Planner:
 
     def _search(self, q_start: Array, targets: list[Array]) -> tuple[Array, int]:
         for k, q in enumerate(targets):
-            if np.allclose(q, q_start, atol=1e-12):
+            if np.allclose(q, q_start, rtol=0.0, atol=1e-12):
                 return np.array([q_start, q]), k
         if self.naive:  # the benchmark's baseline: the plain planner, its raw path
             res = self._ompl(q_start, targets, max_checks=FULL_MOTION_CHECKS)
@@ -455,7 +455,7 @@ class Planner:
 
     def _connect(self, q_a: Array, targets: list[Array]) -> tuple[Array, int] | None:
         for k, q in enumerate(targets):
-            if np.allclose(q, q_a, atol=1e-12):
+            if np.allclose(q, q_a, rtol=0.0, atol=1e-12):
                 return np.array([q_a, q]), k
             if self._motion_ok(q_a, q):
                 return np.array([q_a, q]), k
@@ -511,7 +511,7 @@ class Planner:
             if tail is None:
                 return None
         # Along the ride from where the head joins it to where the tail leaves it (at most one rail move).
-        ride = [tail[0][0]] if not np.allclose(head[-1], tail[0][0], atol=1e-12) else []
+        ride = [tail[0][0]] if not np.allclose(head[-1], tail[0][0], rtol=0.0, atol=1e-12) else []
         # Shortcut here; the caller then cuts the corners for time (OMPL's length-based simplifier, tried
         # here as well, gave the same durations after corner cutting, at 30-50 ms a plan).
         waypoints = self._shortcut(np.vstack([head, *ride, tail[0][1:]]))

@@ -341,9 +341,10 @@ class CollisionWorld:
         self._pair_sph = [np.arange(bounds[k], bounds[k + 1]) for k in range(len(self.bodies.pairs))]
         self._carriage_table: tuple[float, float, Array] | None = None
         if self._cabin_obj is not None:
-            # The table depends on the cabin, the carriage's shape and the rail only: built once per process.
+            # The table depends on the cabin's geometry (the vertices as loaded, in the base frame: the file
+            # hash alone would not tell units apart), the carriage's shape and the rail: built once.
             table_key = (
-                key[0],
+                key[0] + hashlib.sha256(key[1] + key[2]).hexdigest(),
                 repr(self.bodies.shapes[self._carriage]),
                 robot.limits.lower[0],
                 robot.limits.upper[0],

@@ -154,36 +154,44 @@ def find_transit(
 
     lo6, hi6 = robot.limits.lower[chain.THETA6], robot.limits.upper[chain.THETA6]
     middle = 0.5 * (np.asarray(q_start, dtype=float) + np.asarray(q_goal, dtype=float))
-    # (estimated standstill, rank, swept already, posture)
-    riders: list[tuple[float, int, bool, Array]] = []
+    def certified(batch: list[tuple[float, int, bool, Array]]) -> Transit | None:
+        """The batch's best rider (least estimated standstill) whose ride is certified, if any."""
+        for _, _, swept, posture in sorted(batch, key=lambda r: (r[0], r[1], not r[2])):
+            if deadline():
+                return None
+            if not swept and not rides(posture):
+                continue
+            q_a, q_b = posture.copy(), posture.copy()
+            q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
+            if motion_clear(world, q_a, q_b, clearance, motion_margin) and segment_ok(q_a, q_b):
+                log.info("transit posture found after %d candidates, %d state checks", tried, checks)
+                return Transit(q_a, q_b, tried, checks)
+        return None
+
+    # Riders in batches: (estimated standstill, rank, swept already, posture). A batch is judged when it
+    # holds the start's or goal's own posture (no change on that side: the best there is) or n_riders pool
+    # postures; when none of its rides is certified (the sweep samples the rail, the certification proves
+    # it), the pool sweep goes on.
+    batch: list[tuple[float, int, bool, Array]] = []
     tried = found = 0
     for tried, posture in enumerate(candidates(), start=1):
         if deadline():
             return None
         if not rides(posture):
             continue
-        # The start's or the goal's own posture needs no change on that side: the best it gets.
-        riders.append((change_time(posture), tried, True, posture))
-        if tried <= 2:
-            break
-        # Variants nearer the start's and goal's postures (a random posture is compact for some joints and
-        # needlessly far off in others), and its twins with the wrist turned half a turn (a payload
-        # symmetric about the tool axis fits alike): swept only when their turn comes (below).
-        riders += [(change_time(v), tried, False, v) for v in _variants(posture, middle, lo6, hi6)]
-        found += 1
-        if found >= n_riders:
-            break
-    for _, _, swept, posture in sorted(riders, key=lambda r: (r[0], r[1], not r[2])):
-        if deadline():
-            return None
-        if not swept and not rides(posture):
-            continue
-        q_a, q_b = posture.copy(), posture.copy()
-        q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
-        if motion_clear(world, q_a, q_b, clearance, motion_margin) and segment_ok(q_a, q_b):
-            log.info("transit posture found after %d candidates, %d state checks", tried, checks)
-            return Transit(q_a, q_b, tried, checks)
-    return None
+        batch.append((change_time(posture), tried, True, posture))
+        if tried > 2:
+            # Variants nearer the start's and goal's postures (a random posture is compact for some joints
+            # and needlessly far off in others), and its twins with the wrist turned half a turn (a payload
+            # symmetric about the tool axis fits alike): swept only when their turn comes.
+            batch += [(change_time(v), tried, False, v) for v in _variants(posture, middle, lo6, hi6)]
+            found += 1
+        if tried <= 2 or found >= n_riders:
+            result = certified(batch)
+            if result is not None or deadline():
+                return result
+            batch, found = [], 0
+    return certified(batch) if batch else None
 
 
 #: How far a rider's variants move toward the start's and goal's mean posture (all joints but the rail).

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.mesh_loader import load_mesh
+from planner.collision.mesh_loader import LoadedMesh, load_mesh
 from planner.collision.world import CollisionWorld
 from planner.kinematics.parallel import stage_points
 from planner.robots.cabin8 import Cabin8
@@ -38,8 +38,7 @@ def free(robot: Cabin8, payload: PayloadGeometry) -> CollisionWorld:
     return CollisionWorld(robot, None, payload)
 
 
-@pytest.fixture(scope="module")
-def plate_world(robot: Cabin8, payload: PayloadGeometry) -> CollisionWorld:
+def plate_mesh(robot: Cabin8) -> LoadedMesh:
     """A 2 mm plate across link AB's path at d1 = 2.55 m (as in the thin-wall motion test of test_world)."""
     q = home(robot, d1=2.0)
     with np.errstate(invalid="ignore"):
@@ -50,8 +49,12 @@ def plate_world(robot: Cabin8, payload: PayloadGeometry) -> CollisionWorld:
         extents=(0.02, 0.02, 0.002),
         transform=trimesh.transformations.translation_matrix((spot[0], spot[1], PLATE_Z_M)),
     )
-    mesh = load_mesh(io.BytesIO(plate.export(file_type="stl")).getvalue(), units="m", name="plate.stl")
-    return CollisionWorld(robot, mesh, payload)
+    return load_mesh(io.BytesIO(plate.export(file_type="stl")).getvalue(), units="m", name="plate.stl")
+
+
+@pytest.fixture(scope="module")
+def plate_world(robot: Cabin8, payload: PayloadGeometry) -> CollisionWorld:
+    return CollisionWorld(robot, plate_mesh(robot), payload)
 
 
 def rail_samples(robot: Cabin8, d1_from: float, d1_to: float, n: int) -> np.ndarray:
@@ -172,3 +175,18 @@ def test_a_run_refused_only_for_its_extra_is_split_not_refused(
     rep = plate_world.check_path(qs, CLEARANCE_M, MOTION_MARGIN_M, max_run=64, max_extra_m=0.02)
     assert rep.valid and rep.last_checked == len(qs) - 1
     assert rep.motion_checks > 1
+
+
+def test_one_cabin_file_in_two_units_gets_two_carriage_tables(robot: Cabin8) -> None:
+    """The carriage's clearance table follows the geometry as loaded, not the file's bytes alone."""
+    slab = trimesh.creation.box(
+        extents=(2.0, 0.05, 12.0), transform=trimesh.transformations.translation_matrix((0.0, -0.4, 5.0))
+    )
+    data = io.BytesIO(slab.export(file_type="stl")).getvalue()
+    in_m = CollisionWorld(robot, load_mesh(data, units="m", name="cabin.stl"), None)
+    in_mm = CollisionWorld(robot, load_mesh(data, units="mm", name="cabin.stl"), None)
+    assert in_m._carriage_table is not in_mm._carriage_table
+    q = home(robot, d1=0.006)  # on the millimetre slab's carriage: a contact
+    reference = CollisionWorld(robot, load_mesh(data, units="mm", name="cabin.stl"), None, reference=True)
+    assert not reference.check_state(q, CLEARANCE_M).valid
+    assert not in_mm.is_valid(q, CLEARANCE_M) and not in_mm.check_state(q, CLEARANCE_M).valid

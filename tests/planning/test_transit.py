@@ -121,3 +121,32 @@ def test_of_the_riding_postures_the_one_quickest_to_reach_is_taken(
 
     assert change(transit) <= change(compact)
     assert compactness(world, compact.q_a[None, :])[0] <= compactness(world, transit.q_a[None, :])[0]
+
+
+def test_a_start_posture_that_rides_only_at_the_sweep_samples_does_not_end_the_search() -> None:
+    """The start's own posture passes the sampled sweep but its ride is not certified: the pool is swept.
+
+    The posture is home with the platform 15 cm to the side; along the rail it clears a 2 mm plate at
+    every sampled d1 by the clearance, but not by the clearance plus the certification margin.
+    """
+    from planner.collision.bodies import PayloadGeometry
+    from planner.planning.motion import motion_clear
+    from planner.robots.cabin8 import Cabin8
+    from tests.collision.test_check_path import home, plate_mesh
+
+    robot = Cabin8()
+    grasp = np.eye(4)
+    grasp[2, 3] = 0.30
+    world = CollisionWorld(robot, plate_mesh(robot), PayloadGeometry((0.45, 0.35, 0.5), T_tool_payload=grasp))
+    clearance, margin = 0.01, 0.005
+    q_start, q_goal = home(robot, d1=1.0), home(robot, d1=4.0)
+    q_start[1] -= 0.15
+    on_rail = np.repeat(q_start[None, :], 61, axis=0)
+    on_rail[:, 0] = np.linspace(1.0, 4.0, 61)  # the sweep's rail positions (5 cm)
+    assert all(world.is_valid(q, clearance) for q in on_rail)
+    ride_end = q_start.copy()
+    ride_end[0] = 4.0
+    assert not motion_clear(world, q_start, ride_end, clearance, margin)
+    found = find_transit(world, q_start, q_goal, clearance, margin, lambda q: True, lambda a, b: True, seed=0)
+    assert found is not None and found.candidates_tried > 2
+    assert motion_clear(world, found.q_a, found.q_b, clearance, margin)
