@@ -96,7 +96,7 @@ class MotionReport:
 class PathReport:
     """Result of :meth:`CollisionWorld.check_path`.
 
-    ``first_bad`` is the index of the sample starting the first run that failed (None if valid).
+    ``first_bad`` is the index of the sample starting the first piece that failed (None if valid).
     """
 
     valid: bool
