@@ -613,12 +613,17 @@ class Planner:
                 for a, b in zip(waypoints[:-1], waypoints[1:], strict=True)
             ]
         level = np.zeros(n_corners, dtype=int)
+        # A corner's blend depends on its own fraction only (a blend takes at most 0.45 of each neighbouring
+        # segment, so two never meet): a verdict holds while the other corners shrink.
+        verdicts: dict[tuple[int, int], bool] = {}
         while True:
             frac = np.array([BLEND_FRACTIONS[k] for k in level])
             path, blend_index = blended_polyline(self.robot, waypoints, frac)
             failed = False
             for c, idx in enumerate(blend_index):
                 if idx < 0:
+                    continue
+                if verdicts.get((c, int(level[c]))):
                     continue
                 piece = path.pieces[idx]
                 s = np.linspace(0.0, piece.length, 17)
@@ -636,6 +641,7 @@ class Planner:
                         max_extra_m=BLEND_MAX_EXTRA_M,
                     ).valid
                 )
+                verdicts[c, int(level[c])] = ok
                 if not ok:
                     level[c] = min(level[c] + 1, len(BLEND_FRACTIONS) - 1)
                     failed = True
