@@ -32,7 +32,7 @@ Array = NDArray[np.float64]
 #: and how far along the outgoing one it may end.
 CUT_FRACTIONS = (1.0, 0.75, 0.55, 0.4, 0.28, 0.18, 0.1)
 CUT_ENDS = (1.0, 0.5)
-#: A cut must save at least this much estimated time [s] (0.05 s cut as short and checked a fifth more).
+#: A cut must save at least this much estimated time [s] (0.05 s gave the same durations, 20% more checks).
 MIN_GAIN_S = 0.2
 #: Passes over the corners (each stops early when it changed nothing).
 PASSES = 2
