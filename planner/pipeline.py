@@ -6,8 +6,10 @@ Stages (each reported through the ``progress`` callback):
    and statically holdable within the drive force limits; a pose goal becomes several good exact goal
    configurations (:mod:`planner.planning.goals`); with an approach each is tracked back along the
    insertion line and the best line (largest clearance) gives the pre-insertion configurations.
-2. ``search``: the straight joint-space motion when it is certified clear, else OMPL
-   (:mod:`planner.planning.ompl_adapter`) to any of the pre-insertion / goal configurations, shortcut.
+2. ``search``: the straight joint-space motion when it is certified clear; for a long rail move a transit
+   posture (:mod:`planner.planning.transit`) joined and left while the rail moves; else OMPL
+   (:mod:`planner.planning.ompl_adapter`) to any of the pre-insertion / goal configurations; shortcut,
+   then corners cut for time (:mod:`planner.planning.shortcut`).
 3. ``smooth``: corners become certified quadratic blends (shrunk, or left sharp with a stop, where a
    blend would not be clear).
 4. ``timing``: TOPP-RA per leg (rest to rest; legs split at sharp corners and before the approach).
