@@ -774,6 +774,33 @@ def packed_poses(
         body_poses(qs[i], u[0], u[1], u[2], u[3], poses[i], c[i])
 
 
+@njit(cache=True, fastmath=False, error_model="numpy")
+def run_extent(qs: np.ndarray, i: int, j: int, rho: np.ndarray, max_extra: float) -> tuple[int, float]:
+    """The run of :meth:`CollisionWorld.check_path` from sample i: (its last sample, its extra clearance).
+
+    Starting at j, the run is halved until the samples' reach-weighted deviation from the chord
+    q_i -> q_j (parameterised alike: sample k at (k - i) / (j - i)), doubled for self pairs, plus 1e-6, is
+    at most ``max_extra``; a single piece has no extra.
+    """
+    n_j = qs.shape[1]
+    while j > i + 1:
+        m = j - i
+        worst = 0.0
+        for a in range(n_j):
+            e = 0.0
+            step = qs[j, a] - qs[i, a]
+            for k in range(1, m):
+                d = abs(qs[i + k, a] - (qs[i, a] + (k / m) * step))
+                if d > e:
+                    e = d
+            worst += rho[a] * e
+        extra = worst * 2.0 + 1e-6
+        if extra <= max_extra:
+            return j, extra
+        j = i + max(1, m // 2)
+    return j, 0.0
+
+
 #: Codes of :func:`packed_check`.
 CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
 

@@ -1002,20 +1002,12 @@ class CollisionWorld:
         ratio = float(np.nanmax(ratios)) if np.all(np.isfinite(ratios)) else 1.0
         rho_all = segment_reach_bounds(self.robot, self.bodies, min(ratio + 0.02, 0.999))[0]
         rho_joint = np.max(rho_all, axis=0)  # per joint, the largest reach of any body
+        qs = np.ascontiguousarray(qs)
+        rho_joint = np.ascontiguousarray(rho_joint, dtype=float)
         i, checks, cap = 0, 0, max_run
         while i < n - 1:
-            j = min(n - 1, i + cap)
-            while True:
-                if j == i + 1:
-                    extra = 0.0
-                    break
-                t = np.linspace(0.0, 1.0, j - i + 1)[:, None]
-                chord = qs[i] + t * (qs[j] - qs[i])
-                e = np.max(np.abs(qs[i : j + 1] - chord), axis=0)
-                extra = float(rho_joint @ e) * 2.0 + 1e-6  # both bodies of a self pair may move
-                if extra <= max_extra_m:
-                    break
-                j = i + max(1, (j - i) // 2)
+            # Both bodies of a self pair may move: the kernel doubles the reach-weighted deviation.
+            j, extra = _kernels.run_extent(qs, i, min(n - 1, i + cap), rho_joint, float(max_extra_m))
             motion = self.check_motion(
                 qs[i],
                 qs[j],

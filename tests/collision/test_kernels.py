@@ -224,3 +224,26 @@ def test_worlds_of_one_model_share_its_pose_function_but_not_their_payloads(robo
             np.testing.assert_allclose(
                 ref._state(q, 0.06).flat, fast._state(q, 0.06).flat, rtol=0, atol=1e-12
             )
+
+
+def test_run_extent_is_the_halving_rule_of_check_path() -> None:
+    """The compiled run rule equals the numpy one: halve until the reach-weighted chord deviation fits."""
+    rng = np.random.default_rng(51)
+    rho = rng.uniform(0.2, 2.0, 8)
+    for trial in range(200):
+        n = int(rng.integers(2, 300))
+        qs = np.cumsum(rng.normal(0.0, 10.0 ** rng.uniform(-5, -2), (n, 8)), axis=0)
+        i = int(rng.integers(0, n - 1))
+        j0 = int(min(n - 1, i + rng.integers(1, 200)))
+        max_extra = float(10.0 ** rng.uniform(-4, -1))
+        j, extra = j0, 0.0
+        while j > i + 1:  # the reference: numpy, as check_path had it
+            t = np.linspace(0.0, 1.0, j - i + 1)[:, None]
+            e = np.max(np.abs(qs[i : j + 1] - (qs[i] + t * (qs[j] - qs[i]))), axis=0)
+            extra = float(rho @ e) * 2.0 + 1e-6
+            if extra <= max_extra:
+                break
+            j, extra = i + max(1, (j - i) // 2), 0.0
+        got_j, got_extra = _kernels.run_extent(qs, i, j0, rho, max_extra)
+        assert got_j == j, trial
+        assert got_extra == pytest.approx(extra, rel=1e-9, abs=1e-15)
