@@ -154,6 +154,7 @@ def find_transit(
 
     lo6, hi6 = robot.limits.lower[chain.THETA6], robot.limits.upper[chain.THETA6]
     middle = 0.5 * (np.asarray(q_start, dtype=float) + np.asarray(q_goal, dtype=float))
+
     def certified(batch: list[tuple[float, int, bool, Array]]) -> Transit | None:
         """The batch's best rider (least estimated standstill) whose ride is certified, if any."""
         for _, _, swept, posture in sorted(batch, key=lambda r: (r[0], r[1], not r[2])):
