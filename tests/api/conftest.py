@@ -25,6 +25,18 @@ def scenario(name: str, **options: Any) -> dict[str, Any]:
     return data
 
 
+def stuck(seed: int, time_limit_s: float = 20.0) -> dict[str, Any]:
+    """The hatch pass with a payload too bulky for the hatch: the search runs to its time limit.
+
+    Valid start and goal, so the job runs (rather than being refused at once) for as long as the test
+    needs a busy worker, however fast planning gets (measured: no path within 8 s on seeds 11-13).
+    """
+    data = scenario("hatch-pass", seed=seed, time_limit_s=time_limit_s)
+    data["payload"]["box"] = [0.5, 0.5, 0.45]
+    data["payload"]["grasp"]["position"] = [0.0, 0.0, 0.3]
+    return data
+
+
 def free_transfer(d1_goal: float = 1.6, **options: Any) -> dict[str, Any]:
     """A short free-space rail move without payload: plans in well under a second."""
     home = {"d1": 1.0, "x1": -0.46, "x2": 0.46, "x3": -0.09, "theta3": 1.2, "theta4": -0.8, "d5": -0.25}

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from planner.robots import load_robot
-from tests.api.conftest import Service, free_transfer, make_settings, scenario, start_service, wait_for
+from tests.api.conftest import Service, free_transfer, make_settings, scenario, start_service, stuck, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -93,12 +93,7 @@ def test_hard_limit_kills_the_job_and_the_next_one_runs(svc: Service) -> None:
 
 
 def test_cancel_running_job_kills_it_and_health_stays_fast(svc: Service) -> None:
-    ids = [
-        svc.client.post("/api/v1/plans", json=scenario("aisle-bay-insert", seed=s), headers=svc.h()).json()[
-            "id"
-        ]
-        for s in (11, 12)
-    ]
+    ids = [svc.client.post("/api/v1/plans", json=stuck(s), headers=svc.h()).json()["id"] for s in (11, 12)]
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         states = [svc.client.get(f"/api/v1/plans/{i}", headers=svc.h()).json()["status"] for i in ids]

@@ -101,7 +101,10 @@ def test_sigkill_mid_run_then_restart_loses_nothing(server: Server) -> None:
     key = (server.data_dir / "local-api-key").read_text().strip()
     assert key in server.log.read_text()  # the local default key is printed at start-up
     h = {"X-API-Key": key}
-    running = httpx.post(f"{server.url}/api/v1/plans", json=scenario("aisle-transfer"), headers=h, timeout=30)
+    # The hatch pass without the transit posture (plain OMPL): a few seconds, long enough to be caught
+    # running however fast the other scenarios plan.
+    slow = scenario("hatch-pass", simplify=False, seed=11)
+    running = httpx.post(f"{server.url}/api/v1/plans", json=slow, headers=h, timeout=30)
     queued = httpx.post(f"{server.url}/api/v1/plans", json=free_transfer(), headers=h, timeout=30)
     assert running.status_code == queued.status_code == 202
     a, b = running.json()["id"], queued.json()["id"]
