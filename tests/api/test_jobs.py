@@ -94,14 +94,16 @@ def test_hard_limit_kills_the_job_and_the_next_one_runs(svc: Service) -> None:
 
 def test_cancel_running_job_kills_it_and_health_stays_fast(svc: Service) -> None:
     ids = [svc.client.post("/api/v1/plans", json=stuck(s), headers=svc.h()).json()["id"] for s in (11, 12)]
+    # A job is "running" from its claim on; its worker process is counted once it has started (a cold
+    # forkserver takes a moment): wait for both.
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         states = [svc.client.get(f"/api/v1/plans/{i}", headers=svc.h()).json()["status"] for i in ids]
-        if states == ["running", "running"]:
+        busy = svc.client.get("/api/v1/ready").json()["workers"]["running"]
+        if states == ["running", "running"] and busy == 2:
             break
         time.sleep(0.05)
-    assert states == ["running", "running"]
-    assert svc.client.get("/api/v1/ready").json()["workers"]["running"] == 2
+    assert states == ["running", "running"] and busy == 2, (states, busy)
     latencies = []
     for _ in range(20):  # both workers busy: the event loop still answers at once
         t = time.perf_counter()
