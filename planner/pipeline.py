@@ -558,10 +558,11 @@ class Planner:
         combos.sort()
         verdict: dict[tuple[str, float, int], bool] = {}
 
-        def ok(side: str, f: float, k: int) -> bool:
+        def ok(side: str, f: float, k: int, budget: int) -> bool:
+            """The side's connection certified; False, unchecked, once ``budget`` checks are spent."""
             key = (side, f, k if side == "out" else 0)
             if key not in verdict:
-                if len(verdict) >= RIDE_MAX_CHECKS + 2 * RIDE_SIDE_CHECKS:
+                if len(verdict) >= budget:
                     return False
                 a, b = (q_start, on_ride(f)) if side == "in" else (on_ride(1.0 - f), targets[k])
                 verdict[key] = self._motion_ok(a, b)
@@ -569,31 +570,29 @@ class Planner:
 
         # A side whose plain connection at the ride's end is not clear rarely has a longer diagonal that is
         # (it crosses the same obstacle while the rail moves too): such sides are not tried further.
-        open_in = ok("in", 0.0, 0)
-        open_out = {k for k in range(len(targets)) if ok("out", 0.0, k)}
+        open_in = ok("in", 0.0, 0, RIDE_MAX_CHECKS)
+        open_out = {k for k in range(len(targets)) if ok("out", 0.0, k, RIDE_MAX_CHECKS)}
         combos = [c for c in combos if (open_in or c[1] == 0.0) and (c[3] in open_out or c[2] == 0.0)]
         join: float | None = None
         out: tuple[float, int] | None = None
-        for _, a, b, k in combos:
-            if len(verdict) >= RIDE_MAX_CHECKS and not (("in", a, 0) in verdict and ("out", b, k) in verdict):
-                continue
-            if ok("in", a, k) and ok("out", b, k):
-                join, out = a, (b, k)
-                break
+        pair = next(
+            (
+                (a, b, k)
+                for _, a, b, k in combos
+                if ok("in", a, k, RIDE_MAX_CHECKS) and ok("out", b, k, RIDE_MAX_CHECKS)
+            ),
+            None,
+        )
+        if pair is not None:
+            join, out = pair[0], (pair[1], pair[2])
         else:
             # No pair within the budget: one side alone, the other at the ride's end (f = 0), the side's
             # fractions in order of their own estimate, with a few more checks.
             budget = len(verdict) + RIDE_SIDE_CHECKS
-            for _, a, b, k in combos:
-                if b == 0.0 and (len(verdict) < budget or ("in", a, 0) in verdict) and ok("in", a, k):
-                    join = a
-                    break
+            join = next((a for _, a, b, k in combos if b == 0.0 and ok("in", a, k, budget)), None)
             if join is None:
                 budget = len(verdict) + RIDE_SIDE_CHECKS
-                for _, a, b, k in combos:
-                    if a == 0.0 and (len(verdict) < budget or ("out", b, k) in verdict) and ok("out", b, k):
-                        out = (b, k)
-                        break
+                out = next(((b, k) for _, a, b, k in combos if a == 0.0 and ok("out", b, k, budget)), None)
         self.report.setdefault("search_attempts", []).append(
             {
                 "method": "ride_connections",

@@ -237,8 +237,7 @@ def validate_profile(
     except OutsideWorkspace as exc:
         checks.append(Check("workspace", False, exc.message, None, exc.details.get("index")))
     if q is not None:
-        c = robot.constraint_values_batch(q)
-        bad = ~np.all((c >= robot.c_lower - 1e-9) & (c <= robot.c_upper + 1e-9), axis=1)
+        bad = ~robot.admissible_batch(q)
         if bad.any():
             i = int(np.argmax(bad))
             names = ", ".join(v["name"] for v in robot.violations(q[i]))

@@ -783,8 +783,7 @@ class CollisionWorld:
         n_fine = int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
         t_fine = np.linspace(0.0, 1.0, n_fine + 1)
         qs = q_a[None, :] + t_fine[:, None] * dq[None, :]
-        c = self.robot.constraint_values_batch(qs)
-        bad = ~np.all((c >= self.robot.c_lower - 1e-9) & (c <= self.robot.c_upper + 1e-9), axis=1)
+        bad = ~self.robot.admissible_batch(qs)
         if bad.any():
             i = int(np.argmax(bad))
             return MotionReport(False, n_fine + 1, 0, float(t_fine[i]), tuple(self._limit_contacts(qs[i])))

@@ -54,13 +54,6 @@ def segment_times(robot: Cabin8, q_at: Array, a: Array, b: Array) -> Array:
     return np.max(np.abs(du) / robot.limits.v_max[None, :], axis=1)
 
 
-def polyline_time(robot: Cabin8, waypoints: Array) -> float:
-    """Estimated time of a polyline: the sum of its segments' times (rest at every corner ignored)."""
-    return float(
-        sum(segment_times(robot, a, a, b)[0] for a, b in zip(waypoints[:-1], waypoints[1:], strict=True))
-    )
-
-
 def cut_corners(
     robot: Cabin8,
     waypoints: Array,

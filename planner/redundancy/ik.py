@@ -175,9 +175,7 @@ def random_admissible_joints(
     lo[1:4] = [-0.25, ps.y_range[0], -ps.gamma_max]
     hi[1:4] = [0.25, ps.y_range[1], ps.gamma_max]
     q = rng.uniform(lo, hi, size=(max(max_tries, 0), 8))
-    c = robot.constraint_values_batch(q)
-    ok = np.all((c >= robot.c_lower - 1e-9) & (c <= robot.c_upper + 1e-9), axis=1)
-    return q[ok][:count].reshape(-1, 8)
+    return q[robot.admissible_batch(q)][:count].reshape(-1, 8)
 
 
 @dataclass(frozen=True)

@@ -5,12 +5,20 @@ Every test module defines its own module-scoped ``scenario`` fixture; these buil
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.pipeline import GATE_SLACK_M
 from planner.planning.goals import StaticForceCheck
 from planner.scenario import ResolvedScenario
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+#: The pipeline's planning clearance for the reference scenarios (the requested 0.01 m plus its slack).
+CLEARANCE_M = 0.01 + GATE_SLACK_M
+MOTION_MARGIN_M = 0.005
 
 
 @pytest.fixture(scope="module")

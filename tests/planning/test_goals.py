@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -19,11 +17,7 @@ from planner.planning.goals import (
 from planner.redundancy.ik import normalised_margin
 from planner.scenario import ResolvedScenario, load_scenario
 from tests.conftest import admissible_joints
-
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
-#: The pipeline's planning clearance for the scenario (requested 0.01 m plus its 3 mm slack).
-CLEARANCE_M = 0.013
-MOTION_MARGIN_M = 0.005
+from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
 
 @pytest.fixture(scope="module")

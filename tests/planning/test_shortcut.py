@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,12 +11,10 @@ from planner.collision.world import CollisionWorld
 from planner.kinematics import chain
 from planner.planning.goals import StaticForceCheck
 from planner.planning.motion import motion_clear
-from planner.planning.shortcut import MIN_GAIN_S, cut_corners, polyline_time, segment_times
+from planner.planning.shortcut import MIN_GAIN_S, cut_corners, segment_times
+from planner.robots.cabin8 import Cabin8
 from planner.scenario import ResolvedScenario, load_scenario
-
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
-CLEARANCE_M = 0.013
-MOTION_MARGIN_M = 0.005
+from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
 
 @pytest.fixture(scope="module")
@@ -26,6 +23,13 @@ def scenario() -> ResolvedScenario:
 
 
 Motion = Callable[[np.ndarray, np.ndarray], bool]
+
+
+def polyline_time(robot: Cabin8, waypoints: np.ndarray) -> float:
+    """Estimated time of a polyline: its segments' times summed (the cutter's own estimate)."""
+    return float(
+        sum(segment_times(robot, a, a, b)[0] for a, b in zip(waypoints[:-1], waypoints[1:], strict=True))
+    )
 
 
 def _checker(

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -12,11 +10,8 @@ from planner.planning.goals import StaticForceCheck
 from planner.planning.shortcut import segment_times
 from planner.planning.transit import Transit, compactness, find_transit
 from planner.scenario import ResolvedScenario, load_scenario
+from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
-#: The pipeline's planning clearance for the scenario (requested 0.01 m plus its 3 mm slack).
-CLEARANCE_M = 0.013
-MOTION_MARGIN_M = 0.005
 HATCH_Z_M = 2.0  # the bulkhead of cabin-hatch
 
 
