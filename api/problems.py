@@ -22,7 +22,7 @@ from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from planner.exceptions import PlannerError
+from planner.core.exceptions import PlannerError
 
 _LOG = logging.getLogger(__name__)
 

@@ -3,7 +3,7 @@
 A mesh's id is the SHA-256 of its bytes. The file is written once (atomically, fsynced) as
 ``<data_dir>/meshes/<sha256>.<ext>``, shared by tenants who upload the same bytes; each tenant has its
 own metadata row, so one tenant never sees another's meshes. Uploads are parsed and validated with
-:func:`planner.collision.mesh_loader.load_mesh` before anything is stored.
+:func:`planner.meshio.load.load_mesh` before anything is stored.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from sqlalchemy import func, select
 from api.db import ACTIVE_STATES, Database, Job, Mesh, now_s
 from api.problems import Problem
 from meshes import reference_cabin_path
-from planner.collision.mesh_loader import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
-from planner.exceptions import InvalidInput, InvalidMesh
-from planner.scenario import MeshResolver
+from planner.core.exceptions import InvalidInput, InvalidMesh
+from planner.meshio.load import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
+from planner.scenario.schema import MeshResolver
 
 _LOG = logging.getLogger(__name__)
 
@@ -29,7 +29,7 @@ _LOG = logging.getLogger(__name__)
 def scenario_mesh_resolver(meshes: dict[str, str]) -> MeshResolver:
     """A scenario mesh resolver mapping a tenant's mesh ids to their files, refusing any other file.
 
-    Reference cabin names pass through (``None``: :func:`~planner.scenario.resolve_scenario` finds them);
+    Reference cabin names pass through (``None``: `resolve_scenario` finds them);
     any other name raises, so a scenario sent over HTTP never reads a file of the server.
 
     Args:

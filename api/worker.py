@@ -19,11 +19,11 @@ from pathlib import Path
 from typing import Any
 
 from api.store import scenario_mesh_resolver
-from planner.exceptions import PlannerError
-from planner.output import refusal_document, result_document
-from planner.pipeline import Planner
-from planner.plot import plan_png
-from planner.scenario import ResolvedScenario, resolve_scenario, scenario_from_dict
+from planner.core.exceptions import PlannerError
+from planner.documents.output import refusal_document, result_document
+from planner.documents.plot import plan_png
+from planner.plan.pipeline import Planner
+from planner.scenario.schema import ResolvedScenario, resolve_scenario, scenario_from_dict
 
 _LOG = logging.getLogger(__name__)
 

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.mesh_loader import load_mesh
 from planner.collision.world import CollisionWorld
+from planner.meshio.load import load_mesh
 from planner.redundancy.ik import random_admissible_joints
 from planner.robots.cabin8 import Cabin8
 

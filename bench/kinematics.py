@@ -17,9 +17,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from planner.core.so3 import pose_error
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload, box_inertia
-from planner.kinematics.so3 import pose_error
 from planner.redundancy.compiled_step import IKStep, StepWeights
 from planner.redundancy.configuration import Configuration
 from planner.redundancy.ik import comfort_margins, random_admissible_joints, solve_pose_ik

@@ -12,7 +12,7 @@ alike:
 
 Measured per scenario and mode:
 
-* success rate; a refusal (any :class:`~planner.exceptions.PlannerError`) is a failure, counted by reason
+* success rate; a refusal (any :class:`~planner.core.exceptions.PlannerError`) is a failure, counted by reason
                                                                                [100% on feasible scenarios]
 * end-to-end planning time, ``time.perf_counter()`` around ``Planner(sc).plan()``, median and p95 over
   every run, failures included (a failure costs up to the time limit)        [median <= 0.5 s, p95 <= 2 s]
@@ -46,11 +46,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from planner.collision.clearance_grid import cache_dir
-from planner.exceptions import PlannerError
-from planner.pipeline import Planner
-from planner.planning.goals import line_speed_bounds
-from planner.scenario import ResolvedScenario, load_scenario
+from planner.core.cache import cache_dir
+from planner.core.exceptions import PlannerError
+from planner.plan.goals import line_speed_bounds
+from planner.plan.pipeline import Planner
+from planner.scenario.schema import ResolvedScenario, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "tests" / "scenarios"
 MODES = ("product", "baseline")
@@ -140,7 +140,7 @@ def insertion_bounds(names: list[str]) -> None:
 
     For each insertion scenario (seed 0), at 20 configurations of the executed insertion line: the fastest
     the payload can move along the line with its orientation fixed within the drive velocity limits, and
-    the fastest the rail can move meanwhile (:func:`planner.planning.goals.line_speed_bounds`). With the
+    the fastest the rail can move meanwhile (:func:`planner.plan.goals.line_speed_bounds`). With the
     rail unable to move during the line, no trajectory beats the single-drive bound plus length / speed.
     """
     rows = []

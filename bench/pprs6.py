@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 
 from planner.robots.pprs6 import Pprs6
-from planner.robots.pprs6_tools import profile_document, workspace_document
+from planner.tools.pprs6 import profile_document, workspace_document
 
 
 def seconds(fn: Callable[[], object], repeat: int = 5) -> float:

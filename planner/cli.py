@@ -17,15 +17,16 @@ from typing import Annotated, Any, NoReturn, ParamSpec, TypeVar
 import typer
 from pydantic import ValidationError
 
-from planner.exceptions import (
+from planner.core.exceptions import (
     GoalUnreachable,
     InvalidInput,
     LimitViolation,
     OutsideWorkspace,
     PlannerError,
 )
-from planner.robots import available_robots, kinematics_tools, load_robot
+from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8
+from planner.tools import kinematics_tools
 
 app = typer.Typer(
     add_completion=False,
@@ -177,7 +178,7 @@ ScenarioArg = Annotated[
 
 
 def _load(scenario: Path) -> Any:
-    from planner.scenario import load_scenario
+    from planner.scenario.schema import load_scenario
 
     return load_scenario(scenario)
 
@@ -234,9 +235,9 @@ def plan(
 
     The JSON written to --output is the profile on success and the refusal document otherwise.
     """
-    from planner.exceptions import PlanRefused
-    from planner.output import refusal_document, result_document
-    from planner.pipeline import Planner
+    from planner.core.exceptions import PlanRefused
+    from planner.documents.output import refusal_document, result_document
+    from planner.plan.pipeline import Planner
 
     sc = _load(scenario)
     try:
@@ -256,7 +257,7 @@ def plan(
     if csv is not None:
         _write(csv, result.profile.to_csv(), "--csv")
     if plot is not None:
-        from planner.plot import plan_png
+        from planner.documents.plot import plan_png
 
         _write(plot, plan_png(sc, result, planner.world), "--plot")
     typer.echo(
@@ -280,9 +281,9 @@ def check(
     Exit 0 when every check passes, 3 when any fails.
     """
     from planner.collision.world import CollisionWorld
-    from planner.pipeline import gate_requirements
+    from planner.gate.checks import validate_profile
+    from planner.plan.pipeline import gate_requirements
     from planner.timing.profile import DriveProfile
-    from planner.validate import validate_profile
 
     sc = _load(scenario)
     try:
@@ -318,7 +319,7 @@ def workspace(
     if robot != "pprs6":
         load_robot(robot)
         _fail(f"workspace: not available for robot {robot!r} (pprs6 only)", EXIT_INVALID)
-    from planner.robots import pprs6_tools
+    from planner.tools import pprs6 as pprs6_tools
 
     doc, image = pprs6_tools.workspace_document(
         None if orientation is None else _json_arg(orientation, "--orientation"),
@@ -350,8 +351,8 @@ def profile(
         )
     import yaml
 
-    from planner.exceptions import PlanRefused
-    from planner.robots import pprs6_tools
+    from planner.core.exceptions import PlanRefused
+    from planner.tools import pprs6 as pprs6_tools
 
     spec = None
     if path is not None:

@@ -111,7 +111,7 @@ def test_rotation_angles_match_the_rotation_log_over_the_whole_range() -> None:
     """The vectorised angle equals |log R| from 0 to pi (near 0 and near pi included)."""
     from scipy.spatial.transform import Rotation
 
-    from planner.kinematics.so3 import rotation_angles, rotation_log
+    from planner.core.so3 import rotation_angles, rotation_log
 
     rng = np.random.default_rng(4)
     axes = rng.normal(size=(200, 3))

@@ -14,7 +14,7 @@ import yaml
 from typer.testing import CliRunner
 
 from planner.cli import app
-from planner.scenario import ResolvedScenario, load_scenario
+from planner.scenario.schema import ResolvedScenario, load_scenario
 
 SCENARIOS = Path(__file__).parent / "scenarios"
 EXPECTED = yaml.safe_load((SCENARIOS / "expected.yaml").read_text())

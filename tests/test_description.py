@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from planner.exceptions import InvalidInput, InvalidRobotDescription, UnknownRobot
+from planner.core.exceptions import InvalidInput, InvalidRobotDescription, UnknownRobot
 from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8, default_description_path
 

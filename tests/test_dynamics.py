@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from planner.core.exceptions import InvalidInput
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload, box_inertia
-from planner.exceptions import InvalidInput
 from planner.robots.cabin8 import Cabin8
 
 

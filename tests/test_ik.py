@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner.exceptions import GoalUnreachable, InvalidInput
+from planner.core.exceptions import GoalUnreachable, InvalidInput
+from planner.core.so3 import pose_error
 from planner.kinematics.closed_form import redundant_family
-from planner.kinematics.so3 import pose_error
 from planner.redundancy.configuration import Configuration
 from planner.redundancy.ik import IKOptions, solve_pose_ik
 from planner.redundancy.limits import AdmissibilityLimit, DriveVelocityLimit

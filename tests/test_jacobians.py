@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.kinematics.so3 import rotation_log
+from planner.core.so3 import rotation_log
 from planner.robots.cabin8 import Cabin8
 
 H = 1e-6

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from planner.exceptions import OutsideWorkspace
+from planner.core.exceptions import OutsideWorkspace
 from planner.kinematics import parallel
 from planner.robots.cabin8 import Cabin8
 

@@ -10,9 +10,10 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-import planner.robots as robots
+import planner.robots.registry as registry
+import planner.tools as tools_registry
 from planner.cli import app
-from planner.exceptions import UnknownRobot
+from planner.core.exceptions import UnknownRobot
 
 
 @pytest.fixture
@@ -28,17 +29,17 @@ def toy(monkeypatch: pytest.MonkeyPatch) -> str:
 
     module.fk, module.ik = fk, ik  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "toy_tools", module)
-    monkeypatch.setitem(robots._FACTORIES, "toy", robots._FACTORIES["cabin8"])
-    monkeypatch.setitem(robots._TOOLS, "toy", "toy_tools")
+    monkeypatch.setitem(registry._FACTORIES, "toy", registry._FACTORIES["cabin8"])
+    monkeypatch.setitem(tools_registry._TOOLS, "toy", "toy_tools")
     return "toy"
 
 
 def test_builtin_tools_follow_the_protocol() -> None:
-    for name in robots.available_robots():
-        tools = robots.kinematics_tools(name)
+    for name in registry.available_robots():
+        tools = tools_registry.kinematics_tools(name)
         assert callable(tools.fk) and callable(tools.ik)
     with pytest.raises(UnknownRobot) as info:
-        robots.kinematics_tools("r2d2")
+        tools_registry.kinematics_tools("r2d2")
     assert info.value.details["field"] == "robot"
 
 

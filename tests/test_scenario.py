@@ -19,9 +19,10 @@ import trimesh
 import yaml
 
 from meshes import REFERENCE_DIR, reference_cabin_path, reference_cabins, reference_manifest
-from planner.collision.mesh_loader import MeshLimits, load_mesh
-from planner.exceptions import InvalidInput, InvalidMesh, UnknownRobot
-from planner.scenario import (
+from planner.core.exceptions import InvalidInput, InvalidMesh, UnknownRobot
+from planner.core.schemas import Pose
+from planner.meshio.load import MeshLimits, load_mesh
+from planner.scenario.schema import (
     MAX_SCENARIO_BYTES,
     PlanOptions,
     Scenario,
@@ -31,7 +32,6 @@ from planner.scenario import (
     scenario_from_dict,
     scenario_hash,
 )
-from planner.schemas import Pose
 
 EXAMPLE_YAML = """\
 name: bay3-insert

@@ -14,13 +14,13 @@ import pytest
 import yaml
 
 from planner.collision.world import CollisionWorld
+from planner.core.exceptions import PlannerError
+from planner.core.schemas import Pose
+from planner.core.so3 import pose_error
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.stiffness import StiffnessModel, deflected_pose
-from planner.exceptions import PlannerError
-from planner.kinematics.so3 import pose_error
-from planner.pipeline import Planner, PlanResult
-from planner.scenario import ResolvedScenario, load_scenario
-from planner.schemas import Pose
+from planner.plan.pipeline import Planner, PlanResult
+from planner.scenario.schema import ResolvedScenario, load_scenario
 
 HERE = Path(__file__).parent / "scenarios"
 EXPECTED = yaml.safe_load((HERE / "expected.yaml").read_text())

@@ -18,12 +18,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from planner.exceptions import InvalidInput
-from planner.pipeline import Planner, PlanResult, gate_requirements
+from planner.core.exceptions import InvalidInput
+from planner.gate.checks import GateReport, GateRequirements, validate_profile
+from planner.plan.pipeline import Planner, PlanResult, gate_requirements
 from planner.robots.cabin8 import Cabin8
-from planner.scenario import ResolvedScenario, load_scenario
+from planner.scenario.schema import ResolvedScenario, load_scenario
 from planner.timing.profile import DriveProfile
-from planner.validate import GateReport, GateRequirements, validate_profile
 
 SCENARIO = Path(__file__).parent / "scenarios" / "aisle-transfer.yaml"
 ALL_CHECKS = {
@@ -424,7 +424,7 @@ def test_a_final_sample_still_accelerating_is_not_at_rest(plan: Plan) -> None:
 
 def test_approach_check_refuses_overshooting_the_goal_and_backing_out() -> None:
     """Poses on the insertion line (x into the bay): straight in passes; past the goal or back out fails."""
-    from planner.validate import _approach_check
+    from planner.gate.checks import _approach_check
 
     goal = np.eye(4)
     goal[:3, 3] = [0.8, 0.7, 2.7]
@@ -453,7 +453,7 @@ def test_approach_check_refuses_overshooting_the_goal_and_backing_out() -> None:
 
 
 def _carry(d1_goal: float) -> ResolvedScenario:
-    from planner.scenario import resolve_scenario, scenario_from_dict
+    from planner.scenario.schema import resolve_scenario, scenario_from_dict
 
     home = {"x1": -0.46, "x2": 0.46, "x3": -0.09, "theta3": 1.2, "theta4": -0.8, "d5": -0.25, "theta6": 0.0}
     return resolve_scenario(
@@ -472,7 +472,7 @@ def _carry(d1_goal: float) -> ResolvedScenario:
 
 def test_deflected_joints_put_the_payload_where_it_sags_to() -> None:
     from planner.dynamics.stiffness import deflected_pose, stiffness_model
-    from planner.validate import deflected_joints
+    from planner.gate.checks import deflected_joints
 
     sc = _carry(1.3)
     res = Planner(sc).plan()
@@ -491,8 +491,8 @@ def test_a_plate_the_rigid_robot_clears_but_the_sagging_payload_touches_is_refus
     """A plate 3.8 mm under the payload's lowest corner: certified for the rigid robot, not sagging ~2 mm."""
     import trimesh
 
-    from planner.collision.mesh_loader import load_mesh
     from planner.collision.world import CollisionWorld
+    from planner.meshio.load import load_mesh
 
     sc = _carry(1.3)
     res = Planner(sc).plan()

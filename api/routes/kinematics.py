@@ -1,7 +1,7 @@
 """Single-shot kinematics tools for operator UIs: forward and inverse kinematics of a robot.
 
 Requests name the robot; its tools come from the robot registry
-(:func:`planner.robots.kinematics_tools`), so a new mechanism needs no change here. The request models
+(:func:`planner.tools.kinematics_tools`), so a new mechanism needs no change here. The request models
 document both pose forms (a tool pose for cabin8, a platform pose for pprs6); the robot's tools refuse the
 form they do not take, naming the field.
 """
@@ -14,8 +14,8 @@ from fastapi import APIRouter
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
-from planner.robots import kinematics_tools
-from planner.schemas import Pose
+from planner.core.schemas import Pose
+from planner.tools import kinematics_tools
 
 router = APIRouter(tags=["kinematics"])
 

@@ -28,8 +28,8 @@ from api.problems import Problem
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
 from meshes import reference_cabin_path, reference_cabins
-from planner.exceptions import InvalidInput
-from planner.scenario import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
+from planner.core.exceptions import InvalidInput
+from planner.scenario.schema import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
 
 router = APIRouter(tags=["plans"])
 
@@ -211,7 +211,7 @@ def submit(
         if replay is not None:
             return replay
     spec, resolved, meshes = _resolve(ctx, tenant, body)
-    from planner.output import provenance
+    from planner.documents.output import provenance
 
     # Count and insert under the tenant's lock, so concurrent submissions cannot pass the quota together
     # (one service instance per database, see api.jobs).
@@ -386,9 +386,9 @@ def validate(
 ) -> dict[str, Any]:
     """The gate's report (``passed`` and every check); a profile that fails the gate is a 200 answer."""
     from planner.collision.world import CollisionWorld
-    from planner.pipeline import gate_requirements
+    from planner.gate.checks import validate_profile
+    from planner.plan.pipeline import gate_requirements
     from planner.timing.profile import DriveProfile
-    from planner.validate import validate_profile
 
     _, sc, _ = _resolve(ctx, principal.tenant, scenario)
     if profile.get("status", "succeeded") != "succeeded":

@@ -18,7 +18,7 @@ from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
 from api.auth import CurrentPrincipal
 from api.problems import SafeJSONResponse
 from api.routes.kinematics import PlatformPose
-from planner.robots import pprs6_tools
+from planner.tools import pprs6 as pprs6_tools
 
 router = APIRouter(tags=["pprs6"])
 

@@ -1,10 +1,10 @@
 """Collision world: cabin, payload and robot geometry.
 
-The mesh layer (:mod:`planner.collision.mesh_loader`) turns STL/OBJ/PLY/GLB/glTF files into validated
+The mesh layer (:mod:`planner.meshio.load`) turns STL/OBJ/PLY/GLB/glTF files into validated
 triangle meshes in metres, in the robot base frame.
 """
 
-from planner.collision.mesh_loader import (
+from planner.meshio.load import (
     SUPPORTED_EXTENSIONS,
     LoadedMesh,
     MeshLimits,

@@ -28,8 +28,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.core.exceptions import InvalidInput
 from planner.dynamics.payload import RigidPayload, box_inertia
-from planner.exceptions import InvalidInput
 from planner.kinematics import chain, parallel
 from planner.robots.cabin8 import Cabin8
 

@@ -27,11 +27,12 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
+
+from planner.core.cache import cache_dir
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -126,15 +127,6 @@ class ClearanceGrid:
 
 #: Bump when the grid's construction changes: cached grids of an older version are not used.
 GRID_VERSION = 1
-
-
-def cache_dir() -> Path | None:
-    """Where built grids are cached: ``$CABINPLAN_CACHE_DIR`` (empty: no cache), else the user cache."""
-    env = os.environ.get("CABINPLAN_CACHE_DIR")
-    if env is not None:
-        return Path(env) if env else None
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "cabinplan"
 
 
 def cached_build(key: str, vertices: Array, faces: NDArray[np.int64], step: float) -> ClearanceGrid:

@@ -34,7 +34,7 @@ import fcl
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.collision import _kernels
+from planner.collision import kernels
 from planner.collision.bodies import (
     BodySet,
     PayloadGeometry,
@@ -44,10 +44,10 @@ from planner.collision.bodies import (
     segment_reach_bounds,
 )
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
-from planner.collision.mesh_loader import LoadedMesh
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import FastFunction, dense_function
+from planner.meshio.load import LoadedMesh
 from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
 
 Array = NDArray[np.float64]
@@ -413,10 +413,10 @@ class CollisionWorld:
             ),
         )
         # Closed-form poses in the kernel (the CasADi pose function stays the reference, :meth:`poses`).
-        if len(robot.c_lower) != _kernels.N_CONSTRAINTS:
+        if len(robot.c_lower) != kernels.N_CONSTRAINTS:
             raise InvalidInput(
                 f"robot: {len(robot.c_lower)} admissibility values, the collision kernels expect "
-                f"{_kernels.N_CONSTRAINTS}",
+                f"{kernels.N_CONSTRAINTS}",
                 field="robot",
             )
         links = robot.desc.serial_chain
@@ -428,11 +428,11 @@ class CollisionWorld:
         )
         geo = robot.geometry
         table = self._carriage_table
-        self._fbuf, self._ibuf = _kernels.pack(
+        self._fbuf, self._ibuf = kernels.pack(
             np.ascontiguousarray(self._T_tool_box, dtype=float),
             mdh,
             np.array([geo.L1, geo.L2, geo.L3, geo.L4]),
-            np.array([_kernels.KIND_CODES[n] for n in self.names], dtype=np.int64),
+            np.array([kernels.KIND_CODES[n] for n in self.names], dtype=np.int64),
             (*self._fine_cover, self._fine_r, self._fine_bounds),
             g.origin if g is not None else np.zeros(3),
             1.0 / g.step if g is not None else 1.0,
@@ -466,8 +466,8 @@ class CollisionWorld:
         if n == 1:
             flat, c = (x[None, :] for x in self._pose_fast(q2[0], self._T_tool_box))
         elif not self.reference:  # the closed-form kernel, ~100x faster than CasADi's batch call
-            poses, c = np.empty((n, self._n_bodies, 13)), np.empty((n, _kernels.N_CONSTRAINTS))
-            _kernels.packed_poses(np.ascontiguousarray(q2), self._fbuf, self._ibuf, poses, c)
+            poses, c = np.empty((n, self._n_bodies, 13)), np.empty((n, kernels.N_CONSTRAINTS))
+            kernels.packed_poses(np.ascontiguousarray(q2), self._fbuf, self._ibuf, poses, c)
             return poses, c
         else:
             # CasADi evaluates a function column-wise when given N stacked columns.
@@ -484,7 +484,7 @@ class CollisionWorld:
         """World centres (N, S, 3) of the fine (cabin) or coarse (self) sphere cover, grouped by body."""
         flat, _ = self._evaluate(q)
         cover = self._coarse_cover if coarse else self._fine_cover
-        return _kernels.cover_centres_batch(flat, *cover)
+        return kernels.cover_centres_batch(flat, *cover)
 
     def poses(self, q: Array) -> tuple[Array, Array, Array]:
         """(R (N, B, 3, 3), p (N, B, 3), lengths (N, B)) of every body for (N, 8) or (8,) joints.
@@ -607,14 +607,14 @@ class CollisionWorld:
                 return StateReport(False, tuple(self._limit_contacts(q)))
             state = self._state(q, self.self_clearance)
         else:
-            code, flat, cabin, pairs = _kernels.packed_check(
+            code, flat, cabin, pairs = kernels.packed_check(
                 q, self._fbuf, self._ibuf, self._grid_flat, clearance, self.self_clearance, -1.0
             )
-            if code == _kernels.CLEAR:  # the bounds prove everything: no FCL query
+            if code == kernels.CLEAR:  # the bounds prove everything: no FCL query
                 return _VALID
-            if code == _kernels.NOT_FINITE:
+            if code == kernels.NOT_FINITE:
                 return StateReport(False, tuple(self._limit_contacts(q)))
-            state = _State(flat, cabin, pairs, code != _kernels.INADMISSIBLE)
+            state = _State(flat, cabin, pairs, code != kernels.INADMISSIBLE)
         contacts = [] if state.admissible else self._limit_contacts(q)
         if contacts and not all_contacts:
             return StateReport(False, tuple(contacts))
@@ -642,11 +642,11 @@ class CollisionWorld:
         _check_clearance(clearance)
         q = _joints(q)
         own = self.self_clearance
-        code, flat, cabin, pairs = _kernels.packed_check(
+        code, flat, cabin, pairs = kernels.packed_check(
             q, self._fbuf, self._ibuf, self._grid_flat, clearance, own, self._upper_slack
         )
-        if code != _kernels.UNDECIDED:
-            return code == _kernels.CLEAR  # a certain contact is as invalid as an FCL-found one
+        if code != kernels.UNDECIDED:
+            return code == kernels.CLEAR  # a certain contact is as invalid as an FCL-found one
         st = _State(flat, cabin, pairs, True)
         for b, lb in enumerate(cabin.tolist()):
             if lb <= clearance and self._cabin_hit(st, b, clearance):
@@ -668,7 +668,7 @@ class CollisionWorld:
         """
         if self.reference:
             return self._state_reference(q, threshold)
-        flat, cabin, pairs, ok = _kernels.packed_state(q, self._fbuf, self._ibuf, self._grid_flat, threshold)
+        flat, cabin, pairs, ok = kernels.packed_state(q, self._fbuf, self._ibuf, self._grid_flat, threshold)
         return _State(flat, cabin, pairs, ok)
 
     def _state_reference(self, q: Array, threshold: float) -> _State:
@@ -678,7 +678,7 @@ class CollisionWorld:
         slot.args[0][:] = q
         slot.trigger()
         flat = slot.res[0].reshape(self._n_bodies, 13).copy()
-        cabin, pairs, ok = _kernels.state_bounds(
+        cabin, pairs, ok = kernels.state_bounds(
             flat, *self._kernel_args, slot.res[1].copy(), self._c_lo, self._c_hi, threshold
         )
         return _State(flat, cabin, pairs, ok)
@@ -876,21 +876,21 @@ class CollisionWorld:
         """:meth:`check_motion` through the compiled kernels: the same samples, bounds and walk.
 
         Limits at the same samples, the same reach bounds (:meth:`_segment_reach`), then
-        :func:`~planner.collision._kernels.motion_walk`, which evaluates states lazily in compiled code and
+        :func:`~planner.collision.kernels.motion_walk`, which evaluates states lazily in compiled code and
         returns here only when a task needs FCL probes on a grown body.
         """
         adq = np.abs(dq)
         n_fine = int(min(10_000, max(1, np.ceil(float(adq.max()) / LIMIT_STEP))))
-        bad = _kernels.first_inadmissible(q_a, dq, n_fine, self._fbuf, self._ibuf)
+        bad = kernels.first_inadmissible(q_a, dq, n_fine, self._fbuf, self._ibuf)
         if bad >= 0:
             t = bad * (1.0 / n_fine) if bad < n_fine else 1.0  # numpy.linspace's samples
             return MotionReport(False, n_fine + 1, 0, t, tuple(self._limit_contacts(q_a + t * dq)))
         g = self.robot.geometry
-        end = _kernels.end_ratio(q_a, q_b, self._fbuf)
+        end = kernels.end_ratio(q_a, q_b, self._fbuf)
         dev = 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
         if ratio is not None:
             end = max(end, ratio)
-        reach, pair_reach = _kernels.segment_reach(
+        reach, pair_reach = kernels.segment_reach(
             self.bodies.rho,
             self._link_mask,
             link_slope_bound(end + dev),
@@ -908,52 +908,52 @@ class CollisionWorld:
         poses = np.empty((cap, self._n_bodies, 13))
         cabin = np.empty((cap, self._n_bodies))
         pairs = np.empty((cap, len(self._pair_a)))
-        ci = np.zeros(_kernels.CI_SIZE, dtype=np.int64)
-        cf = np.zeros(_kernels.CF_SIZE)
-        ci[_kernels.CI_N], ci[_kernels.CI_CABIN] = n, has_cabin
-        cf[_kernels.CF_CLEARANCE], cf[_kernels.CF_OWN], cf[_kernels.CF_MARGIN] = clearance, own, motion_margin
+        ci = np.zeros(kernels.CI_SIZE, dtype=np.int64)
+        cf = np.zeros(kernels.CF_SIZE)
+        ci[kernels.CI_N], ci[kernels.CI_CABIN] = n, has_cabin
+        cf[kernels.CF_CLEARANCE], cf[kernels.CF_OWN], cf[kernels.CF_MARGIN] = clearance, own, motion_margin
         # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
-        cf[_kernels.CF_THRESHOLD] = own + 0.06
-        cf[_kernels.CF_PROBE_PROVEN] = self.probe_when_proven
+        cf[kernels.CF_THRESHOLD] = own + 0.06
+        cf[kernels.CF_PROBE_PROVEN] = self.probe_when_proven
         n_cabin = self._n_bodies if has_cabin else 0
         before = self._fcl_queries
         while True:
-            code = _kernels.motion_walk(
+            code = kernels.motion_walk(
                 ci, cf, q_a, q_b, dq, reach, pair_reach, self._fbuf, self._ibuf, self._grid_flat,
                 slot_of, poses, cabin, pairs,
             )  # fmt: skip
-            task = int(ci[_kernels.CI_TASK])
+            task = int(ci[kernels.CI_TASK])
             is_cabin = task < n_cabin
             idx = task if is_cabin else task - n_cabin
             base = clearance if is_cabin else own
-            if code == _kernels.WALK_DONE:
-                return MotionReport(True, int(ci[_kernels.CI_COUNT]), self._fcl_queries - before)
-            if code == _kernels.WALK_GROW:
+            if code == kernels.WALK_DONE:
+                return MotionReport(True, int(ci[kernels.CI_COUNT]), self._fcl_queries - before)
+            if code == kernels.WALK_GROW:
                 grow = poses.shape[0]
                 poses = np.concatenate([poses, np.empty_like(poses[:grow])])
                 cabin = np.concatenate([cabin, np.empty_like(cabin[:grow])])
                 pairs = np.concatenate([pairs, np.empty_like(pairs[:grow])])
-            elif code == _kernels.WALK_FAIL:
+            elif code == kernels.WALK_FAIL:
                 contact = (
                     self._cabin_contact(idx, base + motion_margin)
                     if is_cabin
                     else self._pair_contact(idx, base + motion_margin)
                 )
-                states = int(ci[_kernels.CI_COUNT])
-                t_fail = float(cf[_kernels.CF_TFAIL])
+                states = int(ci[kernels.CI_COUNT])
+                t_fail = float(cf[kernels.CF_TFAIL])
                 return MotionReport(False, states, self._fcl_queries - before, t_fail, (contact,))
             else:  # WALK_PROBE: the first level at which the grown body is clear becomes the spare clearance
-                slot = int(ci[_kernels.CI_SLOT])
+                slot = int(ci[kernels.CI_SLOT])
                 st = _State(poses[slot], cabin[slot], pairs[slot])
-                first = _kernels.CF_LEVEL0
-                for level in cf[first : first + int(ci[_kernels.CI_LEVELS])].tolist():
+                first = kernels.CF_LEVEL0
+                for level in cf[first : first + int(ci[kernels.CI_LEVELS])].tolist():
                     hit = (
                         self._cabin_hit(st, idx, base + level)
                         if is_cabin
                         else self._pair_hit(st, idx, base + level)
                     )
                     if not hit:
-                        cf[_kernels.CF_E] = level
+                        cf[kernels.CF_E] = level
                         break
 
     def _segment_reach(self, q_a: Array, q_b: Array, ratio: float | None = None) -> tuple[Array, Array]:
@@ -1006,7 +1006,7 @@ class CollisionWorld:
         i, checks, cap = 0, 0, max_run
         while i < n - 1:
             # Both bodies of a self pair may move: the kernel doubles the reach-weighted deviation.
-            j, extra = _kernels.run_extent(qs, i, min(n - 1, i + cap), rho_joint, float(max_extra_m))
+            j, extra = kernels.run_extent(qs, i, min(n - 1, i + cap), rho_joint, float(max_extra_m))
             motion = self.check_motion(
                 qs[i],
                 qs[j],

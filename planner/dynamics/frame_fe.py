@@ -23,10 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.core.description import Section
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain, parallel
 from planner.robots.cabin8 import Cabin8
-from planner.robots.description import Section
 
 Array = NDArray[np.float64]
 

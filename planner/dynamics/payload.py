@@ -8,7 +8,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
 
 Array = NDArray[np.float64]
 

@@ -68,14 +68,14 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from planner.core.description import Section, StiffnessSpec
+from planner.core.exceptions import DeflectionNotCompensated, InvalidInput, InvalidRobotDescription
+from planner.core.schemas import Finite, Pose
+from planner.core.so3 import matrix_to_quat_wxyz, pose_error
 from planner.dynamics.payload import RigidPayload, box_inertia
-from planner.exceptions import DeflectionNotCompensated, InvalidInput, InvalidRobotDescription
 from planner.kinematics import chain, parallel
 from planner.kinematics.closed_form import redundant_family
-from planner.kinematics.so3 import matrix_to_quat_wxyz, pose_error
 from planner.robots.cabin8 import Cabin8
-from planner.robots.description import Section, StiffnessSpec
-from planner.schemas import Finite, Pose
 
 Array = NDArray[np.float64]
 
@@ -710,7 +710,7 @@ def stiffness_document(
         InvalidInput: bad names, shapes, frame, wrench or payload (``details['field']`` names it).
         LimitViolation / OutsideWorkspace: the configuration is not admissible or does not assemble.
     """
-    from planner.tools import tool_pose_robot
+    from planner.tools.cabin8 import tool_pose_robot
 
     robot = tool_pose_robot(robot_name)
     if frame not in ("tool", "payload"):

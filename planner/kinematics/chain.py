@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.robots.description import MDHSpec
+from planner.core.description import MDHSpec
 
 Array = NDArray[np.float64]
 

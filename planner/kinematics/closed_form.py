@@ -22,8 +22,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.core.description import MDHSpec
 from planner.kinematics.chain import mdh_batch
-from planner.robots.description import MDHSpec
 
 Array = NDArray[np.float64]
 

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import casadi as ca
 
+from planner.core.cache import cache_dir
+
 log = logging.getLogger(__name__)
 
 #: Compiler flags: -O1 builds in well under a second and runs as fast as -O2 on these functions.
@@ -46,8 +48,6 @@ def _compiler() -> str | None:
 
 
 def _cache_dir() -> Path | None:
-    from planner.collision.clearance_grid import cache_dir
-
     folder = cache_dir()
     return None if folder is None else folder / "native"
 

@@ -34,8 +34,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.exceptions import OutsideWorkspace
-from planner.robots.description import ParallelStageSpec
+from planner.core.description import ParallelStageSpec
+from planner.core.exceptions import OutsideWorkspace
 
 Array = NDArray[np.float64]
 

@@ -67,7 +67,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.exceptions import ForwardKinematicsFailed
+from planner.core.exceptions import ForwardKinematicsFailed
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

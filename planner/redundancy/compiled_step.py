@@ -87,7 +87,7 @@ class IKStep:
         self._comfort = np.asarray(comfort, dtype=float)
 
     def problem(self, q: Array, err: Array, q_ref: Array, weights: StepWeights, step_max: Array) -> Problem:
-        """The step QP at q for the pose error ``err`` (see :func:`planner.kinematics.so3.pose_error`)."""
+        """The step QP at q for the pose error ``err`` (see :func:`planner.core.so3.pose_error`)."""
         H, f, G, h = self._fn(
             q, err, q_ref, self._comfort, self._lo, self._hi, np.asarray(weights, dtype=float)
         )

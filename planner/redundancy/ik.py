@@ -26,9 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.exceptions import GoalUnreachable, InvalidInput, OutsideWorkspace, QPSolveFailed
+from planner.core.exceptions import GoalUnreachable, InvalidInput, OutsideWorkspace, QPSolveFailed
+from planner.core.so3 import pose_error
 from planner.kinematics.closed_form import redundant_family
-from planner.kinematics.so3 import pose_error
 from planner.redundancy.compiled_step import IKStep, StepWeights
 from planner.redundancy.solve import DEFAULT_SOLVER, solve_problem
 from planner.robots.cabin8 import Cabin8

@@ -23,7 +23,7 @@ import qpsolvers
 from numpy.typing import NDArray
 from scipy import sparse
 
-from planner.exceptions import QPSolveFailed
+from planner.core.exceptions import QPSolveFailed
 from planner.redundancy.configuration import Configuration
 from planner.redundancy.limits import Limit
 from planner.redundancy.tasks import Task

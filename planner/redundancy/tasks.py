@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.kinematics.so3 import pose_error
+from planner.core.so3 import pose_error
 from planner.redundancy.configuration import Configuration
 
 Array = NDArray[np.float64]

@@ -89,7 +89,7 @@ class RobotModel(ABC):
 
 
 def _vector_from_dict(values: dict[str, float], names: tuple[str, ...], field: str) -> Array:
-    from planner.exceptions import InvalidInput
+    from planner.core.exceptions import InvalidInput
 
     if not isinstance(values, dict):
         raise InvalidInput(f"{field}: expected an object mapping names to numbers", field=field)
@@ -113,7 +113,7 @@ class KinematicsTools(Protocol):
 
     A module with these two functions, registered beside the robot's model (``planner.robots``).
 
-    Both take parsed JSON (mappings) and raise :class:`~planner.exceptions.InvalidInput` naming the field
+    Both take parsed JSON (mappings) and raise :class:`~planner.core.exceptions.InvalidInput` naming the field
     for anything the robot does not take (joints, a guess, a nearby solution, a pose of another form).
     """
 

@@ -28,11 +28,11 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.exceptions import InvalidInput, LimitViolation
+from planner.core.description import Hybrid8Description, description_hash, load_description
+from planner.core.exceptions import InvalidInput, LimitViolation
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import FastFunction, dense_function
 from planner.robots.base import DriveLimits, RobotModel
-from planner.robots.description import Hybrid8Description, description_hash, load_description
 
 Array = NDArray[np.float64]
 

@@ -26,10 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from planner.exceptions import InvalidInput, OutsideWorkspace
+from planner.core.description import DriveSpec, load_description_file
+from planner.core.exceptions import InvalidInput, OutsideWorkspace
 from planner.kinematics import pprs6 as kin
 from planner.robots.base import DriveLimits, RobotModel
-from planner.robots.description import DriveSpec, load_description_file
 
 BoolArray = NDArray[np.bool_]
 

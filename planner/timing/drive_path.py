@@ -1,6 +1,6 @@
 """A small generic TOPP-RA stage for a geometric path given directly in drive space.
 
-cabin8's :class:`~planner.timing.stage.ToppraStage` works on joint paths with a force model. Mechanisms
+cabin8's :class:`~planner.timing.toppra.ToppraStage` works on joint paths with a force model. Mechanisms
 without a dynamics model (pprs6) give their path as a callable ``s -> (u(s), u'(s), u''(s))`` on
 ``[0, length]``; this stage times it rest to rest under
 
@@ -26,7 +26,7 @@ import toppra.algorithm
 import toppra.constraint
 from numpy.typing import NDArray
 
-from planner.exceptions import RetimingFailed
+from planner.core.exceptions import RetimingFailed
 
 Array = NDArray[np.float64]
 logging.getLogger("toppra").setLevel(logging.ERROR)

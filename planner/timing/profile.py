@@ -2,7 +2,7 @@
 
 A profile holds, for N samples at t_k = k * period, the positions, velocities, accelerations and efforts
 (forces / torques) of the 8 drives, and the joint positions. It is built from one or more
-:class:`~planner.timing.stage.TimedPath` legs executed one after the other (each at rest at its ends);
+:class:`~planner.timing.toppra.TimedPath` legs executed one after the other (each at rest at its ends);
 after the last leg ends the robot holds the goal at rest until the next sample.
 """
 
@@ -16,12 +16,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.core.exceptions import InvalidInput, OutsideWorkspace
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.exceptions import InvalidInput, OutsideWorkspace
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import DriveGeometry
-from planner.timing.stage import TimedPath
+from planner.timing.toppra import TimedPath
 
 Array = NDArray[np.float64]
 

@@ -9,9 +9,9 @@ import pytest
 import trimesh
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.mesh_loader import LoadedMesh, load_mesh
 from planner.collision.world import CollisionWorld
 from planner.kinematics.parallel import stage_points
+from planner.meshio.load import LoadedMesh, load_mesh
 from planner.robots.cabin8 import Cabin8
 
 CLEARANCE_M = 0.01

@@ -12,11 +12,11 @@ import fcl
 import numpy as np
 import pytest
 
-from planner.collision import _kernels
+from planner.collision import kernels
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.mesh_loader import load_mesh
 from planner.collision.world import CollisionWorld
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
+from planner.meshio.load import load_mesh
 from planner.robots.cabin8 import Cabin8
 from tests.conftest import admissible_joints
 
@@ -48,11 +48,11 @@ def test_closed_form_poses_equal_the_casadi_model(robot: Cabin8, worlds: tuple[C
     world = worlds[0]
     qs = along_rail(robot, 200, seed=11)
     wild = qs + np.random.default_rng(12).normal(0.0, 0.3, qs.shape)  # inadmissible, some links unreachable
-    u = _kernels._unpack(world._fbuf, world._ibuf)
+    u = kernels._unpack(world._fbuf, world._ibuf)
     for q in np.vstack([qs, wild]):
         ref_poses, ref_c = world._evaluate(q)
-        poses, c = np.empty((len(world.names), 13)), np.empty(_kernels.N_CONSTRAINTS)
-        _kernels.body_poses(q, u[0], u[1], u[2], u[3], poses, c)
+        poses, c = np.empty((len(world.names), 13)), np.empty(kernels.N_CONSTRAINTS)
+        kernels.body_poses(q, u[0], u[1], u[2], u[3], poses, c)
         finite = np.isfinite(ref_c[0])
         np.testing.assert_array_equal(np.isfinite(c), finite)  # NaN exactly where a link cannot close
         np.testing.assert_allclose(c[finite], ref_c[0][finite], rtol=0, atol=1e-12)
@@ -188,7 +188,7 @@ def test_certain_contacts_are_real(robot: Cabin8, worlds: tuple[CollisionWorld, 
     found = 0
     for q in along_rail(robot, 200, seed=61):
         for clearance in (0.0, 0.01, 0.05):
-            code, flat, _, _ = _kernels.packed_check(
+            code, flat, _, _ = kernels.packed_check(
                 q,
                 world._fbuf,
                 world._ibuf,
@@ -199,13 +199,13 @@ def test_certain_contacts_are_real(robot: Cabin8, worlds: tuple[CollisionWorld, 
             )
             R, p, lengths = world.poses(q)
             for b in range(len(world.names)):
-                if _kernels.certain_cabin_contact(
+                if kernels.certain_cabin_contact(
                     b, flat, clearance, world._fbuf, world._ibuf, world._grid_flat, world._upper_slack
                 ):
                     found += 1
                     o = world._object(b, R[0, b], p[0, b], lengths[0, b], clearance)
                     assert fcl.collide(o, cabin, fcl.CollisionRequest(), fcl.CollisionResult()) > 0
-            if code == _kernels.CONTACT:
+            if code == kernels.CONTACT:
                 assert not worlds[1].is_valid(q, clearance)
     assert found > 20  # the test recognises a good share of the contacts
 
@@ -244,6 +244,6 @@ def test_run_extent_is_the_halving_rule_of_check_path() -> None:
             if extra <= max_extra:
                 break
             j, extra = i + max(1, (j - i) // 2), 0.0
-        got_j, got_extra = _kernels.run_extent(qs, i, j0, rho, max_extra)
+        got_j, got_extra = kernels.run_extent(qs, i, j0, rho, max_extra)
         assert got_j == j, trial
         assert got_extra == pytest.approx(extra, rel=1e-9, abs=1e-15)

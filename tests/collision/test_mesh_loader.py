@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from meshes import generate
 from planner.collision import LoadedMesh, MeshLimits, load_mesh, mesh_loader
-from planner.exceptions import InvalidInput, InvalidMesh, PlannerError
+from planner.core.exceptions import InvalidInput, InvalidMesh, PlannerError
 
 MESH_DIR = Path(__file__).resolve().parents[2] / "meshes"
 MANIFEST = json.loads((MESH_DIR / "cabins.json").read_text(encoding="utf-8"))
@@ -350,7 +350,7 @@ def _sphere_with_degenerate_faces() -> tuple[np.ndarray, list[list[int]]]:
 
 def test_degenerate_faces_are_dropped_and_counted(caplog):
     vertices, faces = _sphere_with_degenerate_faces()
-    with caplog.at_level(logging.WARNING, logger="planner.collision.mesh_loader"):
+    with caplog.at_level(logging.WARNING, logger="planner.meshio.load"):
         mesh = load_mesh(obj_text(vertices, faces), units="m", name="sphere.obj")
     r = mesh.report
     assert (r.n_faces_read, r.n_faces) == (324, 320)

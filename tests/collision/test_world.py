@@ -13,9 +13,9 @@ import trimesh
 
 from planner.collision.bodies import ADJACENT, PayloadGeometry
 from planner.collision.clearance_grid import ClearanceGrid, surface_samples
-from planner.collision.mesh_loader import LoadedMesh, load_mesh
 from planner.collision.world import CollisionWorld
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
+from planner.meshio.load import LoadedMesh, load_mesh
 from planner.redundancy.ik import IKOptions, family_candidates
 from planner.robots.cabin8 import Cabin8
 from tests.conftest import admissible_joints
@@ -299,7 +299,7 @@ def test_capsule_pairs_use_exact_distances(robot: Cabin8, payload: PayloadGeomet
 
 
 def test_segment_box_distance_known_answers() -> None:
-    from planner.collision._kernels import segment_box_distance, segment_distance
+    from planner.collision.kernels import segment_box_distance, segment_distance
 
     half = np.array([0.5, 0.25, 0.1])
     cases = [

@@ -11,9 +11,9 @@ import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
-from planner.pipeline import GATE_SLACK_M
-from planner.planning.goals import StaticForceCheck
-from planner.scenario import ResolvedScenario
+from planner.plan.goals import StaticForceCheck
+from planner.plan.pipeline import GATE_SLACK_M
+from planner.scenario.schema import ResolvedScenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 #: The pipeline's planning clearance for the reference scenarios (the requested 0.01 m plus its slack).

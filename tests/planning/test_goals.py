@@ -7,7 +7,7 @@ import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
-from planner.planning.goals import (
+from planner.plan.goals import (
     GoalCandidate,
     StaticForceCheck,
     approach_lines,
@@ -15,7 +15,7 @@ from planner.planning.goals import (
     line_speed_bounds,
 )
 from planner.redundancy.ik import normalised_margin
-from planner.scenario import ResolvedScenario, load_scenario
+from planner.scenario.schema import ResolvedScenario, load_scenario
 from tests.conftest import admissible_joints
 from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from planner.collision.world import CollisionWorld
-from planner.pipeline import _joint_box
-from planner.planning.ompl_adapter import PLANNERS, SearchResult, joint_scale, plan_joint_path
-from planner.scenario import PlannerName, ResolvedScenario, load_scenario
+from planner.plan.ompl_adapter import PLANNERS, SearchResult, joint_scale, plan_joint_path
+from planner.plan.pipeline import _joint_box
+from planner.scenario.schema import PlannerName, ResolvedScenario, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 CLEARANCE_M = 0.01

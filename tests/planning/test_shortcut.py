@@ -9,11 +9,11 @@ import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.kinematics import chain
-from planner.planning.goals import StaticForceCheck
-from planner.planning.motion import motion_clear
-from planner.planning.shortcut import MIN_GAIN_S, cut_corners, segment_times
+from planner.plan.goals import StaticForceCheck
+from planner.plan.motion import motion_clear
+from planner.plan.shortcut import MIN_GAIN_S, cut_corners, segment_times
 from planner.robots.cabin8 import Cabin8
-from planner.scenario import ResolvedScenario, load_scenario
+from planner.scenario.schema import ResolvedScenario, load_scenario
 from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
 

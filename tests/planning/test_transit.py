@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from planner.collision.world import CollisionWorld
-from planner.planning.goals import StaticForceCheck
-from planner.planning.shortcut import segment_times
-from planner.planning.transit import Transit, compactness, find_transit
-from planner.scenario import ResolvedScenario, load_scenario
+from planner.plan.goals import StaticForceCheck
+from planner.plan.shortcut import segment_times
+from planner.plan.transit import Transit, compactness, find_transit
+from planner.scenario.schema import ResolvedScenario, load_scenario
 from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
 HATCH_Z_M = 2.0  # the bulkhead of cabin-hatch
@@ -125,7 +125,7 @@ def test_a_start_posture_that_rides_only_at_the_sweep_samples_does_not_end_the_s
     every sampled d1 by the clearance, but not by the clearance plus the certification margin.
     """
     from planner.collision.bodies import PayloadGeometry
-    from planner.planning.motion import motion_clear
+    from planner.plan.motion import motion_clear
     from planner.robots.cabin8 import Cabin8
     from tests.collision.test_check_path import home, plate_mesh
 

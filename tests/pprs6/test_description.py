@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from planner.exceptions import InvalidRobotDescription
+from planner.core.exceptions import InvalidRobotDescription
 from planner.robots.pprs6 import Pprs6, default_description_path
 
 
@@ -57,7 +57,7 @@ def test_errors_name_the_field(tmp_path: Path, edit: dict, field: str) -> None:
 
 
 def test_registered_by_name() -> None:
-    from planner.exceptions import InvalidInput
+    from planner.core.exceptions import InvalidInput
     from planner.robots import available_robots, load_robot
 
     assert "pprs6" in available_robots()

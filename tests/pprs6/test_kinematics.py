@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from planner.exceptions import ForwardKinematicsFailed, InvalidInput, OutsideWorkspace
+from planner.core.exceptions import ForwardKinematicsFailed, InvalidInput, OutsideWorkspace
 from planner.kinematics import pprs6 as kin
 from planner.robots import load_robot
 from planner.robots.pprs6 import Pprs6

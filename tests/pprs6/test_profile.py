@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
+from planner.core.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
+from planner.plan.pose_path import PAPER_PATH, build_profile, pose_path_from_spec, validate
 from planner.robots import load_robot
 from planner.robots.pprs6 import Pprs6
-from planner.robots.pprs6_profile import PAPER_PATH, build_profile, pose_path_from_spec, validate
-from planner.robots.pprs6_tools import profile_document, profile_png
+from planner.tools.pprs6 import profile_document, profile_png
 
 
 @pytest.fixture(scope="module")

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
 from planner.robots import load_robot
-from planner.robots.pprs6_tools import workspace_document
-from planner.workspace import boundary_search
+from planner.tools.pprs6 import workspace_document
+from planner.tools.workspace import boundary_search
 
 
 @pytest.fixture(scope="module")

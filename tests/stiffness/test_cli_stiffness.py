@@ -9,8 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 from planner.cli import app
+from planner.core.exceptions import InvalidInput
 from planner.dynamics.stiffness import stiffness_document
-from planner.exceptions import InvalidInput
 from planner.robots.cabin8 import Cabin8
 
 runner = CliRunner()

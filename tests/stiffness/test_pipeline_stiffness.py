@@ -12,13 +12,13 @@ import pytest
 import yaml
 from PIL import Image
 
+from planner.core.exceptions import InvalidInput
+from planner.core.so3 import pose_error
+from planner.documents.plot import profile_png
 from planner.dynamics.stiffness import StiffnessModel, deflected_pose
-from planner.exceptions import InvalidInput
-from planner.kinematics.so3 import pose_error
-from planner.pipeline import Planner, PlanResult, gate_requirements
-from planner.plot import profile_png
-from planner.scenario import ResolvedScenario, resolve_scenario, scenario_from_dict
-from planner.validate import validate_profile
+from planner.gate.checks import validate_profile
+from planner.plan.pipeline import Planner, PlanResult, gate_requirements
+from planner.scenario.schema import ResolvedScenario, resolve_scenario, scenario_from_dict
 
 SCENARIOS = Path(__file__).parent.parent / "scenarios"
 

@@ -8,6 +8,9 @@ import numpy as np
 import pytest
 import yaml
 
+from planner.core.description import Section
+from planner.core.exceptions import DeflectionNotCompensated, InvalidRobotDescription
+from planner.core.so3 import pose_error
 from planner.dynamics.frame_fe import element_stiffness, fe_deflection
 from planner.dynamics.payload import RigidPayload, box_inertia
 from planner.dynamics.stiffness import (
@@ -19,11 +22,8 @@ from planner.dynamics.stiffness import (
     map_compliance,
     section_properties,
 )
-from planner.exceptions import DeflectionNotCompensated, InvalidRobotDescription
 from planner.kinematics.closed_form import redundant_family
-from planner.kinematics.so3 import pose_error
 from planner.robots.cabin8 import Cabin8, default_description_path
-from planner.robots.description import Section
 from tests.conftest import admissible_joints
 
 E, G = 206e9, 79.4e9

@@ -18,7 +18,7 @@ import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from planner.exceptions import InvalidRobotDescription
+from planner.core.exceptions import InvalidRobotDescription
 
 Array = NDArray[np.float64]
 

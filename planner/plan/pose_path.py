@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
+from planner.core.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
 from planner.kinematics import pprs6 as kin
 from planner.robots.pprs6 import Pprs6
 from planner.timing.drive_path import DrivePath, SampledLegs, sample_legs, time_drive_path

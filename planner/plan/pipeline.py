@@ -4,17 +4,17 @@ Stages (each reported through the ``progress`` callback):
 
 1. ``check_start`` / ``goals``: the start must be admissible, collision-free with the requested clearance
    and statically holdable within the drive force limits; a pose goal becomes several good exact goal
-   configurations (:mod:`planner.planning.goals`); with an approach each is tracked back along the
+   configurations (:mod:`planner.plan.goals`); with an approach each is tracked back along the
    insertion line and the best line (largest clearance) gives the pre-insertion configurations.
 2. ``search``: the straight joint-space motion when it is certified clear; for a long rail move a transit
-   posture (:mod:`planner.planning.transit`) joined and left while the rail moves; else OMPL
-   (:mod:`planner.planning.ompl_adapter`) to any of the pre-insertion / goal configurations; shortcut,
-   then corners cut for time (:mod:`planner.planning.shortcut`).
+   posture (:mod:`planner.plan.transit`) joined and left while the rail moves; else OMPL
+   (:mod:`planner.plan.ompl_adapter`) to any of the pre-insertion / goal configurations; shortcut,
+   then corners cut for time (:mod:`planner.plan.shortcut`).
 3. ``smooth``: corners become certified quadratic blends (shrunk, or left sharp with a stop, where a
    blend would not be clear).
 4. ``timing``: TOPP-RA per leg (rest to rest; legs split at sharp corners and before the approach).
 5. ``sample`` and ``validate``: sampled at the controller period and passed through the gate
-   (:mod:`planner.validate`); a gate failure on a limit re-times with tighter limits, any other failure
+   (:mod:`planner.gate.checks`); a gate failure on a limit re-times with tighter limits, any other failure
    refuses.
 """
 
@@ -30,10 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
-from planner.dynamics.lagrange import Cabin8Dynamics
-from planner.dynamics.payload import RigidPayload
-from planner.dynamics.stiffness import Compensation, StaticDeflection, compensate_goals, stiffness_model
-from planner.exceptions import (
+from planner.core.exceptions import (
     ApproachInfeasible,
     GoalInCollision,
     GoalUnreachable,
@@ -43,25 +40,28 @@ from planner.exceptions import (
     StartInvalid,
     ValidationFailed,
 )
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.payload import RigidPayload
+from planner.dynamics.stiffness import Compensation, StaticDeflection, compensate_goals, stiffness_model
 from planner.kinematics import chain
-from planner.planning.goals import (
+from planner.plan.goals import (
     GoalCandidate,
     StaticForceCheck,
     approach_lines,
     goal_configurations,
     track_approach,
 )
-from planner.planning.motion import motion_clear
-from planner.planning.ompl_adapter import plan_joint_path
-from planner.planning.shortcut import cut_corners, segment_times
-from planner.planning.transit import find_transit
+from planner.plan.motion import motion_clear
+from planner.plan.ompl_adapter import plan_joint_path
+from planner.plan.shortcut import cut_corners, segment_times
+from planner.plan.transit import find_transit
 
 if TYPE_CHECKING:
-    from planner.scenario import ResolvedScenario
+    from planner.scenario.schema import ResolvedScenario
+from planner.gate.checks import GateReport, GateRequirements, validate_profile
 from planner.timing.path import JointPath, LinePiece, SplinePiece, blended_polyline, segment_time_length
 from planner.timing.profile import DriveProfile, sample_legs
-from planner.timing.stage import TimedPath, TimingStage, ToppraStage
-from planner.validate import GateReport, GateRequirements, validate_profile
+from planner.timing.toppra import TimedPath, TimingStage, ToppraStage
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -183,7 +183,7 @@ class Planner:
         scenario: The resolved scenario.
         progress: Called with (stage name, fraction done) as the stages start.
         timing: Factory of the timing stage, ``(robot, payload, safety) -> TimingStage`` (default:
-            :class:`~planner.timing.stage.ToppraStage`): the timing stage is pluggable.
+            :class:`~planner.timing.toppra.ToppraStage`): the timing stage is pluggable.
         naive: The benchmark's baseline: OMPL with OMPL's defaults, no straight-line, transit or
             shortcut steps, no corner blends (the robot stops at every waypoint); the gate still decides.
     """
@@ -836,7 +836,7 @@ def plan(
     scenario: ResolvedScenario,
     progress: Progress | None = None,
 ) -> PlanResult:
-    """Plan a resolved scenario; raises a :class:`~planner.exceptions.PlanRefused` (or GoalUnreachable)."""
+    """Plan a resolved scenario; raises a `PlanRefused` (or GoalUnreachable)."""
     return Planner(scenario, progress).plan()
 
 

@@ -1,6 +1,6 @@
 """JSON-able documents of the pprs6 platform, shared by the CLI and the HTTP API.
 
-Each function validates its input (raising :class:`~planner.exceptions.InvalidInput` with the field named),
+Each function validates its input (raising `InvalidInput` with the field named),
 calls the model, and returns plain dicts / bytes. Units: m, rad, s; the pose is
 ``{"x","y","z","phi","theta","psi"}`` of the platform centre O1 in the fixed frame.
 """
@@ -12,17 +12,17 @@ from typing import Any
 
 import numpy as np
 
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
 from planner.kinematics import pprs6 as kin
-from planner.robots.pprs6 import Pprs6
-from planner.robots.pprs6_profile import (
+from planner.plan.pose_path import (
     PAPER_PATH,
     Pprs6Profile,
     build_profile,
     pose_from_mapping,
     pose_path_from_spec,
 )
-from planner.workspace import two_pass_search
+from planner.robots.pprs6 import Pprs6
+from planner.tools.workspace import two_pass_search
 
 
 def _robot() -> Pprs6:
@@ -148,7 +148,7 @@ def workspace_document(
         }
     image = b""
     if png:
-        from planner.robots.pprs6_plot import workspace_png
+        from planner.documents.pprs6_plot import workspace_png
 
         deg = np.degrees(angles)
         image = workspace_png(
@@ -220,7 +220,7 @@ def _document(prof: Pprs6Profile) -> dict[str, Any]:
 
 def profile_png(document: Mapping[str, Any]) -> bytes:
     """PNG of the six drive displacements against time (paper Fig. 7) from a :func:`profile_document`."""
-    from planner.robots.pprs6_plot import drives_png
+    from planner.documents.pprs6_plot import drives_png
 
     t = np.asarray(document["t"], dtype=float)
     pos = np.asarray(document["position"], dtype=float)

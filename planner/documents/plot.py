@@ -20,8 +20,8 @@ from planner.timing.profile import DriveProfile  # noqa: E402
 
 if TYPE_CHECKING:
     from planner.collision.world import CollisionWorld
-    from planner.pipeline import PlanResult
-    from planner.scenario import ResolvedScenario
+    from planner.plan.pipeline import PlanResult
+    from planner.scenario.schema import ResolvedScenario
 
 Array = NDArray[np.float64]
 

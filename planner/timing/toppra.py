@@ -30,9 +30,9 @@ import toppra.constraint
 from numpy.typing import NDArray
 from toppra.constraint.linear_constraint import canlinear_colloc_to_interpolate
 
+from planner.core.exceptions import RetimingFailed
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.exceptions import RetimingFailed
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import BlendPiece, DriveGeometry, JointPath, SplinePiece
 

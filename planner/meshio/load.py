@@ -20,7 +20,7 @@ The pipeline of :func:`load_mesh` is, in order:
    when they are more than ``MeshLimits.max_degenerate_fraction`` of the faces read;
 6. drop unreferenced vertices, merge bit-identical ones (faces are unchanged), apply the pose.
 
-Any failure raises :class:`~planner.exceptions.InvalidMesh` whose message names the file and the check
+Any failure raises :class:`~planner.core.exceptions.InvalidMesh` whose message names the file and the check
 and whose ``details`` carry ``file``, ``check`` and the measured values; no other exception type leaves
 this module. Meshes are treated as triangle shells: they need not be closed (the report says whether
 they are).
@@ -47,7 +47,7 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from planner.exceptions import InvalidInput, InvalidMesh
+from planner.core.exceptions import InvalidInput, InvalidMesh
 
 _LOG = logging.getLogger(__name__)
 

@@ -10,7 +10,7 @@ Two steps, kept apart so that the schema stays pure and the HTTP API can reuse i
 
 1. :func:`scenario_from_dict` / :func:`load_scenario_file` validate the *shape* of the input into a frozen
    :class:`Scenario` (pydantic, ``extra="forbid"`` everywhere: unknown fields are errors). Every failure
-   is an :class:`~planner.exceptions.InvalidInput` whose message names the offending field as a dotted
+   is an `InvalidInput` whose message names the offending field as a dotted
    path, e.g. ``options.clearance_m: Input should be greater than 0``.
 2. :func:`resolve_scenario` turns a :class:`Scenario` into a :class:`ResolvedScenario`: the robot model,
    the loaded cabin mesh, the payload geometry, drive *and* joint vectors of the start and goal, and the
@@ -53,12 +53,12 @@ from pydantic_core import ErrorDetails
 
 from meshes import reference_cabin_path, reference_cabins
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.mesh_loader import LoadedMesh, MeshLimits, load_mesh
+from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
+from planner.core.schemas import Pose
 from planner.dynamics.payload import RigidPayload
-from planner.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
+from planner.meshio.load import LoadedMesh, MeshLimits, load_mesh
 from planner.robots import load_robot
 from planner.robots.cabin8 import Cabin8
-from planner.schemas import Pose
 
 _LOG = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ SCENARIO_EXTENSIONS: tuple[str, ...] = (".yaml", ".yml", ".json")
 
 #: A finite real number: ints and floats only (no numeric strings, no booleans, no NaN/inf).
 #:
-#: Stricter than :data:`planner.schemas.Finite` (lax: accepts ``"0.3"`` and ``true``) and checked *before*
+#: Stricter than `planner.core.schemas.Finite` (lax: accepts ``"0.3"`` and ``true``) and checked *before*
 #: any bound, so ``.nan`` is reported as "not finite" rather than as "not <= 0.2"; bounds added to it also
 #: land in the JSON schema as standard ``exclusiveMinimum``/``maximum`` keys.
 Number = Annotated[float, Strict(), AllowInfNan(False)]
@@ -80,13 +80,13 @@ PositiveNumber = Annotated[Number, Field(gt=0.0)]
 Vector3 = tuple[Number, Number, Number]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
 
-#: OMPL geometric planners the planning adapter can run (``planner.planning.ompl_adapter.PLANNERS``;
+#: OMPL geometric planners the planning adapter can run (``planner.plan.ompl_adapter.PLANNERS``;
 #: a test keeps the two lists equal).
 PlannerName = Literal["RRTConnect", "RRT", "RRTstar", "AORRTC"]
 
 #: Maps a mesh name from a scenario to stored content (a path or the file's bytes), or returns ``None`` to
 #: fall back to the default resolution (reference cabin, then a file path). It may raise
-#: :class:`~planner.exceptions.InvalidInput` to refuse a name outright (e.g. to forbid file-system paths
+#: `InvalidInput` to refuse a name outright (e.g. to forbid file-system paths
 #: in the HTTP API). Bytes are parsed in the format of the name's extension.
 MeshResolver = Callable[[str], Path | bytes | None]
 

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
-from planner.workspace import Workspace  # noqa: E402
+from planner.tools.workspace import Workspace  # noqa: E402
 
 Array = NDArray[np.float64]
 

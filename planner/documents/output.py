@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from planner.exceptions import PlannerError
-from planner.provenance import code_version
+from planner.core.exceptions import PlannerError
+from planner.core.provenance import code_version
 
 if TYPE_CHECKING:
-    from planner.pipeline import PlanResult
-    from planner.scenario import ResolvedScenario
+    from planner.plan.pipeline import PlanResult
+    from planner.scenario.schema import ResolvedScenario
 
 
 def provenance(sc: ResolvedScenario) -> dict[str, Any]:

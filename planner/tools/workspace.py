@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

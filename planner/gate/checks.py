@@ -38,6 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
+from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
+from planner.core.so3 import rotation_angles, rotation_log
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.dynamics.stiffness import (
@@ -47,8 +49,6 @@ from planner.dynamics.stiffness import (
     deflected_pose,
     stiffness_model,
 )
-from planner.exceptions import DeflectionNotCompensated, OutsideWorkspace
-from planner.kinematics.so3 import rotation_angles, rotation_log
 from planner.robots.cabin8 import Cabin8
 from planner.timing.profile import DriveProfile
 

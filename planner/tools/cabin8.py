@@ -1,7 +1,7 @@
 """Single-shot kinematics tools (forward and inverse kinematics documents) shared by the CLI and the API.
 
 Each function takes parsed inputs (mappings of drive or joint names to values in m / rad, a
-:class:`~planner.schemas.Pose`), calls the robot model, and returns the JSON-ready document both
+:class:`~planner.core.schemas.Pose`), calls the robot model, and returns the JSON-ready document both
 front ends print or serve. Robot-specific tool sets (e.g. a second mechanism) live next to their model
 and are dispatched by robot name by the callers.
 """
@@ -15,10 +15,10 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
-from planner.exceptions import InvalidInput
+from planner.core.exceptions import InvalidInput
+from planner.core.schemas import Pose
 from planner.robots import load_robot
 from planner.robots.cabin8 import Cabin8
-from planner.schemas import Pose
 
 
 def tool_pose_robot(robot_name: str) -> Cabin8:

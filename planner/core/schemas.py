@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
-from planner.kinematics.so3 import matrix_to_quat_wxyz, quat_wxyz_to_matrix
+from planner.core.so3 import matrix_to_quat_wxyz, quat_wxyz_to_matrix
 
 Array = NDArray[np.float64]
 

@@ -26,7 +26,7 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from planner.collision.world import CollisionWorld
-from planner.planning.motion import motion_clear
+from planner.plan.motion import motion_clear
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)

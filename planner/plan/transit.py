@@ -33,8 +33,8 @@ from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
 from planner.kinematics import chain
-from planner.planning.motion import motion_clear
-from planner.planning.shortcut import segment_times
+from planner.plan.motion import motion_clear
+from planner.plan.shortcut import segment_times
 from planner.redundancy.ik import random_admissible_joints
 
 Array = NDArray[np.float64]

@@ -1,1 +1,0 @@
-"""Path search: goal configurations, the straight-line approach, transit postures and the OMPL adapter."""
