@@ -7,7 +7,7 @@ alike:
 
 * product  -- ``Planner(sc)``: straight line, transit postures, OMPL with a tuned range, shortcuts,
   certified corner blends;
-* baseline -- ``Planner(sc, naive=True)``: plain OMPL RRTConnect with OMPL's defaults, the raw path, a
+* baseline -- ``Planner(sc, preset=BASELINE)``: plain OMPL RRTConnect with OMPL's defaults, the raw path, a
   stop at every waypoint; the same TOPP-RA timing and validation gate.
 
 Measured per scenario and mode:
@@ -48,6 +48,7 @@ import yaml
 
 from planner.core.cache import cache_dir
 from planner.core.exceptions import PlannerError
+from planner.plan.context import BASELINE, PRODUCT
 from planner.plan.goals import line_speed_bounds
 from planner.plan.pipeline import Planner
 from planner.scenario.schema import ResolvedScenario, load_scenario
@@ -79,7 +80,7 @@ def run_once(sc: ResolvedScenario, mode: str) -> dict[str, Any]:
     out: dict[str, Any] = {"mode": mode, "seed": sc.options.seed, "time_limit_s": sc.options.time_limit_s}
     t0 = time.perf_counter()
     try:
-        res = Planner(sc, naive=mode == "baseline").plan()
+        res = Planner(sc, preset=BASELINE if mode == "baseline" else PRODUCT).plan()
     except PlannerError as exc:
         out.update(time_s=time.perf_counter() - t0, ok=False, reason=exc.reason, message=exc.message)
         return out

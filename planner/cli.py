@@ -280,10 +280,7 @@ def check(
 
     Exit 0 when every check passes, 3 when any fails.
     """
-    from planner.collision.world import CollisionWorld
-    from planner.gate.checks import validate_profile
-    from planner.plan.pipeline import gate_requirements
-    from planner.timing.profile import DriveProfile
+    from planner.gate.check_profile import check_profile
 
     sc = _load(scenario)
     try:
@@ -294,12 +291,7 @@ def check(
         _fail(f"profile: not valid JSON ({exc.msg} at line {exc.lineno})", EXIT_INVALID)
     except UnicodeDecodeError:
         _fail(f"profile: {profile} is not UTF-8 text (expected the JSON written by plan)", EXIT_INVALID)
-    if not isinstance(data, dict) or data.get("status", "succeeded") != "succeeded":
-        _fail("profile: not a drive profile (a refusal document or not a JSON object)", EXIT_INVALID)
-    prof = DriveProfile.from_dict(data, sc.robot)
-    payload = sc.payload.rigid_payload() if sc.payload is not None else None
-    world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
-    report = validate_profile(prof, sc.robot, world, gate_requirements(sc, payload))
+    report = check_profile(sc, data)
     _emit(report.to_dict())
     if not report.passed:
         _fail(f"validation_failed: {report.summary()}", EXIT_INFEASIBLE)

@@ -20,7 +20,8 @@ import pytest
 
 from planner.core.exceptions import InvalidInput
 from planner.gate.checks import GateReport, GateRequirements, validate_profile
-from planner.plan.pipeline import Planner, PlanResult, gate_requirements
+from planner.gate.requirements import requirements_for
+from planner.plan.pipeline import Planner, PlanResult
 from planner.robots.cabin8 import Cabin8
 from planner.scenario.schema import ResolvedScenario, load_scenario
 from planner.timing.profile import DriveProfile
@@ -67,7 +68,7 @@ def plan() -> Plan:
     sc = load_scenario(SCENARIO)
     planner = Planner(sc)
     result = planner.plan()
-    return Plan(sc, planner, result, gate_requirements(sc, planner.payload))
+    return Plan(sc, planner, result, requirements_for(sc, planner.payload))
 
 
 def outcome(report: GateReport) -> tuple[set[str], set[str]]:
@@ -508,7 +509,7 @@ def test_a_plate_the_rigid_robot_clears_but_the_sagging_payload_touches_is_refus
         sc.robot, load_mesh(plate.export(file_type="stl"), units="m", name="p.stl"), sc.payload
     )
     assert world.min_distance(q[-1], include_self=False).distance_m == pytest.approx(0.0038, abs=1e-6)
-    req = dataclasses.replace(gate_requirements(sc, sc.payload.rigid_payload()), clearance_m=0.0005)
+    req = dataclasses.replace(requirements_for(sc, sc.payload.rigid_payload()), clearance_m=0.0005)
     rigid = validate_profile(res.profile, sc.robot, world, dataclasses.replace(req, deflection_check=False))
     assert next(c for c in rigid.checks if c.name == "collision").passed
     report = validate_profile(res.profile, sc.robot, world, req)

@@ -28,7 +28,6 @@ from api.problems import Problem
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
 from meshes import reference_cabin_path, reference_cabins
-from planner.core.exceptions import InvalidInput
 from planner.scenario.schema import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
 
 router = APIRouter(tags=["plans"])
@@ -385,17 +384,9 @@ def validate(
     profile: Annotated[dict[str, Any], Body(description="A drive profile document (as GET /plans/{id}).")],
 ) -> dict[str, Any]:
     """The gate's report (``passed`` and every check); a profile that fails the gate is a 200 answer."""
-    from planner.collision.world import CollisionWorld
-    from planner.gate.checks import validate_profile
-    from planner.plan.pipeline import gate_requirements
-    from planner.timing.profile import DriveProfile
+    from planner.gate.check_profile import check_profile
 
     _, sc, _ = _resolve(ctx, principal.tenant, scenario)
-    if profile.get("status", "succeeded") != "succeeded":
-        raise InvalidInput("profile: not a drive profile (a refusal document)", field="profile.status")
-    prof = DriveProfile.from_dict(profile, sc.robot)
-    payload = sc.payload.rigid_payload() if sc.payload is not None else None
-    world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
-    report = validate_profile(prof, sc.robot, world, gate_requirements(sc, payload))
+    report = check_profile(sc, profile)
     out: dict[str, Any] = report.to_dict()
     return out

@@ -31,7 +31,7 @@ A failed check never stops the others: the report lists every failure with its w
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -49,54 +49,23 @@ from planner.dynamics.stiffness import (
     deflected_pose,
     stiffness_model,
 )
+from planner.gate.requirements import (
+    ACC_CONSISTENCY,
+    APPROACH_BACKOUT_TOL_M,
+    GATE_MAX_EXTRA_M,
+    GATE_MAX_RUN,
+    GOAL_ANGLE_TOL_RAD,
+    GOAL_POSITION_TOL_M,
+    LIMIT_TOLERANCE,
+    LINE_TOL_M,
+    START_TOL,
+    GateRequirements,
+    deflection_sample_indices,
+)
 from planner.robots.cabin8 import Cabin8
 from planner.timing.profile import DriveProfile
 
 Array = NDArray[np.float64]
-
-LIMIT_TOLERANCE = 0.01  # 1% above velocity / acceleration / force limits
-GOAL_POSITION_TOL_M = 1e-3
-GOAL_ANGLE_TOL_RAD = np.deg2rad(0.1)
-LINE_TOL_M = 1e-3
-#: Along the insertion the payload may not step back out of the bay by more than this [m] (rounding).
-APPROACH_BACKOUT_TOL_M = 1e-9
-START_TOL = 1e-9
-#: Largest extra clearance a run of samples may cost in the certified collision check [m], and the
-#: longest run: a run that fails is retried in halves, so a larger extra costs no verdict, only fewer,
-#: longer certified chords where the path has room (measured on the reference scenarios: 0.5 mm and 32
-#: samples took twice as long as 2 mm and 128).
-GATE_MAX_EXTRA_M = 0.002
-GATE_MAX_RUN = 128
-#: The reported acceleration may differ from the step's mean acceleration dv/dt by this fraction of a_max
-#: (the time law's acceleration is piecewise constant and may switch within a step; the executed dv/dt
-#: itself is held to the 1% limit tolerance by the acceleration check).
-ACC_CONSISTENCY = 0.05
-
-
-@dataclass(frozen=True)
-class GateRequirements:
-    """What the trajectory must do, from the scenario."""
-
-    start_u: Array = field(repr=False)
-    clearance_m: float
-    motion_margin_m: float
-    goal_u: Array | None = field(default=None, repr=False)
-    T_base_payload_goal: Array | None = field(default=None, repr=False)
-    T_tool_payload: Array = field(default_factory=lambda: np.eye(4), repr=False)
-    approach_direction: Array | None = field(default=None, repr=False)
-    approach_distance_m: float = 0.0
-    payload: RigidPayload | None = None
-    #: Deflection compensation of a pose goal: the final sample must reach the commanded payload pose
-    #: (kinematically) and its predicted deflected pose the requested one. The commanded pose is the
-    #: planner's; without it the gate recomputes it from the final sample's redundant coordinates.
-    compensate_deflection: bool = False
-    T_base_payload_commanded: Array | None = field(default=None, repr=False)
-    #: Also certify the *deflected* robot (the static sag predicted by the stiffness model, see
-    #: :func:`deflected_joints`) keeping the clearance; needs a payload and the robot's stiffness data.
-    deflection_check: bool = False
-    #: The controller period the scenario asks for [s]: the profile must be sampled at exactly it (a
-    #: profile timed at another period runs faster or slower on the controller than it was checked).
-    sample_period_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -447,10 +416,6 @@ def _approach_check(T_pay: Array, req: GateRequirements, T_goal: Array | None = 
     )
 
 
-#: Samples at which the sag is predicted for the deflected collision check (interpolated in between).
-DEFLECTION_SAMPLES = 300
-
-
 def deflected_joints(
     robot: Cabin8, q: Array, payload: RigidPayload | None, T_tool_payload: Array
 ) -> tuple[Array, float]:
@@ -473,7 +438,7 @@ def deflected_joints(
     from planner.kinematics.closed_form import redundant_family
 
     n = len(q)
-    idx = np.unique(np.concatenate([np.arange(0, n, max(1, n // DEFLECTION_SAMPLES)), [n - 1]]))
+    idx = deflection_sample_indices(n)
     x = stiffness_model(robot).deflection_along(q[idx], payload, T_tool_payload)
     T_pay = robot.fk_batch(q[idx]) @ T_tool_payload
     T_payload_tool = np.linalg.inv(T_tool_payload)

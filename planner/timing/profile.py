@@ -2,7 +2,7 @@
 
 A profile holds, for N samples at t_k = k * period, the positions, velocities, accelerations and efforts
 (forces / torques) of the 8 drives, and the joint positions. It is built from one or more
-:class:`~planner.timing.toppra.TimedPath` legs executed one after the other (each at rest at its ends);
+:class:`~planner.timing.stage.TimedPath` legs executed one after the other (each at rest at its ends);
 after the last leg ends the robot holds the goal at rest until the next sample.
 """
 
@@ -21,7 +21,7 @@ from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import DriveGeometry
-from planner.timing.toppra import TimedPath
+from planner.timing.stage import TimedPath
 
 Array = NDArray[np.float64]
 
@@ -169,7 +169,7 @@ def sample_legs(
     for k, leg in enumerate(legs):
         idx = np.arange(first[k], first[k + 1] + 1)
         scale = leg.duration / (steps[k] * period_s)
-        s, sd, sdd = leg.state((idx - first[k]) * period_s * scale)
+        s, sd, sdd = leg.state((idx - first[k]) * period_s * scale, 2)
         sd, sdd = sd * scale, sdd * scale**2
         sd[-1] = 0.0  # the leg ends at rest (the time law's last grid velocity is 0)
         pq, pdq, pddq = leg.path.evaluate(s)

@@ -1,7 +1,7 @@
 """Time-parameterisation of a joint path under every drive's velocity, acceleration and force limits.
 
-The pluggable interface is :class:`TimingStage`: ``time_path(path) -> TimedPath``. The default,
-:class:`ToppraStage`, runs TOPP-RA (Pham & Pham 2018, reachability analysis) on the drive path u(s) with
+The stage protocol is :class:`planner.timing.stage.TimingStage`; :class:`ToppraStage`, the default, runs
+TOPP-RA (Pham & Pham 2018, reachability analysis) on the drive path u(s) with
 
 - drive velocity limits |u'(s) sd| <= v_max,
 - drive acceleration limits |u'(s) sdd + u''(s) sd^2| <= a_max,
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import toppra
@@ -42,7 +42,7 @@ logging.getLogger("toppra").setLevel(logging.ERROR)
 
 
 @dataclass(frozen=True)
-class TimedPath:
+class ToppraTimedPath:
     """A path with its time law: path velocity ``sd`` at grid points ``ss``, constant sdd in between."""
 
     path: JointPath
@@ -55,8 +55,12 @@ class TimedPath:
         """Duration of the time law [s]."""
         return float(self.t[-1])
 
-    def state(self, times: Array) -> tuple[Array, Array, Array]:
-        """Path parameter, velocity and acceleration (s, sd, sdd) at times (N,) in [0, duration]."""
+    def state(self, times: Array, order: int = 2) -> tuple[Array, ...]:
+        """Path parameter and its derivatives (s, sd, sdd; sddd = 0 for ``order`` 3) at times (N,).
+
+        The path acceleration is constant between grid points (TOPP-RA's own assumption), so its jerk is
+        zero inside each interval and unbounded at the grid points.
+        """
         times = np.clip(np.asarray(times, dtype=float), 0.0, self.duration)
         i = np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, len(self.ss) - 2)
         ds = self.ss[i + 1] - self.ss[i]
@@ -64,17 +68,8 @@ class TimedPath:
         tau = times - self.t[i]
         s = self.ss[i] + self.sd[i] * tau + 0.5 * sdd * tau**2
         sd = self.sd[i] + sdd * tau
-        return np.minimum(s, self.ss[i + 1]), np.maximum(sd, 0.0), sdd
-
-
-class TimingStage(Protocol):
-    """Turns a geometric joint path into a time law within the robot's drive limits."""
-
-    name: str
-
-    def time_path(self, path: JointPath) -> TimedPath:
-        """The time law (rest to rest); raises :class:`RetimingFailed` when there is none."""
-        ...
+        out = (np.minimum(s, self.ss[i + 1]), np.maximum(sd, 0.0), sdd, np.zeros_like(sdd))
+        return out[: order + 1]
 
 
 class _DrivePathAdapter(toppra.interpolator.AbstractGeometricPath):
@@ -187,7 +182,7 @@ class ToppraStage:
         self.dynamics = Cabin8Dynamics.of(self.robot)
         self.geometry = DriveGeometry(self.robot)
 
-    def time_path(self, path: JointPath) -> TimedPath:
+    def time_path(self, path: JointPath) -> ToppraTimedPath:
         """TOPP-RA time law of ``path`` at rest at both ends (raises RetimingFailed)."""
         lim = self.robot.limits
         sv, sa, sf = self.safety
@@ -222,7 +217,7 @@ class ToppraStage:
         sd = np.maximum(np.asarray(sd, dtype=float), 0.0)
         ss = np.asarray(algo.gridpoints, dtype=float)
         dt = 2.0 * np.diff(ss) / np.maximum(sd[:-1] + sd[1:], 1e-12)
-        return TimedPath(path, ss, sd, np.concatenate([[0.0], np.cumsum(dt)]))
+        return ToppraTimedPath(path, ss, sd, np.concatenate([[0.0], np.cumsum(dt)]))
 
     def _static_overload(self, path: JointPath, grid: Array) -> RetimingFailed | None:
         """The refusal for the first grid point whose forces at rest exceed a (scaled) limit, if any."""

@@ -11,13 +11,13 @@ import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.plan.context import PLANNER_SLACK_M
 from planner.plan.goals import StaticForceCheck
-from planner.plan.pipeline import GATE_SLACK_M
 from planner.scenario.schema import ResolvedScenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 #: The pipeline's planning clearance for the reference scenarios (the requested 0.01 m plus its slack).
-CLEARANCE_M = 0.01 + GATE_SLACK_M
+CLEARANCE_M = 0.01 + PLANNER_SLACK_M
 MOTION_MARGIN_M = 0.005
 
 

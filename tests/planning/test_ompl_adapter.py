@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from planner.collision.world import CollisionWorld
+from planner.plan.connect import joint_box
 from planner.plan.ompl_adapter import PLANNERS, SearchResult, joint_scale, plan_joint_path
-from planner.plan.pipeline import _joint_box
 from planner.scenario.schema import PlannerName, ResolvedScenario, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -40,7 +40,7 @@ def problem(scenario: ResolvedScenario, world: CollisionWorld) -> tuple[np.ndarr
 
 
 def _plan(world: CollisionWorld, q_start: np.ndarray, q_goal: np.ndarray, planner: str, **kw: object):
-    lo, hi = _joint_box(world)
+    lo, hi = joint_box(world)
     options: dict[str, object] = {
         "clearance": CLEARANCE_M,
         "motion_margin": MOTION_MARGIN_M,
@@ -73,7 +73,7 @@ def _assert_certified(
     assert wp.ndim == 2 and wp.shape[1] == 8 and len(wp) >= 3  # the straight motion is blocked
     assert np.array_equal(wp[0], q_start) and np.array_equal(wp[-1], q_goal)
     assert res.goal_index == 0
-    lo, hi = _joint_box(world)
+    lo, hi = joint_box(world)
     assert np.all(wp >= lo - 1e-12) and np.all(wp <= hi + 1e-12)
     for a, b in zip(wp[:-1], wp[1:], strict=True):
         assert world.check_motion(a, b, CLEARANCE_M, MOTION_MARGIN_M).valid

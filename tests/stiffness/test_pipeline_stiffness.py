@@ -17,7 +17,8 @@ from planner.core.so3 import pose_error
 from planner.documents.plot import profile_png
 from planner.dynamics.stiffness import StiffnessModel, deflected_pose
 from planner.gate.checks import validate_profile
-from planner.plan.pipeline import Planner, PlanResult, gate_requirements
+from planner.gate.requirements import requirements_for
+from planner.plan.pipeline import Planner, PlanResult
 from planner.scenario.schema import ResolvedScenario, resolve_scenario, scenario_from_dict
 
 SCENARIOS = Path(__file__).parent.parent / "scenarios"
@@ -74,7 +75,7 @@ def test_rigid_plan_misses_by_the_sag_and_the_gate_knows(plans: dict) -> None:
     assert np.linalg.norm(pose_error(sc.T_base_payload_goal, T_sagged)[:3]) > 1e-3
     # Under compensating requirements the same profile fails: it ends at the nominal pose, not the command,
     # and inserts along the nominal line, 1.7 mm off the commanded one.
-    req = dataclasses.replace(gate_requirements(sc, planner.payload), compensate_deflection=True)
+    req = dataclasses.replace(requirements_for(sc, planner.payload), compensate_deflection=True)
     gate = validate_profile(res.profile, sc.robot, planner.world, req, planner.dynamics)
     assert {c.name for c in gate.failures} == {"goal", "approach"}
 
@@ -82,7 +83,7 @@ def test_rigid_plan_misses_by_the_sag_and_the_gate_knows(plans: dict) -> None:
 def test_gate_recomputes_the_command_when_not_given(plans: dict) -> None:
     """`cabinplan check` has only the scenario: the gate derives the command itself and still passes."""
     sc, planner, res = plans["compensated"]
-    req = gate_requirements(sc, planner.payload)
+    req = requirements_for(sc, planner.payload)
     assert req.compensate_deflection and req.T_base_payload_commanded is None
     gate = validate_profile(res.profile, sc.robot, planner.world, req, planner.dynamics)
     assert gate.passed, gate.summary()

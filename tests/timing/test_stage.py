@@ -18,11 +18,12 @@ from planner.collision.bodies import PayloadGeometry
 from planner.core.exceptions import RetimingFailed
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.plan.pipeline import single_drive_lower_bound
+from planner.plan.report import single_drive_lower_bound
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import JointPath, LinePiece, blended_polyline, segment_time_length
 from planner.timing.profile import DriveProfile, sample_legs
-from planner.timing.toppra import TimedPath, ToppraStage
+from planner.timing.stage import TimedPath
+from planner.timing.toppra import ToppraStage
 
 PERIOD = 0.004
 TOL = 1.01

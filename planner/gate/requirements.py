@@ -1,0 +1,120 @@
+"""What a profile must satisfy for a scenario, and the gate's own tolerances.
+
+The gate's constants live here, with the measurement that chose them; :func:`requirements_for` turns a
+resolved scenario into the :class:`GateRequirements` every route to the gate uses (the planner, CLI
+``check`` and ``POST /plans:validate`` through :mod:`planner.gate.check_profile`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from planner.core.exceptions import InvalidInput
+from planner.core.types import Array, IntArray
+from planner.dynamics.payload import RigidPayload
+
+if TYPE_CHECKING:
+    from planner.scenario.schema import ResolvedScenario
+
+#: Certification margin of the gate's collision check [m]: the certified walk proves the requested
+#: clearance with this margin at the states it starts from (the scenario's ``motion_margin_m`` is the
+#: planner's, not the gate's).
+GATE_MOTION_MARGIN_M = 0.001
+LIMIT_TOLERANCE = 0.01  # 1% above velocity / acceleration / force limits
+GOAL_POSITION_TOL_M = 1e-3
+GOAL_ANGLE_TOL_RAD = np.deg2rad(0.1)
+LINE_TOL_M = 1e-3
+#: Along the insertion the payload may not step back out of the bay by more than this [m] (rounding).
+APPROACH_BACKOUT_TOL_M = 1e-9
+START_TOL = 1e-9
+#: Largest extra clearance a run of samples may cost in the certified collision check [m], and the
+#: longest run: a run that fails is retried in halves, so a larger extra costs no verdict, only fewer,
+#: longer certified chords where the path has room (measured on the reference scenarios: 0.5 mm and 32
+#: samples took twice as long as 2 mm and 128).
+GATE_MAX_EXTRA_M = 0.002
+GATE_MAX_RUN = 128
+#: The reported acceleration may differ from the step's mean acceleration dv/dt by this fraction of a_max
+#: (the time law's acceleration is piecewise constant and may switch within a step; the executed dv/dt
+#: itself is held to the 1% limit tolerance by the acceleration check).
+ACC_CONSISTENCY = 0.05
+
+
+@dataclass(frozen=True)
+class GateRequirements:
+    """What the trajectory must do, from the scenario."""
+
+    start_u: Array = field(repr=False)
+    clearance_m: float
+    motion_margin_m: float
+    goal_u: Array | None = field(default=None, repr=False)
+    T_base_payload_goal: Array | None = field(default=None, repr=False)
+    T_tool_payload: Array = field(default_factory=lambda: np.eye(4), repr=False)
+    approach_direction: Array | None = field(default=None, repr=False)
+    approach_distance_m: float = 0.0
+    payload: RigidPayload | None = None
+    #: Deflection compensation of a pose goal: the final sample must reach the commanded payload pose
+    #: (kinematically) and its predicted deflected pose the requested one. The commanded pose is the
+    #: planner's; without it the gate recomputes it from the final sample's redundant coordinates.
+    compensate_deflection: bool = False
+    T_base_payload_commanded: Array | None = field(default=None, repr=False)
+    #: Also certify the *deflected* robot (the static sag predicted by the stiffness model, see
+    #: :func:`deflected_joints`) keeping the clearance; needs a payload and the robot's stiffness data.
+    deflection_check: bool = False
+    #: The controller period the scenario asks for [s]: the profile must be sampled at exactly it (a
+    #: profile timed at another period runs faster or slower on the controller than it was checked).
+    sample_period_s: float | None = None
+
+
+#: Samples of a profile at which the static deflection is predicted (the gate's deflected collision check,
+#: the plan's report), interpolated in between: the deflection is a smooth function of the configuration.
+DEFLECTION_SAMPLES = 300
+
+
+def deflection_sample_indices(n: int) -> IntArray:
+    """Indices (K,) of up to :data:`DEFLECTION_SAMPLES` evenly spaced samples of ``n``, the last included."""
+    return np.unique(np.concatenate([np.arange(0, n, max(1, n // DEFLECTION_SAMPLES)), [n - 1]]))
+
+
+def compensates_deflection(sc: ResolvedScenario) -> bool:
+    """Whether a scenario's pose goal is deflection-compensated (option, default: with a payload).
+
+    Raises:
+        InvalidInput: compensation asked for explicitly on a robot without stiffness data.
+    """
+    option = sc.options.compensate_deflection
+    if option and sc.robot.desc.stiffness is None:
+        raise InvalidInput(
+            f"options.compensate_deflection: robot {sc.robot.name!r} has no stiffness data",
+            field="options.compensate_deflection",
+        )
+    if sc.T_base_payload_goal is None or sc.robot.desc.stiffness is None:
+        return False
+    return sc.payload is not None if option is None else bool(option)
+
+
+def requirements_for(
+    sc: ResolvedScenario, payload: RigidPayload | None, T_base_payload_commanded: Array | None = None
+) -> GateRequirements:
+    """What the validation gate demands of any trajectory for this scenario.
+
+    ``T_base_payload_commanded`` is the planner's compensated command of a pose goal (the gate
+    recomputes it from the final sample when it is not given).
+    """
+    return GateRequirements(
+        start_u=sc.start_u,
+        clearance_m=sc.options.clearance_m,
+        motion_margin_m=GATE_MOTION_MARGIN_M,
+        goal_u=sc.goal_u,
+        T_base_payload_goal=sc.T_base_payload_goal,
+        T_tool_payload=sc.payload.T_tool_payload if sc.payload is not None else np.eye(4),
+        approach_direction=sc.approach_direction,
+        approach_distance_m=sc.approach_distance_m,
+        payload=payload,
+        compensate_deflection=compensates_deflection(sc),
+        T_base_payload_commanded=T_base_payload_commanded,
+        sample_period_s=sc.options.sample_period_s,
+        deflection_check=sc.payload is not None and sc.robot.desc.stiffness is not None,
+    )

@@ -1,0 +1,250 @@
+"""Connections: OMPL attempts, straight connections onto and off a transit ride, the greedy shortcut.
+
+:func:`ompl_attempt` runs the sampling planner (:mod:`planner.plan.ompl_adapter`, the only module that
+imports OMPL) with a motion-check budget and the time left; :func:`via_transit` plans start -> transit
+ride -> target, joining and leaving the ride while the rail moves where a straight connection is certified
+(:func:`ride_connections`), else with OMPL as a local problem first (:func:`connect`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.collision.world import CollisionWorld
+from planner.core.types import Array
+from planner.kinematics import chain
+from planner.plan.context import PlanContext
+from planner.plan.ompl_adapter import plan_joint_path
+from planner.plan.shortcut import segment_times
+from planner.plan.transit import find_transit
+
+#: Motion checks of the first, reproducible planner attempt.
+QUICK_MOTION_CHECKS = 1500
+#: Motion-check budget of the full attempt (the time limit applies as well; when it stops the planner
+#: first, the result depends on the machine's speed).
+FULL_MOTION_CHECKS = 40_000
+#: A connection onto or off a transit ride is first planned with the rail within this of its ends [m].
+CONNECT_RAIL_WINDOW_M = 0.3
+#: Fractions of the transit ride at which a straight connection may join or leave it (see
+#: :func:`ride_connections`), and the most certified checks spent looking for such a pair.
+RIDE_FRACTIONS = (0.0, 0.15, 0.3, 0.45, 0.6, 0.75, 0.9, 1.0)
+RIDE_MAX_CHECKS = 12
+RIDE_SIDE_CHECKS = 4
+
+
+def joint_box(world: CollisionWorld) -> tuple[Array, Array]:
+    """The sampling planner's joint box (8,), (8,): drive ranges, the stage's x, y and gamma ranges."""
+    robot = world.robot
+    ps = robot.desc.parallel_stage
+    lo, hi = robot.limits.lower.copy(), robot.limits.upper.copy()
+    half = 0.5 * (max(robot.limits.upper[1:4]) - min(robot.limits.lower[1:4]))
+    lo[1:4] = [-half, ps.y_range[0], -ps.gamma_max]
+    hi[1:4] = [half, ps.y_range[1], ps.gamma_max]
+    return lo, hi
+
+
+def ompl_attempt(
+    ctx: PlanContext,
+    q_start: Array,
+    targets: list[Array],
+    max_checks: int,
+    simplify: bool = True,
+    rail_window_m: float | None = None,
+) -> tuple[Array, int] | None:
+    """OMPL from ``q_start`` to any of ``targets`` within ``max_checks`` motion checks and the time left.
+
+    ``rail_window_m`` makes it a local problem: the rail kept within that of the ends. None when no path
+    was found (the attempt is recorded in the report).
+    """
+    budget = ctx.remaining()
+    if budget <= 0:
+        return None
+    lo, hi = joint_box(ctx.world)
+    if rail_window_m is not None:  # a local problem: the rail kept near its two ends
+        d1s = [float(q_start[chain.D1]), *(float(q[chain.D1]) for q in targets)]
+        lo[chain.D1] = max(lo[chain.D1], min(d1s) - rail_window_m)
+        hi[chain.D1] = min(hi[chain.D1], max(d1s) + rail_window_m)
+    res = plan_joint_path(
+        ctx.world,
+        q_start,
+        targets,
+        clearance=ctx.clearances.planner_m,
+        motion_margin=ctx.clearances.motion_margin_m,
+        time_limit_s=budget,
+        seed=ctx.opts.seed,
+        planner=ctx.opts.planner,
+        simplify=simplify and ctx.simplify,
+        joint_lower=lo,
+        joint_upper=hi,
+        state_ok=ctx.forces.ok,
+        motion_ok=ctx.forces.segment_ok,
+        max_motion_checks=max_checks,
+        planner_range=ctx.preset.planner_range,
+    )
+    if res is None:
+        ctx.report.setdefault("search_attempts", []).append({"method": "ompl", "max_checks": max_checks})
+        return None
+    ctx.report["search"] = {
+        "method": "ompl",
+        "planner": res.planner,
+        "planning_time_s": round(res.planning_time_s, 4),
+        "simplify_time_s": round(res.simplify_time_s, 4),
+        "raw_waypoints": res.raw_waypoints,
+        "waypoints": len(res.waypoints),
+        "motion_checks": res.motion_checks,
+    }
+    return res.waypoints, res.goal_index
+
+
+def connect(ctx: PlanContext, q_a: Array, targets: list[Array]) -> tuple[Array, int] | None:
+    """``q_a`` to any target: straight where certified, else OMPL (local first); None when not found."""
+    for k, q in enumerate(targets):
+        if np.allclose(q, q_a, rtol=0.0, atol=1e-12):
+            return np.array([q_a, q]), k
+        if ctx.motion_ok(q_a, q):
+            return np.array([q_a, q]), k
+    # Not simplified here: the caller shortcuts and simplifies the whole path it is part of. First as a
+    # local problem (the rail near the connection's ends: a posture change at the end of a rail move
+    # needs no rail detour), then in the whole joint box.
+    local = ompl_attempt(
+        ctx, q_a, targets, max_checks=QUICK_MOTION_CHECKS, simplify=False, rail_window_m=CONNECT_RAIL_WINDOW_M
+    )
+    return local or ompl_attempt(ctx, q_a, targets, max_checks=FULL_MOTION_CHECKS, simplify=False)
+
+
+def greedy_shortcut(ctx: PlanContext, waypoints: Array) -> Array:
+    """Greedy, deterministic shortcut.
+
+    From each kept waypoint, jump to the farthest one reachable by a certified straight motion.
+    """
+    keep = [0]
+    i = 0
+    n = len(waypoints)
+    while i < n - 1:
+        j = n - 1
+        while j > i + 1 and not ctx.motion_ok(waypoints[i], waypoints[j]):
+            j -= 1
+        keep.append(j)
+        i = j
+    return waypoints[keep]
+
+
+def via_transit(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Array, int] | None:
+    """Start -> transit ride -> a target (waypoints, target index), or None when no transit is found."""
+    transit = find_transit(
+        ctx.world,
+        q_start,
+        targets[0],
+        ctx.clearances.planner_m,
+        ctx.clearances.motion_margin_m,
+        ctx.forces.ok,
+        ctx.forces.segment_ok,
+        ctx.opts.seed,
+        deadline=lambda: ctx.remaining() <= 0,
+    )
+    ctx.report.setdefault("search_attempts", []).append({"method": "transit", "found": transit is not None})
+    if transit is None:
+        return None
+    head, tail = ride_connections(ctx, q_start, targets, transit.q_a, transit.q_b)
+    if head is None:
+        joined = connect(ctx, q_start, [transit.q_a])
+        if joined is None:
+            return None
+        head = joined[0]
+    if tail is None:
+        tail = connect(ctx, transit.q_b, targets)
+        if tail is None:
+            return None
+    # Along the ride from where the head joins it to where the tail leaves it (at most one rail move).
+    ride = [tail[0][0]] if not np.allclose(head[-1], tail[0][0], rtol=0.0, atol=1e-12) else []
+    # Shortcut here; the caller then cuts the corners for time (OMPL's length-based simplifier, tried
+    # here as well, gave the same durations after corner cutting, at 30-50 ms a plan).
+    waypoints = greedy_shortcut(ctx, np.vstack([head, *ride, tail[0][1:]]))
+    ctx.report["search"] = {
+        "method": "transit",
+        "transit_candidates": transit.candidates_tried,
+        "transit_state_checks": transit.state_checks,
+        "waypoints": len(waypoints),
+    }
+    return waypoints, tail[1]
+
+
+def ride_connections(
+    ctx: PlanContext, q_start: Array, targets: list[Array], ride_a: Array, ride_b: Array
+) -> tuple[Array | None, tuple[Array, int] | None]:
+    """Straight connections onto and off the transit ride, changing posture while the rail moves.
+
+    The ride is the transit posture moving along the rail from ``ride_a`` (the start's d1) to ``ride_b``
+    (the goal's). Joining it at a fraction f_in of the way and leaving it at 1 - f_out lets the posture
+    changes overlap the rail move instead of happening at a standstill. The pairs (f_in, f_out) with
+    f_in + f_out <= 1 are tried in order of estimated time (slowest drive at v_max per segment), each
+    straight connection certified, at most :data:`RIDE_MAX_CHECKS` checks in all. A side without a
+    certified connection is None: the caller joins the ride at its start, or leaves it at its end,
+    with the planner.
+
+    Returns:
+        (start -> join waypoints or None, (leave -> target waypoints, target index) or None).
+    """
+    ride = ride_b - ride_a
+    t_ride = float(segment_times(ctx.robot, ride_a, ride_a, ride_b)[0])
+
+    def on_ride(f: float) -> Array:
+        return ride_a + f * ride
+
+    t_in = {f: float(segment_times(ctx.robot, q_start, q_start, on_ride(f))[0]) for f in RIDE_FRACTIONS}
+    combos: list[tuple[float, float, float, int]] = []
+    for k, q_t in enumerate(targets):
+        for f_out in RIDE_FRACTIONS:
+            t_out = float(segment_times(ctx.robot, q_t, on_ride(1.0 - f_out), q_t)[0])
+            for f_in in RIDE_FRACTIONS:
+                if f_in + f_out <= 1.0 + 1e-12:
+                    combos.append((t_in[f_in] + (1.0 - f_in - f_out) * t_ride + t_out, f_in, f_out, k))
+    combos.sort()
+    verdict: dict[tuple[str, float, int], bool] = {}
+
+    def ok(side: str, f: float, k: int, budget: int) -> bool:
+        """The side's connection certified; False, unchecked, once ``budget`` checks are spent."""
+        key = (side, f, k if side == "out" else 0)
+        if key not in verdict:
+            if len(verdict) >= budget:
+                return False
+            a, b = (q_start, on_ride(f)) if side == "in" else (on_ride(1.0 - f), targets[k])
+            verdict[key] = ctx.motion_ok(a, b)
+        return verdict[key]
+
+    # A side whose plain connection at the ride's end is not clear rarely has a longer diagonal that is
+    # (it crosses the same obstacle while the rail moves too): such sides are not tried further.
+    open_in = ok("in", 0.0, 0, RIDE_MAX_CHECKS)
+    open_out = {k for k in range(len(targets)) if ok("out", 0.0, k, RIDE_MAX_CHECKS)}
+    combos = [c for c in combos if (open_in or c[1] == 0.0) and (c[3] in open_out or c[2] == 0.0)]
+    join: float | None = None
+    out: tuple[float, int] | None = None
+    pair = next(
+        (
+            (a, b, k)
+            for _, a, b, k in combos
+            if ok("in", a, k, RIDE_MAX_CHECKS) and ok("out", b, k, RIDE_MAX_CHECKS)
+        ),
+        None,
+    )
+    if pair is not None:
+        join, out = pair[0], (pair[1], pair[2])
+    else:
+        # No pair within the budget: one side alone, the other at the ride's end (f = 0), the side's
+        # fractions in order of their own estimate, with a few more checks.
+        budget = len(verdict) + RIDE_SIDE_CHECKS
+        join = next((a for _, a, b, k in combos if b == 0.0 and ok("in", a, k, budget)), None)
+        if join is None:
+            budget = len(verdict) + RIDE_SIDE_CHECKS
+            out = next(((b, k) for _, a, b, k in combos if a == 0.0 and ok("out", b, k, budget)), None)
+    ctx.report.setdefault("search_attempts", []).append(
+        {
+            "method": "ride_connections",
+            "checks": len(verdict),
+            "join_fraction": join,
+            "leave_fraction": None if out is None else 1.0 - out[0],
+        }
+    )
+    head = None if join is None else np.array([q_start, on_ride(join)])
+    tail = None if out is None else (np.array([on_ride(1.0 - out[0]), targets[out[1]]]), out[1])
+    return head, tail

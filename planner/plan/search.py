@@ -1,0 +1,66 @@
+"""The search stage: certified waypoints from the start to one of the targets, corners cut for time.
+
+The cascade of the plan's :class:`~planner.plan.context.SearchPreset`: a target equal to the start; the
+straight joint motion when it is certified clear; for a long rail move a transit posture
+(:func:`planner.plan.connect.via_transit`: cheap, and it solves narrow passages such as a hatch); then the
+sampling planner with a budget counted in motion checks (reproducible), then again with the rest of the
+time. The path found is cut at its corners for time (:func:`planner.plan.shortcut.cut_corners`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.core.exceptions import NoPathFound
+from planner.core.types import Array
+from planner.plan.connect import FULL_MOTION_CHECKS, QUICK_MOTION_CHECKS, ompl_attempt, via_transit
+from planner.plan.context import PlanContext
+from planner.plan.shortcut import cut_corners
+
+#: Rail moves at least this long may use a transit posture [m].
+TRANSIT_MIN_RAIL_M = 0.5
+
+
+def search(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Array, int]:
+    """Certified waypoints from the start to one of the targets (and which), corners cut for time."""
+    waypoints, k = _cascade(ctx, q_start, targets)
+    if len(waypoints) > 2 and ctx.simplify:
+        waypoints, stats = cut_corners(
+            ctx.robot, waypoints, ctx.motion_ok, deadline=lambda: ctx.remaining() <= 0
+        )
+        ctx.report.setdefault("search", {})["corner_cuts"] = {
+            "cuts": stats.cuts,
+            "checks": stats.checks,
+            "estimated_saving_s": round(stats.saved_s, 3),
+        }
+    return waypoints, k
+
+
+def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Array, int]:
+    """The search cascade of the preset: identical, straight, transit, OMPL quick, OMPL full."""
+    for k, q in enumerate(targets):
+        if np.allclose(q, q_start, rtol=0.0, atol=1e-12):
+            return np.array([q_start, q]), k
+    preset = ctx.preset
+    if preset.straight:  # free when it is clear
+        for k, q in enumerate(targets):
+            if ctx.motion_ok(q_start, q):
+                ctx.report["search"] = {"method": "straight"}
+                return np.array([q_start, q]), k
+    if preset.transit and ctx.simplify and abs(float(targets[0][0] - q_start[0])) >= TRANSIT_MIN_RAIL_M:
+        via = via_transit(ctx, q_start, targets)
+        if via is not None:
+            return via
+    if preset.quick_attempt:
+        res = ompl_attempt(ctx, q_start, targets, max_checks=QUICK_MOTION_CHECKS)
+        if res is not None:
+            return res
+    res = ompl_attempt(ctx, q_start, targets, max_checks=FULL_MOTION_CHECKS)
+    if res is not None:
+        return res
+    raise NoPathFound(
+        f"no collision-free path found within the time limit ({ctx.opts.time_limit_s:g} s, "
+        f"planner {ctx.opts.planner})",
+        time_limit_s=ctx.opts.time_limit_s,
+        planner=ctx.opts.planner,
+    )

@@ -1,0 +1,52 @@
+"""The timing protocol: a :class:`TimingStage` turns a geometric path into a :class:`TimedPath`.
+
+The geometric path (the joint path after smoothing: exactly the path the collision layer certified) is kept;
+a stage only chooses the time law s(t). Adding a stage is one module implementing :class:`TimingStage`
+plus a scenario option; the sampler (:func:`planner.timing.profile.sample_legs`) and the gate take any
+:class:`TimedPath`. The TOPP-RA adapter is :class:`planner.timing.toppra.ToppraStage`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from planner.core.types import Array
+from planner.timing.path import JointPath
+
+
+class TimedPath(Protocol):
+    """A geometric path with its time law s(t), at rest at both ends."""
+
+    @property
+    def path(self) -> JointPath:
+        """The geometric path, unchanged by timing."""
+        ...
+
+    @property
+    def duration(self) -> float:
+        """Duration of the time law [s]."""
+        ...
+
+    def state(self, times: Array, order: int = 2) -> tuple[Array, ...]:
+        """The path parameter and its time derivatives up to ``order`` at ``times`` (N,) in [0, duration].
+
+        Returns:
+            ``order + 1`` arrays (N,): s, sd, sdd (and sddd for ``order`` 3).
+        """
+        ...
+
+
+class TimingStage(Protocol):
+    """Turns a geometric joint path into a time law within the robot's drive limits."""
+
+    name: str
+
+    def time_path(self, path: JointPath) -> TimedPath:
+        """The time law, rest to rest; raises :class:`~planner.core.exceptions.RetimingFailed` if none."""
+        ...
+
+
+#: Builds the timing stage of a plan: ``(robot, payload, safety) -> TimingStage``, ``safety`` the fractions
+#: of the (velocity, acceleration, force) limits the stage may use.
+TimingFactory = Callable[[Any, Any, tuple[float, float, float]], TimingStage]
