@@ -11,15 +11,14 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter
-from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
-from planner.core.schemas import Pose
+from planner.core.schemas import Finite, Pose
 from planner.tools import kinematics_tools
 
 router = APIRouter(tags=["kinematics"])
 
-Finite = Annotated[float, AllowInfNan(False)]
 DriveMap = dict[str, Finite]
 
 

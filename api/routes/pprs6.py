@@ -13,16 +13,16 @@ from functools import lru_cache
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response
-from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
 from api.problems import SafeJSONResponse
 from api.routes.kinematics import PlatformPose
+from planner.core.schemas import Finite
 from planner.tools import pprs6 as pprs6_tools
 
 router = APIRouter(tags=["pprs6"])
 
-Finite = Annotated[float, AllowInfNan(False)]
 #: Waypoints of one pose path (a request is bounded, not only by the body size limit).
 MAX_WAYPOINTS = 100
 Format = Annotated[Literal["json", "png"], Query(description="json: the document; png: the picture.")]

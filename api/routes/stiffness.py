@@ -11,14 +11,14 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter
-from pydantic import AllowInfNan, BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
+from planner.core.schemas import Finite
 from planner.dynamics.stiffness import PayloadInput, stiffness_document
 
 router = APIRouter(tags=["stiffness"])
 
-Finite = Annotated[float, AllowInfNan(False)]
 DriveMap = dict[str, Finite]
 
 

@@ -15,13 +15,10 @@ from typing import Literal, TypeVar
 
 import numpy as np
 import yaml
-from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from planner.core.exceptions import InvalidRobotDescription
-
-Array = NDArray[np.float64]
-
+from planner.core.types import Array
 
 DescriptionT = TypeVar("DescriptionT", bound=BaseModel)
 

@@ -6,12 +6,10 @@ import math
 from typing import Annotated
 
 import numpy as np
-from numpy.typing import NDArray
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, AllowInfNan, BaseModel, ConfigDict, Field, Strict, model_validator
 
 from planner.core.so3 import matrix_to_quat_wxyz, quat_wxyz_to_matrix
-
-Array = NDArray[np.float64]
+from planner.core.types import Array
 
 
 def _finite(v: float) -> float:
@@ -20,7 +18,15 @@ def _finite(v: float) -> float:
     return v
 
 
+#: A finite real number, lax (pydantic's float coercion: ``"0.3"`` and ``true`` pass): poses and wrenches of
+#: the CLI and the HTTP API.
 Finite = Annotated[float, AfterValidator(_finite)]
+
+#: A finite real number, strict: ints and floats only (no numeric strings, no booleans, no NaN/inf),
+#: checked *before* any bound, so ``.nan`` is reported as "not finite" rather than as "not <= 0.2"; bounds
+#: added to it also land in the JSON schema as standard ``exclusiveMinimum``/``maximum`` keys. Scenario
+#: files use it.
+StrictFinite = Annotated[float, Strict(), AllowInfNan(False)]
 
 
 class Quaternion(BaseModel):

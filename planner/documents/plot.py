@@ -13,8 +13,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from numpy.typing import NDArray  # noqa: E402
 
+from planner.core.types import Array
 from planner.robots.cabin8 import Cabin8  # noqa: E402
 from planner.timing.profile import DriveProfile  # noqa: E402
 
@@ -22,8 +22,6 @@ if TYPE_CHECKING:
     from planner.collision.world import CollisionWorld
     from planner.plan.pipeline import PlanResult
     from planner.scenario.schema import ResolvedScenario
-
-Array = NDArray[np.float64]
 
 
 def profile_png(

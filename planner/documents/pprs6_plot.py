@@ -12,11 +12,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from numpy.typing import NDArray  # noqa: E402
 
+from planner.core.types import Array
 from planner.tools.workspace import Workspace  # noqa: E402
-
-Array = NDArray[np.float64]
 
 
 def workspace_png(ws: Workspace, title: str = "") -> bytes:

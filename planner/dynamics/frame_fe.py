@@ -21,14 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.description import Section
+from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain, parallel
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 
 def element_stiffness(

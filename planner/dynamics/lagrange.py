@@ -27,15 +27,13 @@ from functools import cached_property
 
 import casadi as ca
 import numpy as np
-from numpy.typing import NDArray
 
+from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import CHUNK, SMALL_CHUNK, FastFunction, dense_function, evaluate_mapped
 from planner.kinematics.native import native
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 
 def _bar(m: float, p0: ca.SX, p1: ca.SX, q: ca.SX, qd: ca.SX, g: ca.DM) -> tuple[ca.SX, ca.SX]:

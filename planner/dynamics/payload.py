@@ -6,11 +6,9 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.exceptions import InvalidInput
-
-Array = NDArray[np.float64]
+from planner.core.types import Array
 
 
 def box_inertia(mass: float, size: Array | tuple[float, float, float]) -> Array:

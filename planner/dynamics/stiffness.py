@@ -65,19 +65,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from planner.core.description import Section, StiffnessSpec
 from planner.core.exceptions import DeflectionNotCompensated, InvalidInput, InvalidRobotDescription
 from planner.core.schemas import Finite, Pose
 from planner.core.so3 import matrix_to_quat_wxyz, pose_error
+from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload, box_inertia
 from planner.kinematics import chain, parallel
 from planner.kinematics.closed_form import redundant_family
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 #: Input bounds of :func:`stiffness_document` (beyond them the linear model means nothing and overflows).
 MAX_PAYLOAD_KG = 1e5

@@ -35,11 +35,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
+from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.dynamics.stiffness import (
@@ -64,8 +64,6 @@ from planner.gate.requirements import (
 )
 from planner.robots.cabin8 import Cabin8
 from planner.timing.profile import DriveProfile
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -22,11 +22,9 @@ from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.description import MDHSpec
-
-Array = NDArray[np.float64]
+from planner.core.types import Array
 
 #: Index of each joint in q = (d1, x, y, gamma, theta3, theta4, d5, theta6).
 D1, X, Y, GAMMA, THETA3, THETA4, D5, THETA6 = range(8)

@@ -20,12 +20,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.description import MDHSpec
+from planner.core.types import Array
 from planner.kinematics.chain import mdh_batch
-
-Array = NDArray[np.float64]
 
 
 def redundant_family(links: Sequence[MDHSpec], T: Array, gamma: Array, d5: Array) -> Array:

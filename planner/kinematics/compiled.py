@@ -16,9 +16,8 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
-from numpy.typing import NDArray
 
-Array = NDArray[np.float64]
+from planner.core.types import Array
 
 
 def dense_function(

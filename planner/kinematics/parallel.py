@@ -32,12 +32,10 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.description import ParallelStageSpec
 from planner.core.exceptions import OutsideWorkspace
-
-Array = NDArray[np.float64]
+from planner.core.types import Array
 
 
 @dataclass(frozen=True)

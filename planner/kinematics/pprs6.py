@@ -65,12 +65,9 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.exceptions import ForwardKinematicsFailed
-
-Array = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
+from planner.core.types import Array, BoolArray
 
 #: Drive order of every drive vector.
 DRIVES = ("w1", "w2", "beta", "s1", "s2", "s3")

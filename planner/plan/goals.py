@@ -20,16 +20,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
+from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics.closed_form import redundant_family
 from planner.redundancy.ik import IKOptions, comfort_margins, family_candidates, normalised_margin, track_pose
 from planner.robots.cabin8 import Cabin8
 
-Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
 
 

@@ -12,11 +12,9 @@ always takes the certified walk.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
-
-Array = NDArray[np.float64]
+from planner.core.types import Array
 
 #: One probe state per this much of the largest joint step [m or rad], at most MAX_PROBES.
 PROBE_SPACING = 0.05

@@ -20,15 +20,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
 from planner.collision.world import CollisionWorld
+from planner.core.types import Array
 from planner.plan.motion import motion_clear
 
-Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
 
 ou.setLogLevel(ou.LOG_WARN)

@@ -27,14 +27,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
+from planner.core.types import Array
 from planner.kinematics import pprs6 as kin
 from planner.robots.pprs6 import Pprs6
 from planner.timing.drive_path import DrivePath, SampledLegs, sample_legs, time_drive_path
-
-Array = NDArray[np.float64]
 
 #: The paper's closed path E -> F -> G -> H (Fig. 6 shows only its shape): a saddle-shaped spatial
 #: quadrilateral of 40 mm x 40 mm x 20 mm around the centre of the level workspace, at a yaw of 0.2 rad

@@ -22,11 +22,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from planner.core.types import Array
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 #: How far back along the incoming segment a cut may start (fractions of the segment, longest first),
 #: and how far along the outgoing one it may end.

@@ -32,12 +32,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
+from planner.core.types import Array
 from planner.kinematics import chain
 from planner.plan.motion import motion_clear
 from planner.plan.shortcut import segment_times
 from planner.redundancy.ik import random_admissible_joints
 
-Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
 
 

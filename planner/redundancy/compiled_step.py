@@ -15,13 +15,12 @@ from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
-from numpy.typing import NDArray
 
+from planner.core.types import Array
 from planner.kinematics.compiled import FastFunction, dense_function
 from planner.redundancy.solve import Problem
 from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
 
-Array = NDArray[np.float64]
 _BIG = 1e9
 
 

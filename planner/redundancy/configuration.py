@@ -5,11 +5,9 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
-from numpy.typing import NDArray
 
+from planner.core.types import Array
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 
 class Configuration:

@@ -24,16 +24,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.exceptions import GoalUnreachable, InvalidInput, OutsideWorkspace, QPSolveFailed
 from planner.core.so3 import pose_error
+from planner.core.types import Array
 from planner.kinematics.closed_form import redundant_family
 from planner.redundancy.compiled_step import IKStep, StepWeights
 from planner.redundancy.solve import DEFAULT_SOLVER, solve_problem
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -5,11 +5,9 @@ from __future__ import annotations
 from typing import NamedTuple, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
 
+from planner.core.types import Array
 from planner.redundancy.configuration import Configuration
-
-Array = NDArray[np.float64]
 
 
 class Constraint(NamedTuple):

@@ -20,15 +20,13 @@ from typing import Any, NamedTuple
 import daqp
 import numpy as np
 import qpsolvers
-from numpy.typing import NDArray
 from scipy import sparse
 
 from planner.core.exceptions import QPSolveFailed
+from planner.core.types import Array
 from planner.redundancy.configuration import Configuration
 from planner.redundancy.limits import Limit
 from planner.redundancy.tasks import Task
-
-Array = NDArray[np.float64]
 
 DEFAULT_SOLVER = "daqp"
 

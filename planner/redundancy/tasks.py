@@ -12,12 +12,10 @@ from abc import ABC, abstractmethod
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.so3 import pose_error
+from planner.core.types import Array
 from planner.redundancy.configuration import Configuration
-
-Array = NDArray[np.float64]
 
 
 class Objective(NamedTuple):

@@ -30,11 +30,10 @@ from numpy.typing import NDArray
 
 from planner.core.description import Hybrid8Description, description_hash, load_description
 from planner.core.exceptions import InvalidInput, LimitViolation
+from planner.core.types import Array
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import FastFunction, dense_function
 from planner.robots.base import DriveLimits, RobotModel
-
-Array = NDArray[np.float64]
 
 #: Indices of the stage coordinates in q (x, y, gamma) and in u (x1, x2, x3).
 STAGE = slice(1, 4)

@@ -23,17 +23,13 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from planner.core.description import DriveSpec, load_description_file
 from planner.core.exceptions import InvalidInput, OutsideWorkspace
+from planner.core.types import Array, BoolArray
 from planner.kinematics import pprs6 as kin
 from planner.robots.base import DriveLimits, RobotModel
-
-BoolArray = NDArray[np.bool_]
-
-Array = NDArray[np.float64]
 
 
 class _Frozen(BaseModel):

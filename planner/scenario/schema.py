@@ -36,14 +36,11 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import yaml
-from numpy.typing import NDArray
 from pydantic import (
     AliasChoices,
-    AllowInfNan,
     BaseModel,
     ConfigDict,
     Field,
-    Strict,
     ValidationError,
     ValidationInfo,
     field_validator,
@@ -54,15 +51,15 @@ from pydantic_core import ErrorDetails
 from meshes import reference_cabin_path, reference_cabins
 from planner.collision.bodies import PayloadGeometry
 from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
-from planner.core.schemas import Pose
+from planner.core.schemas import Pose, StrictFinite
+from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload
 from planner.meshio.load import LoadedMesh, MeshLimits, load_mesh
 from planner.robots import load_robot
 from planner.robots.cabin8 import Cabin8
 
-_LOG = logging.getLogger(__name__)
+log = logging.getLogger(__name__)
 
-Array = NDArray[np.float64]
 
 #: Largest accepted scenario file [bytes] (1 MiB), checked before the file is read.
 MAX_SCENARIO_BYTES = 1 << 20
@@ -70,12 +67,8 @@ MAX_SCENARIO_BYTES = 1 << 20
 #: File extensions :func:`load_scenario_file` accepts (lower case, with the dot).
 SCENARIO_EXTENSIONS: tuple[str, ...] = (".yaml", ".yml", ".json")
 
-#: A finite real number: ints and floats only (no numeric strings, no booleans, no NaN/inf).
-#:
-#: Stricter than `planner.core.schemas.Finite` (lax: accepts ``"0.3"`` and ``true``) and checked *before*
-#: any bound, so ``.nan`` is reported as "not finite" rather than as "not <= 0.2"; bounds added to it also
-#: land in the JSON schema as standard ``exclusiveMinimum``/``maximum`` keys.
-Number = Annotated[float, Strict(), AllowInfNan(False)]
+#: Scenario numbers are strict (see :data:`planner.core.schemas.StrictFinite`).
+Number = StrictFinite
 PositiveNumber = Annotated[Number, Field(gt=0.0)]
 Vector3 = tuple[Number, Number, Number]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
@@ -638,7 +631,7 @@ def resolve_scenario(
             direction = d / norm
             distance_m = float(goal.approach.distance)
 
-    _LOG.debug("resolved scenario %r (cabin %s)", spec.name, cabin_source)
+    log.debug("resolved scenario %r (cabin %s)", spec.name, cabin_source)
     return ResolvedScenario(
         spec=spec,
         robot=robot,

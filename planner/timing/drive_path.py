@@ -27,8 +27,8 @@ import toppra.constraint
 from numpy.typing import NDArray
 
 from planner.core.exceptions import RetimingFailed
+from planner.core.types import Array
 
-Array = NDArray[np.float64]
 logging.getLogger("toppra").setLevel(logging.ERROR)
 
 #: s (M,) -> (u (M, n), u' (M, n), u'' (M, n)).

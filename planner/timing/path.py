@@ -27,14 +27,12 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
+from planner.core.types import Array
 from planner.kinematics.compiled import CHUNK, evaluate_mapped
 from planner.kinematics.native import native
 from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
-
-Array = NDArray[np.float64]
 
 
 class Piece(ABC):

@@ -14,16 +14,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.exceptions import InvalidInput, OutsideWorkspace
+from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import DriveGeometry
 from planner.timing.stage import TimedPath
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

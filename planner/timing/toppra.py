@@ -27,16 +27,15 @@ import numpy as np
 import toppra
 import toppra.algorithm
 import toppra.constraint
-from numpy.typing import NDArray
 from toppra.constraint.linear_constraint import canlinear_colloc_to_interpolate
 
 from planner.core.exceptions import RetimingFailed
+from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import BlendPiece, DriveGeometry, JointPath, SplinePiece
 
-Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
 logging.getLogger("toppra").setLevel(logging.ERROR)
 

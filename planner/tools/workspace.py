@@ -16,12 +16,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.exceptions import InvalidInput
+from planner.core.types import Array, BoolArray
 
-Array = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 Predicate = Callable[[Array], BoolArray]
 
 

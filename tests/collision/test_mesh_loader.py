@@ -23,8 +23,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from meshes import generate
-from planner.collision import LoadedMesh, MeshLimits, load_mesh, mesh_loader
+from planner.collision import LoadedMesh, MeshLimits, load_mesh
 from planner.core.exceptions import InvalidInput, InvalidMesh, PlannerError
+from planner.meshio import load as mesh_loader
 
 MESH_DIR = Path(__file__).resolve().parents[2] / "meshes"
 MANIFEST = json.loads((MESH_DIR / "cabins.json").read_text(encoding="utf-8"))
