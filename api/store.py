@@ -21,7 +21,7 @@ from api.problems import Problem
 from meshes import reference_cabin_path
 from planner.core.exceptions import InvalidInput, InvalidMesh
 from planner.meshio.load import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
-from planner.scenario.schema import MeshResolver
+from planner.scenario.resolve import MeshResolver
 
 _LOG = logging.getLogger(__name__)
 

@@ -23,7 +23,8 @@ from planner.core.exceptions import PlannerError
 from planner.documents.output import refusal_document, result_document
 from planner.documents.plot import plan_png
 from planner.plan.pipeline import Planner
-from planner.scenario.schema import ResolvedScenario, resolve_scenario, scenario_from_dict
+from planner.scenario.resolve import ResolvedScenario, resolve_scenario
+from planner.scenario.schema import scenario_from_dict
 
 _LOG = logging.getLogger(__name__)
 

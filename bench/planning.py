@@ -51,7 +51,7 @@ from planner.core.exceptions import PlannerError
 from planner.plan.context import BASELINE, PRODUCT
 from planner.plan.goals import line_speed_bounds
 from planner.plan.pipeline import Planner
-from planner.scenario.schema import ResolvedScenario, load_scenario
+from planner.scenario.resolve import ResolvedScenario, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "tests" / "scenarios"
 MODES = ("product", "baseline")

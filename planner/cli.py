@@ -178,7 +178,7 @@ ScenarioArg = Annotated[
 
 
 def _load(scenario: Path) -> Any:
-    from planner.scenario.schema import load_scenario
+    from planner.scenario.resolve import load_scenario
 
     return load_scenario(scenario)
 

@@ -14,7 +14,7 @@ import yaml
 from typer.testing import CliRunner
 
 from planner.cli import app
-from planner.scenario.schema import ResolvedScenario, load_scenario
+from planner.scenario.resolve import ResolvedScenario, load_scenario
 
 SCENARIOS = Path(__file__).parent / "scenarios"
 EXPECTED = yaml.safe_load((SCENARIOS / "expected.yaml").read_text())
@@ -255,4 +255,4 @@ def test_check_on_a_refusal_document_exits_2(tmp_path: Path) -> None:
     path.write_text(json.dumps({"status": "failed", "reason": "goal_unreachable"}))
     result = invoke("check", TRANSFER, path)
     assert result.exit_code == 2
-    assert one_line(result.stderr).startswith("cabinplan: profile: not a drive profile")
+    assert one_line(result.stderr).startswith("cabinplan: invalid_input: profile: not a drive profile")

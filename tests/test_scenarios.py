@@ -20,7 +20,7 @@ from planner.core.so3 import pose_error
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.stiffness import StiffnessModel, deflected_pose
 from planner.plan.pipeline import Planner, PlanResult
-from planner.scenario.schema import ResolvedScenario, load_scenario
+from planner.scenario.resolve import ResolvedScenario, load_scenario
 
 HERE = Path(__file__).parent / "scenarios"
 EXPECTED = yaml.safe_load((HERE / "expected.yaml").read_text())

@@ -23,7 +23,7 @@ from planner.gate.checks import GateReport, GateRequirements, validate_profile
 from planner.gate.requirements import requirements_for
 from planner.plan.pipeline import Planner, PlanResult
 from planner.robots.cabin8 import Cabin8
-from planner.scenario.schema import ResolvedScenario, load_scenario
+from planner.scenario.resolve import ResolvedScenario, load_scenario
 from planner.timing.profile import DriveProfile
 
 SCENARIO = Path(__file__).parent / "scenarios" / "aisle-transfer.yaml"
@@ -454,7 +454,8 @@ def test_approach_check_refuses_overshooting_the_goal_and_backing_out() -> None:
 
 
 def _carry(d1_goal: float) -> ResolvedScenario:
-    from planner.scenario.schema import resolve_scenario, scenario_from_dict
+    from planner.scenario.resolve import resolve_scenario
+    from planner.scenario.schema import scenario_from_dict
 
     home = {"x1": -0.46, "x2": 0.46, "x3": -0.09, "theta3": 1.2, "theta4": -0.8, "d5": -0.25, "theta6": 0.0}
     return resolve_scenario(

@@ -28,7 +28,8 @@ from api.problems import Problem
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
 from meshes import reference_cabin_path, reference_cabins
-from planner.scenario.schema import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
+from planner.scenario.resolve import ResolvedScenario, resolve_scenario
+from planner.scenario.schema import Scenario, scenario_from_dict
 
 router = APIRouter(tags=["plans"])
 

@@ -24,7 +24,7 @@ from planner.core.provenance import code_version
 
 if TYPE_CHECKING:
     from planner.plan.pipeline import PlanResult
-    from planner.scenario.schema import ResolvedScenario
+    from planner.scenario.resolve import ResolvedScenario
 
 
 def provenance(sc: ResolvedScenario) -> dict[str, Any]:

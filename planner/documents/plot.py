@@ -21,7 +21,7 @@ from planner.timing.profile import DriveProfile  # noqa: E402
 if TYPE_CHECKING:
     from planner.collision.world import CollisionWorld
     from planner.plan.pipeline import PlanResult
-    from planner.scenario.schema import ResolvedScenario
+    from planner.scenario.resolve import ResolvedScenario
 
 
 def profile_png(
@@ -57,6 +57,9 @@ def profile_png(
         (axes[2], profile.acceleration, lim.a_max, "acceleration / a_max"),
         (axes[3], profile.effort, lim.effort_max, "effort / effort_max"),
     ):
+        if values is None:  # a profile without forces
+            ax.text(0.5, 0.5, "no force model", transform=ax.transAxes, ha="center")
+            continue
         for j, n in enumerate(names):
             ax.plot(t, values[:, j] / limit[j], lw=1, label=n)
         ax.axhline(1.0, color="red", lw=0.8, ls="--")

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from planner.core.types import Array
-from planner.tools.workspace import Workspace  # noqa: E402
+from planner.kinematics.workspace import Workspace  # noqa: E402
 
 
 def workspace_png(ws: Workspace, title: str = "") -> bytes:

@@ -708,7 +708,7 @@ def stiffness_document(
         InvalidInput: bad names, shapes, frame, wrench or payload (``details['field']`` names it).
         LimitViolation / OutsideWorkspace: the configuration is not admissible or does not assemble.
     """
-    from planner.tools.cabin8 import tool_pose_robot
+    from planner.robots.registry import tool_pose_robot
 
     robot = tool_pose_robot(robot_name)
     if frame not in ("tool", "payload"):

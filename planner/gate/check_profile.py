@@ -8,7 +8,7 @@ from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
 from planner.gate.checks import GateReport, validate_profile
 from planner.gate.requirements import requirements_for
-from planner.scenario.schema import ResolvedScenario
+from planner.scenario.resolve import ResolvedScenario
 from planner.timing.profile import DriveProfile
 
 

@@ -31,9 +31,6 @@ A failed check never stops the others: the report lists every failure with its w
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
-
 import numpy as np
 
 from planner.collision.world import CollisionWorld
@@ -49,8 +46,8 @@ from planner.dynamics.stiffness import (
     deflected_pose,
     stiffness_model,
 )
+from planner.gate.drive_checks import Check, GateReport, drive_checks, ratio_check
 from planner.gate.requirements import (
-    ACC_CONSISTENCY,
     APPROACH_BACKOUT_TOL_M,
     GATE_MAX_EXTRA_M,
     GATE_MAX_RUN,
@@ -58,90 +55,11 @@ from planner.gate.requirements import (
     GOAL_POSITION_TOL_M,
     LIMIT_TOLERANCE,
     LINE_TOL_M,
-    START_TOL,
     GateRequirements,
     deflection_sample_indices,
 )
 from planner.robots.cabin8 import Cabin8
 from planner.timing.profile import DriveProfile
-
-
-@dataclass(frozen=True)
-class Check:
-    """One check of the gate: its outcome, a readable detail, the worst value and where."""
-
-    name: str
-    passed: bool
-    detail: str
-    worst: float | None = None
-    sample: int | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form."""
-        return {
-            "name": self.name,
-            "passed": bool(self.passed),
-            "detail": self.detail,
-            "worst": None if self.worst is None else float(self.worst),
-            "sample": None if self.sample is None else int(self.sample),
-        }
-
-
-@dataclass(frozen=True)
-class GateReport:
-    """Every check's outcome; ``passed`` only if all passed."""
-
-    checks: tuple[Check, ...]
-    samples: int
-    min_clearance_m: float
-    peak_ratios: dict[str, float]
-
-    @property
-    def passed(self) -> bool:
-        """True when every check passed."""
-        return all(c.passed for c in self.checks)
-
-    @property
-    def failures(self) -> list[Check]:
-        """The checks that failed."""
-        return [c for c in self.checks if not c.passed]
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form of the whole report."""
-        return {
-            "passed": bool(self.passed),
-            "samples": self.samples,
-            "min_clearance_m": self.min_clearance_m,
-            "peak_ratios": self.peak_ratios,
-            "checks": [c.to_dict() for c in self.checks],
-        }
-
-    def summary(self) -> str:
-        """One line: every failure, or the number of passed checks."""
-        if self.passed:
-            return f"all {len(self.checks)} checks passed on {self.samples} samples"
-        return "; ".join(f"{c.name}: {c.detail}" for c in self.failures)
-
-
-def _ratio_check(
-    name: str, values: Array, limit: Array, robot: Cabin8, unit: str, n: int
-) -> tuple[Check, float]:
-    """Peak of |values| / limit over every row; rows past ``n`` are per-step values (step k = row - n)."""
-    ratio = np.abs(values) / limit[None, :]
-    row, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-    worst = float(ratio[row, j])
-    ok = worst <= 1.0 + LIMIT_TOLERANCE
-    if row < n:
-        where = f"{robot.drive_names[j]} at sample {row}, {values[row, j]:.4g} {unit}"
-        sample = int(row)
-    else:
-        sample = int(row - n)
-        where = (
-            f"{robot.drive_names[j]} executed between samples {sample} and {sample + 1}, "
-            f"{values[row, j]:.4g} {unit}"
-        )
-    detail = f"peak {100 * worst:.1f}% of the limit ({where})"
-    return Check(name, ok, detail, worst, sample), worst
 
 
 def validate_profile(
@@ -152,50 +70,12 @@ def validate_profile(
     dynamics: Cabin8Dynamics | None = None,
 ) -> GateReport:
     """Run every check of the gate on a sampled profile (see the module docstring)."""
-    checks: list[Check] = []
-    lim = robot.limits
-    t, u, ud, udd, eff = profile.t, profile.position, profile.velocity, profile.acceleration, profile.effort
-    n = len(t)
-    arrays_ok = all(a.shape == (n, 8) for a in (u, ud, udd, eff)) and t.ndim == 1 and n >= 2
-    finite = arrays_ok and all(np.all(np.isfinite(a)) for a in (t, u, ud, udd, eff))
-    checks.append(
-        Check("finite", bool(finite), "all values finite" if finite else "non-finite or mis-shaped arrays")
-    )
-    if not finite:
+    checks, peaks = drive_checks(profile, robot, req.start_u, req.sample_period_s)
+    n = len(profile.t)
+    if not checks[0].passed:  # not finite: nothing else can be evaluated
         return GateReport(tuple(checks), n, float("nan"), {})
-    dt = np.diff(t)
-    period = profile.sample_period_s
-    time_ok = (
-        abs(t[0]) < 1e-12
-        and bool(np.all(dt > 0))
-        and bool(np.all(np.abs(dt - period) < 1e-9 * max(1.0, t[-1])))
-    )
-    detail = f"{n} samples every {period} s" if time_ok else "t must start at 0 and step by the sample period"
-    if req.sample_period_s is not None and abs(period - req.sample_period_s) > 1e-12:
-        time_ok = False
-        detail = f"sampled every {period} s, but the controller period is {req.sample_period_s} s"
-    checks.append(Check("time", time_ok, detail))
-    err0 = float(np.max(np.abs(u[0] - req.start_u)))
-    checks.append(
-        Check(
-            "start",
-            err0 <= START_TOL and float(np.max(np.abs(ud[0]))) == 0.0,
-            f"start deviation {err0:.3g}",
-            err0,
-            0,
-        )
-    )
-    vend = float(np.max(np.abs(ud[-1])))
-    aend = float(np.max(np.abs(udd[-1])))
-    checks.append(
-        Check(
-            "end_at_rest",
-            vend == 0.0 and aend == 0.0,
-            f"final velocity {vend:.3g}, final acceleration {aend:.3g}",
-            max(vend, aend),
-            n - 1,
-        )
-    )
+    lim = robot.limits
+    u, ud, udd, eff = profile.position, profile.velocity, profile.acceleration, profile.effort
     # Workspace and margins at every sample. A sample that does not assemble leaves no joint trajectory:
     # the checks that need one fail as not evaluated, the drive-space checks still run.
     q: Array | None = None
@@ -213,39 +93,6 @@ def validate_profile(
             checks.append(
                 Check("workspace", True, "stage on its working branch with every margin at every sample")
             )
-    pos_lo = float(np.max(lim.lower[None, :] - u))
-    pos_hi = float(np.max(u - lim.upper[None, :]))
-    checks.append(
-        Check("position", max(pos_lo, pos_hi) <= 1e-9, f"worst excursion {max(pos_lo, pos_hi, 0.0):.3g}")
-    )
-    peaks: dict[str, float] = {}
-    # The acceleration a controller executes between samples is dv/dt: both it and the reported one count.
-    mean_acc = np.diff(ud, axis=0) / dt[:, None]
-    executed = np.vstack([udd, mean_acc])
-    for name, vals, limit, unit in (
-        ("velocity", ud, lim.v_max, "/s"),
-        ("acceleration", executed, lim.a_max, "/s^2"),
-    ):
-        chk, peaks[name] = _ratio_check(name, vals, limit, robot, unit, n)
-        checks.append(chk)
-    # Kinematic consistency: positions integrate the velocities (trapezoid rule), and the mean
-    # acceleration of each step, dv/dt, lies between the reported accelerations at its ends (the time
-    # law's acceleration is piecewise constant, so it may switch within a step).
-    dpos = np.abs(np.diff(u, axis=0) - 0.5 * dt[:, None] * (ud[1:] + ud[:-1])) / (
-        lim.v_max[None, :] * dt[:, None]
-    )
-    lo_acc = np.minimum(udd[1:], udd[:-1])
-    hi_acc = np.maximum(udd[1:], udd[:-1])
-    dvel = np.maximum(lo_acc - mean_acc, mean_acc - hi_acc).clip(min=0.0) / lim.a_max[None, :]
-    worst_c = float(max(dpos.max(), dvel.max() / ACC_CONSISTENCY * LIMIT_TOLERANCE))
-    checks.append(
-        Check(
-            "consistency",
-            worst_c <= LIMIT_TOLERANCE,
-            f"positions integrate velocities and velocities accelerations to {100 * worst_c:.2f}% of a limit",
-            worst_c,
-        )
-    )
     if q is None:
         missing = ["effort", "goal", "collision"]
         if req.approach_direction is not None and req.T_base_payload_goal is not None:
@@ -258,17 +105,20 @@ def validate_profile(
     # q_dot = G^-1 u_dot, q_ddot = G^-1 (u_ddot - G_dot q_dot), exact (CasADi AD of the drive map).
     qd, qdd = dyn.joint_rates_batch(q, ud, udd)
     tau = dyn.drive_forces_batch(q, qd, qdd, req.payload)
-    mismatch = float(np.max(np.abs(tau - eff) / lim.effort_max[None, :]))
-    chk, peaks["effort"] = _ratio_check("effort", tau, lim.effort_max, robot, "N or N m", n)
-    checks.append(
-        Check(
-            "effort",
-            chk.passed and mismatch <= LIMIT_TOLERANCE,
-            chk.detail + f"; reported vs recomputed differ by {100 * mismatch:.2f}% of the limit",
-            chk.worst,
-            chk.sample,
+    chk, peaks["effort"] = ratio_check("effort", tau, lim.effort_max, robot, "N or N m", n)
+    if eff is None:
+        checks.append(Check("effort", False, "the profile carries no forces", chk.worst, chk.sample))
+    else:
+        mismatch = float(np.max(np.abs(tau - eff) / lim.effort_max[None, :]))
+        checks.append(
+            Check(
+                "effort",
+                chk.passed and mismatch <= LIMIT_TOLERANCE,
+                chk.detail + f"; reported vs recomputed differ by {100 * mismatch:.2f}% of the limit",
+                chk.worst,
+                chk.sample,
+            )
         )
-    )
     # Goal.
     T_tool = robot.fk_batch(q)
     T_pay = T_tool @ req.T_tool_payload

@@ -17,7 +17,7 @@ from planner.core.types import Array, IntArray
 from planner.dynamics.payload import RigidPayload
 
 if TYPE_CHECKING:
-    from planner.scenario.schema import ResolvedScenario
+    from planner.scenario.resolve import ResolvedScenario
 
 #: Certification margin of the gate's collision check [m]: the certified walk proves the requested
 #: clearance with this margin at the states it starts from (the scenario's ``motion_margin_m`` is the

@@ -26,7 +26,8 @@ from planner.timing.toppra import ToppraStage
 
 if TYPE_CHECKING:
     from planner.robots.cabin8 import Cabin8
-    from planner.scenario.schema import PlanOptions, ResolvedScenario
+    from planner.scenario.resolve import ResolvedScenario
+    from planner.scenario.schema import PlanOptions
 
 Progress = Callable[[str, float], None]
 

@@ -38,7 +38,7 @@ from planner.timing.profile import DriveProfile
 from planner.timing.stage import TimingFactory
 
 if TYPE_CHECKING:
-    from planner.scenario.schema import ResolvedScenario
+    from planner.scenario.resolve import ResolvedScenario
 
 
 @dataclass(frozen=True)
@@ -136,7 +136,7 @@ class Planner:
         return run_stages(self.ctx)
 
 
-def plan(
+def plan_scenario(
     scenario: ResolvedScenario,
     progress: Progress | None = None,
     timing: TimingFactory | None = None,

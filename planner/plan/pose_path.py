@@ -1,23 +1,20 @@
-"""Drive profiles of the pprs6 platform along a pose path, and their validation gate.
+"""Drive profiles of the pprs6 platform along a pose path, through the shared timing stage and gate.
 
 A pose path is a polyline of platform poses (the paper's closed path E -> F -> G -> H -> E of Fig. 6 by
-default). Each straight leg ``x(s) = x_a + s (x_b - x_a)``, s in [0, 1], becomes a drive path through the
-closed-form inverse kinematics:
+default). Each straight leg ``x(s) = x_a + s (x_b - x_a)``, s in [0, 1], is a one-piece
+:class:`~planner.timing.path.JointPath` in pose coordinates (the platform pose is pprs6's joint vector);
+the robot model maps it to the drive path (:meth:`planner.robots.pprs6.Pprs6.drive_path`: closed-form IK,
+analytic Jacobian, its derivative along the leg by a central difference). Corners are sharp, so the
+platform stops at every waypoint: each leg is timed rest to rest by the shared TOPP-RA stage
+(:class:`~planner.timing.toppra.ToppraStage`, drive velocity and acceleration limits: pprs6 has no force
+model) on a uniform grid of 300 intervals, and the legs are sampled one after the other at the controller
+period by the shared sampler (:func:`~planner.timing.profile.sample_legs`).
 
-    u(s) = IK(x(s)),   u'(s) = J(x(s)) dx,   u''(s) = d/ds [J(x(s))] dx
-
-(J the analytic drive Jacobian; its derivative along the leg by a central difference of J with step
-1e-4 in s, an O(1e-8) relative error). Corners are sharp, so the platform stops at every waypoint: each
-leg is timed rest to rest by :func:`planner.timing.drive_path.time_drive_path` (TOPP-RA under the drive
-velocity and acceleration limits of the description) and the legs are sampled one after the other at the
-controller period.
-
-The gate (:func:`validate`) re-derives everything from the sampled drives, trusting nothing the timing
-computed: finite values; time from 0 in steps of the period; positions within the drive ranges; |v| and
-|a| (reported, and executed between samples dv/dt) within 1% of the limits; positions integrate the
-velocities; at rest at both ends; the forward kinematics (Newton, from the previous sample's pose) of
-every sample on its leg of the pose path within 1e-6 (m, rad); and the singularity measure (condition
-number) below the path's bound at every sample.
+The gate (:func:`validate`) runs the robot-independent drive checks of every profile
+(:func:`~planner.gate.drive_checks.drive_checks`: finite, time, start, end at rest, position, velocity,
+acceleration with the executed dv/dt, consistency) and pprs6's own: the forward kinematics (Newton, from
+the previous samples' pose) of every sample on its leg of the pose path within 1e-6 (m, rad), start and
+end poses within 1e-9, and the singularity measure (condition number) below the path's bound.
 """
 
 from __future__ import annotations
@@ -29,10 +26,13 @@ from typing import Any
 import numpy as np
 
 from planner.core.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
-from planner.core.types import Array
+from planner.core.types import Array, IntArray
+from planner.gate.drive_checks import Check, GateReport, drive_checks
 from planner.kinematics import pprs6 as kin
 from planner.robots.pprs6 import Pprs6
-from planner.timing.drive_path import DrivePath, SampledLegs, sample_legs, time_drive_path
+from planner.timing.path import JointPath, LinePiece
+from planner.timing.profile import DriveProfile, sample_legs
+from planner.timing.toppra import ToppraStage
 
 #: The paper's closed path E -> F -> G -> H (Fig. 6 shows only its shape): a saddle-shaped spatial
 #: quadrilateral of 40 mm x 40 mm x 20 mm around the centre of the level workspace, at a yaw of 0.2 rad
@@ -48,7 +48,6 @@ PAPER_PATH: dict[str, Any] = {
     ],
 }
 
-_FD_STEP = 1e-4
 
 
 @dataclass(frozen=True)
@@ -135,22 +134,10 @@ def pose_from_mapping(values: Mapping[str, Any], field: str = "pose") -> Array:
     return out
 
 
-def leg_drive_path(robot: Pprs6, a: Array, b: Array) -> DrivePath:
-    """The drive path of the straight pose leg a -> b (s in [0, 1]); see the module docstring."""
-    dx = np.asarray(b, dtype=float) - np.asarray(a, dtype=float)
-    geom = robot.geometry
-
-    def evaluate(s: Array) -> tuple[Array, Array, Array]:
-        s = np.atleast_1d(np.asarray(s, dtype=float))
-        x = a + s[:, None] * dx
-        u = kin.inverse(geom, x).drives
-        du = kin.drive_jacobian(geom, x) @ dx
-        J_p = kin.drive_jacobian(geom, x + _FD_STEP * dx)
-        J_m = kin.drive_jacobian(geom, x - _FD_STEP * dx)
-        ddu = ((J_p - J_m) @ dx) / (2.0 * _FD_STEP)
-        return u, du, ddu
-
-    return DrivePath(evaluate, 1.0, 6)
+def leg_paths(path: PosePath) -> list[JointPath]:
+    """The straight legs of a pose path as one-piece joint paths in pose coordinates (s in [0, 1])."""
+    w = path.waypoints
+    return [JointPath((LinePiece(w[k], w[k + 1], 1.0),)) for k in range(path.n_legs)]
 
 
 def check_path(robot: Pprs6, path: PosePath, samples_per_leg: int = 400) -> None:
@@ -188,21 +175,40 @@ def check_path(robot: Pprs6, path: PosePath, samples_per_leg: int = 400) -> None
 
 @dataclass(frozen=True)
 class Pprs6Profile:
-    """A sampled drive profile of the platform, arrays (N samples, 6 drives), SI units."""
+    """A validated drive profile of the platform along a pose path.
+
+    Attributes:
+        path: The pose path.
+        profile: The sampled drive profile, arrays (N samples, 6 drives); its ``joints`` are the poses of
+            the path at the samples; no forces.
+        leg: (N,) the leg of each sample (a corner sample belongs to the leg it starts).
+        poses: (N, 6) forward kinematics of the sampled drives.
+        gate: The gate's report.
+    """
 
     path: PosePath
-    sample_period_s: float
-    samples: SampledLegs = field(repr=False)
-    poses: Array = field(repr=False)  # (N, 6) forward kinematics of the sampled drives
+    profile: DriveProfile = field(repr=False)
+    leg: IntArray = field(repr=False)
+    poses: Array = field(repr=False)
+    gate: GateReport = field(repr=False)
+
+    @property
+    def sample_period_s(self) -> float:
+        """The controller period [s]."""
+        return self.profile.sample_period_s
 
     @property
     def duration_s(self) -> float:
         """Time of the last sample [s]."""
-        return float(self.samples.t[-1])
+        return self.profile.duration_s
+
+
+#: Grid intervals of each leg's TOPP-RA problem (uniform in s).
+GRID_POINTS = 300
 
 
 def build_profile(
-    robot: Pprs6, path: PosePath, period_s: float | None = None, grid_points: int = 300
+    robot: Pprs6, path: PosePath, period_s: float | None = None, grid_points: int = GRID_POINTS
 ) -> Pprs6Profile:
     """Time the pose path leg by leg and sample it; returns the validated :class:`Pprs6Profile`.
 
@@ -217,15 +223,13 @@ def build_profile(
             f"sample_period_s: must be in [0.0005, 0.1] s, got {period}", field="sample_period_s"
         )
     check_path(robot, path)
-    lim = robot.limits
-    paths = [leg_drive_path(robot, path.waypoints[k], path.waypoints[k + 1]) for k in range(path.n_legs)]
-    laws = [time_drive_path(p, lim.v_max, lim.a_max, period, grid_points) for p in paths]
-    samples = sample_legs(paths, laws, period)
-    report, poses = validate(robot, path, samples, period)
-    if not report["passed"]:
-        failed = [c["name"] for c in report["checks"] if not c["passed"]]
-        raise ValidationFailed(f"the drive profile failed the gate: {', '.join(failed)}", report=report)
-    return Pprs6Profile(path, period, samples, poses)
+    stage = ToppraStage(robot, None, min_points=grid_points, max_points=grid_points)
+    timed = [stage.time_path(leg) for leg in leg_paths(path)]
+    profile, leg = sample_legs(robot, timed, period, None)
+    gate, poses = validate(robot, path, profile, leg, period)
+    if not gate.passed:
+        raise ValidationFailed(f"the drive profile failed the gate: {gate.summary()}", report=gate.to_dict())
+    return Pprs6Profile(path, profile, leg, poses, gate)
 
 
 def _segment_distance(x: Array, a: Array, b: Array, weights: Array) -> Array:
@@ -236,58 +240,56 @@ def _segment_distance(x: Array, a: Array, b: Array, weights: Array) -> Array:
     return np.asarray(np.linalg.norm(rel - t[:, None] * d, axis=1))
 
 
-def validate(robot: Pprs6, path: PosePath, s: SampledLegs, period_s: float) -> tuple[dict[str, Any], Array]:
+def validate(
+    robot: Pprs6, path: PosePath, profile: DriveProfile, leg: IntArray, period_s: float
+) -> tuple[GateReport, Array]:
     """The validation gate of a sampled profile (see the module docstring); returns (report, poses)."""
-    lim = robot.limits
-    checks: list[dict[str, Any]] = []
-
-    def check(name: str, passed: bool, **evidence: Any) -> None:
-        checks.append({"name": name, "passed": bool(passed), **evidence})
-
-    arrays = (s.t, s.position, s.velocity, s.acceleration)
-    finite = all(np.all(np.isfinite(a)) for a in arrays)
-    check("finite", finite)
-    if not finite:
-        return {"passed": False, "checks": checks}, np.zeros((0, 6))
-    dt = np.diff(s.t)
-    check("time", bool(s.t[0] == 0.0) and bool(np.all(np.abs(dt - period_s) <= 1e-9)), period_s=period_s)
-    lo_ok = s.position >= lim.lower - 1e-12
-    hi_ok = s.position <= lim.upper + 1e-12
-    check("position_range", bool(np.all(lo_ok & hi_ok)))
-    v_frac = np.max(np.abs(s.velocity) / lim.v_max)
-    a_frac = np.max(np.abs(s.acceleration) / lim.a_max)
-    exec_a = np.max(np.abs(np.diff(s.velocity, axis=0)) / dt[:, None] / lim.a_max) if len(dt) else 0.0
-    check("velocity", bool(v_frac <= 1.01), max_fraction=float(v_frac))
-    check("acceleration", bool(a_frac <= 1.01), max_fraction=float(a_frac))
-    check("executed_acceleration", bool(exec_a <= 1.01), max_fraction=float(exec_a))
-    integ = np.abs(np.diff(s.position, axis=0) - 0.5 * (s.velocity[1:] + s.velocity[:-1]) * dt[:, None])
-    integ_frac = float(np.max(integ / (lim.v_max * period_s))) if len(dt) else 0.0
-    check("integrates_velocity", integ_frac <= 0.01, max_fraction_of_limit_step=integ_frac)
-    rest = max(
-        float(np.max(np.abs(s.velocity[0]) / lim.v_max)), float(np.max(np.abs(s.velocity[-1]) / lim.v_max))
-    )
-    check("at_rest_at_ends", rest <= 1e-9, max_velocity_fraction=rest)
+    start_u = robot.ik(path.waypoints[0])
+    checks, peaks = drive_checks(profile, robot, start_u, period_s)
+    n = len(profile.t)
+    if not checks[0].passed:
+        return GateReport(tuple(checks), n, float("nan"), peaks), np.zeros((0, 6))
     # Forward kinematics of every sample, each leg tracked from its start waypoint, sample after sample.
-    poses = _track_fk(robot, path, s)
+    poses = _track_fk(robot, path, profile.position)
     weights = np.array([1.0, 1.0, 1.0, robot.geometry.r, robot.geometry.r, robot.geometry.r])
-    dev = np.zeros(len(s.t))
+    dev = np.zeros(n)
     for k in range(path.n_legs):
-        m = s.leg == k
+        m = leg == k
         dev[m] = _segment_distance(poses[m], path.waypoints[k], path.waypoints[k + 1], weights)
-    check("pose_path_followed", float(np.max(dev)) <= 1e-6, max_deviation_m=float(np.max(dev)))
+    worst = float(np.max(dev))
+    checks.append(
+        Check(
+            "pose_path_followed",
+            worst <= POSE_PATH_TOL,
+            f"forward kinematics off the pose path by at most {worst:.3g} (m, weighted rad)",
+            worst,
+            int(np.argmax(dev)),
+        )
+    )
     ends = max(
         float(np.max(np.abs(poses[0] - path.waypoints[0]))),
         float(np.max(np.abs(poses[-1] - path.waypoints[-1]))),
     )
-    check("start_and_end_poses", ends <= 1e-9, max_error=ends)
+    checks.append(Check("start_and_end_poses", ends <= 1e-9, f"end poses off by {ends:.3g}", ends))
     cond = robot.condition_number(poses)
-    check("singularity", float(np.max(cond)) <= path.max_condition, max_condition_number=float(np.max(cond)))
-    return {"passed": all(c["passed"] for c in checks), "checks": checks}, poses
+    checks.append(
+        Check(
+            "singularity",
+            float(np.max(cond)) <= path.max_condition,
+            f"condition number at most {float(np.max(cond)):.3g} (bound {path.max_condition:.3g})",
+            float(np.max(cond)),
+            int(np.argmax(cond)),
+        )
+    )
+    return GateReport(tuple(checks), n, float("nan"), peaks), poses
 
 
-def _track_fk(robot: Pprs6, path: PosePath, s: SampledLegs) -> Array:
-    """FK of every sample, Newton started from the pose of the sample before its batch of 25."""
-    u = s.position
+#: How far the forward kinematics of a sample may lie off its leg of the pose path (m, weighted rad).
+POSE_PATH_TOL = 1e-6
+
+
+def _track_fk(robot: Pprs6, path: PosePath, u: Array) -> Array:
+    """FK of every sample (N, 6 drives), Newton started from the pose of the sample before its batch of 25."""
     out = np.empty_like(u)
     stride = 25  # samples solved together from the same start (within a few mm of each other)
     guess = path.waypoints[0]

@@ -63,6 +63,19 @@ class RobotModel(ABC):
         """Joint coordinates for drive positions (the mechanism's forward map of its closed loops)."""
 
     @abstractmethod
+    def drive_path(self, q: Array, dq: Array, ddq: Array) -> tuple[Array, Array, Array]:
+        """Drive-space derivatives of a path given in joint coordinates (the path the planner certifies).
+
+        Args:
+            q: (N, n_joints) path values q(s).
+            dq: (N, n_joints) first derivatives q'(s).
+            ddq: (N, n_joints) second derivatives q''(s).
+
+        Returns:
+            (N, n_drives) u(s), u'(s) = G q', u''(s) = G q'' + (dG/ds) q' (G = du/dq).
+        """
+
+    @abstractmethod
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable description: drives, units, limits, geometry."""
 

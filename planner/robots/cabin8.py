@@ -32,7 +32,8 @@ from planner.core.description import Hybrid8Description, description_hash, load_
 from planner.core.exceptions import InvalidInput, LimitViolation
 from planner.core.types import Array
 from planner.kinematics import chain, parallel
-from planner.kinematics.compiled import FastFunction, dense_function
+from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
+from planner.kinematics.native import native
 from planner.robots.base import DriveLimits, RobotModel
 
 #: Indices of the stage coordinates in q (x, y, gamma) and in u (x1, x2, x3).
@@ -213,6 +214,11 @@ class Cabin8(RobotModel):
         """T_base_tool (4x4) for one joint vector."""
         return self.kin.fk(q)[0]
 
+    def drive_path(self, q: Array, dq: Array, ddq: Array) -> tuple[Array, Array, Array]:
+        """u, u', u'' of a joint path (N, 8) each (compiled CasADi AD of the drive map, vectorised)."""
+        u, du, ddu = evaluate_mapped(_drive_path_function(self.kin), q, dq, ddq)
+        return u, du, ddu
+
     def fk_batch(self, q: Array) -> Array:
         """T_base_tool for (N, 8) joint vectors, shape (N, 4, 4) (numpy, vectorised)."""
         return chain.tool_batch(self.desc.serial_chain, q)
@@ -353,3 +359,16 @@ class Cabin8(RobotModel):
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable model summary: drives, units, limits, stage geometry, chain, masses."""
         return dict(self._summary)
+
+
+@cache
+def _drive_path_function(kin: Cabin8Kinematics) -> ca.Function:
+    """u, u', u'' of a joint path, mapped over CHUNK points (a native build where available)."""
+    q = ca.SX.sym("q", 8)
+    dq = ca.SX.sym("dq", 8)
+    ddq = ca.SX.sym("ddq", 8)
+    u = kin.drives_sx(q)
+    du = ca.jtimes(u, q, dq)
+    ddu = ca.jtimes(du, q, dq) + ca.jtimes(u, q, ddq)
+    fn = ca.Function("drive_path", [q, dq, ddq], [u, du, ddu])
+    return native([fn.map(CHUNK)], "cabin8_drive_path")[0]

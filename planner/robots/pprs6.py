@@ -112,6 +112,10 @@ def _load(path: str) -> tuple[Pprs6Description, str]:
 _CHAIN_OF_DRIVE = ("chain1", "chain2", "chain3", "chain1", "chain2", "chain3")
 
 
+#: Step in the path parameter of the central difference of the drive Jacobian along a path.
+_FD_STEP = 1e-4
+
+
 class Pprs6(RobotModel):
     """The 2PPRS-RPRS platform: limits, closed-form IK, Newton FK, Jacobians, mobility.
 
@@ -241,6 +245,23 @@ class Pprs6(RobotModel):
     def joints_from_drives(self, u: Array) -> Array:
         """Platform poses for drives (the Newton FK from the default starts)."""
         return self.fk(u)
+
+    def drive_path(self, q: Array, dq: Array, ddq: Array) -> tuple[Array, Array, Array]:
+        """u, u', u'' of a pose path (N, 6) each: u = IK(x), u' = J x', u'' = J x'' + (dJ/ds) x'.
+
+        dJ/ds = (J(x + h x') - J(x - h x')) / 2h with h = 1e-4 (a central difference of the analytic
+        Jacobian along the path, an O(1e-8) relative error); raises OutsideWorkspace off the workspace.
+        """
+        x = np.atleast_2d(np.asarray(q, dtype=float))
+        dx = np.atleast_2d(np.asarray(dq, dtype=float))
+        ddx = np.atleast_2d(np.asarray(ddq, dtype=float))
+        u = kin.inverse(self.geometry, x).drives
+        J = kin.drive_jacobian(self.geometry, x)
+        J_p = kin.drive_jacobian(self.geometry, x + _FD_STEP * dx)
+        J_m = kin.drive_jacobian(self.geometry, x - _FD_STEP * dx)
+        du = np.einsum("nij,nj->ni", J, dx)
+        ddu = np.einsum("nij,nj->ni", J, ddx) + np.einsum("nij,nj->ni", J_p - J_m, dx) / (2.0 * _FD_STEP)
+        return u, du, ddu
 
     # ------------------------------------------------------------------ Jacobians, mobility
     def drive_jacobian(self, poses: Array) -> Array:

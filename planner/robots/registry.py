@@ -9,9 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 from planner.core.exceptions import InvalidInput, UnknownRobot
 from planner.robots.base import RobotModel
+
+if TYPE_CHECKING:
+    from planner.robots.cabin8 import Cabin8
 
 
 def _cabin8(rail_length: float | None) -> RobotModel:
@@ -54,3 +58,22 @@ def load_robot(name: str, rail_length: float | None = None) -> RobotModel:
     except KeyError:
         raise unknown_robot(name) from None
     return factory(rail_length)
+
+
+def tool_pose_robot(robot_name: str) -> Cabin8:
+    """The model of ``robot_name`` if it has tool-pose kinematics (cabin8-type).
+
+    Raises:
+        UnknownRobot: no model of that name.
+        InvalidInput: the model has no tool-pose kinematics in these tools (``details['field'] = 'robot'``).
+    """
+    from planner.robots.cabin8 import Cabin8
+
+    model = load_robot(robot_name)
+    if not isinstance(model, Cabin8):
+        raise InvalidInput(
+            f"robot {robot_name!r} has no tool-pose kinematics in this command",
+            field="robot",
+            robot=robot_name,
+        )
+    return model

@@ -1,21 +1,15 @@
-"""Scenario files: the public input contract of the planner (schema, loading, resolution).
+"""The scenario schema: the public input contract of the planner (pydantic, SI units).
 
 A *scenario* names the robot, the cabin (a mesh in the base frame), the payload and its grasp, the start
 configuration, the goal (a drive/joint configuration or a payload pose with an optional straight-line
-approach) and the planning options. It arrives as a YAML or JSON file (CLI) or as a dict (HTTP API), in SI
-units: lengths in metres, angles in radians, masses in kilograms, quaternions as explicit ``{w, x, y, z}``.
-Mesh files may declare millimetres; they are converted once, on load.
+approach) and the planning options. It arrives as a YAML or JSON file (CLI, :mod:`planner.scenario.files`)
+or as a dict (HTTP API), in SI units: lengths in metres, angles in radians, masses in kilograms, quaternions
+as explicit ``{w, x, y, z}``. Mesh files may declare millimetres; they are converted once, on load.
 
-Two steps, kept apart so that the schema stays pure and the HTTP API can reuse it:
-
-1. :func:`scenario_from_dict` / :func:`load_scenario_file` validate the *shape* of the input into a frozen
-   :class:`Scenario` (pydantic, ``extra="forbid"`` everywhere: unknown fields are errors). Every failure
-   is an `InvalidInput` whose message names the offending field as a dotted
-   path, e.g. ``options.clearance_m: Input should be greater than 0``.
-2. :func:`resolve_scenario` turns a :class:`Scenario` into a :class:`ResolvedScenario`: the robot model,
-   the loaded cabin mesh, the payload geometry, drive *and* joint vectors of the start and goal, and the
-   goal pose converted from the payload frame to the tool frame. Names that depend on the robot (drive and
-   joint names) and on the file system (meshes) are checked here.
+:func:`scenario_from_dict` validates the *shape* of the input into a frozen :class:`Scenario` (pydantic,
+``extra="forbid"`` everywhere: unknown fields are errors). Every failure is an `InvalidInput` whose message
+names the offending field as a dotted path, e.g. ``options.clearance_m: Input should be greater than 0``.
+:mod:`planner.scenario.resolve` then makes it concrete (robot model, meshes, vectors and transforms).
 
 Frames: ``T_a_b`` is frame b expressed in frame a (4x4). The cabin pose is ``T_base_cabin``, the grasp is
 ``T_tool_payload`` and a pose goal is ``T_base_payload``; the tool goal follows as
@@ -27,15 +21,9 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import re
-import stat
-from collections.abc import Callable, Hashable
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import (
     AliasChoices,
     BaseModel,
@@ -48,24 +36,13 @@ from pydantic import (
 )
 from pydantic_core import ErrorDetails
 
-from meshes import reference_cabin_path, reference_cabins
-from planner.collision.bodies import PayloadGeometry
-from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
+from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Pose, StrictFinite
 from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload
-from planner.meshio.load import LoadedMesh, MeshLimits, load_mesh
-from planner.robots import load_robot
-from planner.robots.cabin8 import Cabin8
 
 log = logging.getLogger(__name__)
 
-
-#: Largest accepted scenario file [bytes] (1 MiB), checked before the file is read.
-MAX_SCENARIO_BYTES = 1 << 20
-
-#: File extensions :func:`load_scenario_file` accepts (lower case, with the dot).
-SCENARIO_EXTENSIONS: tuple[str, ...] = (".yaml", ".yml", ".json")
 
 #: Scenario numbers are strict (see :data:`planner.core.schemas.StrictFinite`).
 Number = StrictFinite
@@ -76,12 +53,6 @@ Matrix3 = tuple[Vector3, Vector3, Vector3]
 #: OMPL geometric planners the planning adapter can run (``planner.plan.ompl_adapter.PLANNERS``;
 #: a test keeps the two lists equal).
 PlannerName = Literal["RRTConnect", "RRT", "RRTstar", "AORRTC"]
-
-#: Maps a mesh name from a scenario to stored content (a path or the file's bytes), or returns ``None`` to
-#: fall back to the default resolution (reference cabin, then a file path). It may raise
-#: `InvalidInput` to refuse a name outright (e.g. to forbid file-system paths
-#: in the HTTP API). Bytes are parsed in the format of the name's extension.
-MeshResolver = Callable[[str], Path | bytes | None]
 
 _IDENTITY_POSE = Pose(position=(0.0, 0.0, 0.0))
 _MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
@@ -372,123 +343,6 @@ def _describe(error: ErrorDetails) -> dict[str, str]:
     return {"field": path or "scenario", "message": message}
 
 
-class _ScenarioYamlLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses duplicate keys and reads YAML 1.2 floats such as ``1e-3``."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Hashable, Any]:
-        seen: set[Any] = set()
-        for key_node, _ in node.value:
-            if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
-                continue
-            key = self.construct_object(key_node, deep=False)
-            if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    "while constructing a mapping",
-                    node.start_mark,
-                    f"found duplicate key {key!r}",
-                    key_node.start_mark,
-                )
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
-# PyYAML implements YAML 1.1, where 1e-3 (no dot) is a string; accept it as the number users mean.
-_ScenarioYamlLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
-)
-
-
-def _unique_json_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise ValueError(f"duplicate key {key!r}")
-        out[key] = value
-    return out
-
-
-def load_scenario_file(path: Path) -> Scenario:
-    """Read and validate a scenario file (``.yaml``/``.yml`` or ``.json``, at most 1 MiB).
-
-    Relative mesh paths in the scenario refer to the file's folder: pass ``path.parent`` as ``base_dir``
-    to :func:`resolve_scenario` (or use :func:`load_scenario`).
-
-    Args:
-        path: The scenario file.
-
-    Returns:
-        The validated scenario.
-
-    Raises:
-        InvalidInput: wrong extension, missing/unreadable/oversized file, not UTF-8, a syntax error (the
-            message gives line and column) or a duplicate key, or a schema violation (see
-            :func:`scenario_from_dict`). ``details['field']`` is ``"scenario"`` for file-level problems.
-    """
-    path = Path(path)
-    ext = path.suffix.lower()
-    if ext not in SCENARIO_EXTENSIONS:
-        raise InvalidInput(
-            f"scenario: unsupported file extension {ext or '(none)'!r} of {path.name!r}; "
-            f"expected one of {', '.join(SCENARIO_EXTENSIONS)}",
-            field="scenario",
-            file=str(path),
-        )
-    text = _read_text(path)
-    data: object
-    try:
-        if ext == ".json":
-            data = json.loads(text, object_pairs_hook=_unique_json_object)
-        else:
-            data = yaml.load(text, Loader=_ScenarioYamlLoader)  # a SafeLoader subclass
-    except json.JSONDecodeError as exc:
-        raise _file_error(path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        why = " ".join(str(exc.problem or exc.context or "syntax error").split())
-        raise _file_error(path, f"invalid YAML{where}: {why}") from None
-    except yaml.YAMLError as exc:
-        raise _file_error(path, f"invalid YAML: {' '.join(str(exc).split())}") from None
-    except RecursionError:
-        raise _file_error(path, "the document is nested too deeply") from None
-    except ValueError as exc:  # duplicate JSON key
-        raise _file_error(path, f"invalid JSON: {exc}") from None
-    return scenario_from_dict(data, source=str(path))
-
-
-def _file_error(path: Path, why: str) -> InvalidInput:
-    return InvalidInput(f"scenario: {path.name}: {why}", field="scenario", file=str(path))
-
-
-def _read_text(path: Path) -> str:
-    """The file's text (UTF-8), refusing missing, non-regular and oversized files before reading."""
-    try:
-        info = path.stat()
-    except FileNotFoundError:
-        raise _file_error(path, f"file not found ({path})") from None
-    except OSError as exc:
-        raise _file_error(path, f"cannot read the file: {exc.strerror or exc}") from None
-    if not stat.S_ISREG(info.st_mode):
-        raise _file_error(path, "not a regular file")
-    if info.st_size > MAX_SCENARIO_BYTES:
-        raise _file_error(
-            path, f"{info.st_size} bytes exceeds the scenario size cap of {MAX_SCENARIO_BYTES} bytes (1 MiB)"
-        )
-    try:
-        with path.open("rb") as fh:
-            raw = fh.read(MAX_SCENARIO_BYTES + 1)
-    except OSError as exc:
-        raise _file_error(path, f"cannot read the file: {exc.strerror or exc}") from None
-    if len(raw) > MAX_SCENARIO_BYTES:  # the file grew between stat and read
-        raise _file_error(path, f"more than {MAX_SCENARIO_BYTES} bytes (1 MiB)")
-    try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise _file_error(path, f"not UTF-8 text (invalid byte at offset {exc.start})") from None
-
-
 def scenario_hash(s: Scenario) -> str:
     """SHA-256 (hex) of the scenario's canonical JSON (canonical field names, sorted keys, no spaces).
 
@@ -496,323 +350,3 @@ def scenario_hash(s: Scenario) -> str:
     """
     canonical = json.dumps(s.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
-
-
-# ------------------------------------------------------------------------------------------ resolution
-
-
-@dataclass(frozen=True)
-class ResolvedScenario:
-    """A scenario made concrete: robot model, loaded geometry, and start/goal as vectors and transforms.
-
-    Every array is read-only. Drive vectors ``u`` and joint vectors ``q`` are (8,) in the robot's drive and
-    joint order (m, rad).
-
-    Attributes:
-        spec: The validated scenario as given.
-        robot: The robot model (rail length applied).
-        cabin: The cabin mesh in the base frame, or ``None`` for free space.
-        cabin_source: Reference cabin name, resolver name or file path of the cabin; ``"none"`` without.
-        payload: Payload geometry and inertia, or ``None``.
-        start_u: Start drive positions, (8,).
-        start_q: Start joint coordinates, (8,).
-        goal_u: Goal drive positions (8,) for drives/joints goals, else ``None``.
-        goal_q: Goal joint coordinates (8,) for drives/joints goals, else ``None``.
-        T_base_payload_goal: Pose goal: the payload frame in the base frame as given (4x4), else ``None``.
-        T_base_tool_goal: Pose goal in the tool frame, ``T_base_payload_goal @ inv(T_tool_payload)``
-            (4x4; equal to the payload goal without a payload), else ``None``.
-        approach_direction: Unit direction (3,) of the final straight motion in the base frame, or ``None``.
-        approach_distance_m: Length of that motion [m]; 0.0 without an approach.
-        options: Planning options.
-        scenario_sha256: :func:`scenario_hash` of ``spec``.
-    """
-
-    spec: Scenario
-    robot: Cabin8
-    cabin: LoadedMesh | None
-    cabin_source: str
-    payload: PayloadGeometry | None
-    start_u: Array = field(repr=False)
-    start_q: Array = field(repr=False)
-    goal_u: Array | None = field(repr=False)
-    goal_q: Array | None = field(repr=False)
-    T_base_payload_goal: Array | None = field(repr=False)
-    T_base_tool_goal: Array | None = field(repr=False)
-    approach_direction: Array | None = field(repr=False)
-    approach_distance_m: float
-    options: PlanOptions
-    scenario_sha256: str
-
-    def __post_init__(self) -> None:
-        for name in (
-            "start_u",
-            "start_q",
-            "goal_u",
-            "goal_q",
-            "T_base_payload_goal",
-            "T_base_tool_goal",
-            "approach_direction",
-        ):
-            value = getattr(self, name)
-            if value is not None:
-                value = np.array(value, dtype=np.float64)
-                value.flags.writeable = False
-                object.__setattr__(self, name, value)
-
-
-def resolve_scenario(
-    spec: Scenario,
-    base_dir: Path | None = None,
-    mesh_resolver: MeshResolver | None = None,
-    mesh_limits: MeshLimits | None = None,
-) -> ResolvedScenario:
-    """Load the robot and meshes of a scenario and turn its start and goal into vectors and transforms.
-
-    Mesh names resolve in this order: ``mesh_resolver(name)`` (if given and not ``None``), a reference
-    cabin name (cabins only, see :mod:`meshes`), then a file path relative to ``base_dir`` (the current
-    directory if ``None``). Start and goal limits are *not* checked here (the planner refuses them with its
-    own reasons); names, completeness and the parallel stage's workspace are.
-
-    Args:
-        spec: The validated scenario.
-        base_dir: Folder that relative mesh paths refer to (normally the scenario file's folder).
-        mesh_resolver: Optional hook mapping a mesh name to stored content (HTTP API).
-        mesh_limits: Caps applied when loading meshes (default :class:`MeshLimits` ()).
-
-    Returns:
-        The resolved scenario.
-
-    Raises:
-        InvalidInput: unknown robot, unresolvable mesh name, unknown/missing drive or joint names, a start
-            or goal outside the parallel stage's workspace, or unrealisable payload inertia; the message
-            and ``details['field']`` name the field.
-        InvalidMesh: a mesh file cannot be used (message prefixed with the field, e.g. ``cabin.mesh: ``).
-    """
-    robot = _robot(spec)
-    if spec.options.compensate_deflection and robot.desc.stiffness is None:
-        raise InvalidInput(
-            f"options.compensate_deflection: robot {robot.name!r} has no stiffness data",
-            field="options.compensate_deflection",
-        )
-    cabin: LoadedMesh | None = None
-    cabin_source = "none"
-    if spec.cabin is not None:
-        source, cabin_source = _mesh_source(
-            spec.cabin.mesh, "cabin.mesh", base_dir, mesh_resolver, allow_reference=True
-        )
-        cabin = _load(
-            source,
-            spec.cabin.mesh,
-            "cabin.mesh",
-            units=spec.cabin.units,
-            pose=spec.cabin.pose.matrix(),
-            limits=mesh_limits,
-        )
-    payload = _payload(spec.payload, base_dir, mesh_resolver, mesh_limits) if spec.payload else None
-
-    start_u, start_q = _configuration(robot, spec.start.drives, spec.start.joints, "start")
-    goal = spec.goal
-    goal_u = goal_q = T_base_payload = T_base_tool = direction = None
-    distance_m = 0.0
-    if goal.pose is None:
-        goal_u, goal_q = _configuration(robot, goal.drives, goal.joints, "goal")
-    else:
-        T_base_payload = goal.pose.matrix()
-        T_tool_payload = payload.T_tool_payload if payload is not None else np.eye(4)
-        T_base_tool = T_base_payload @ _rigid_inverse(T_tool_payload)
-        if goal.approach is not None:
-            d = np.asarray(goal.approach.direction, dtype=float)
-            norm = float(np.linalg.norm(d))
-            if not (np.all(np.isfinite(d)) and norm > 1e-9):
-                raise InvalidInput(
-                    f"goal.approach.direction: must be a finite non-zero vector, got {d.tolist()}",
-                    field="goal.approach.direction",
-                )
-            direction = d / norm
-            distance_m = float(goal.approach.distance)
-
-    log.debug("resolved scenario %r (cabin %s)", spec.name, cabin_source)
-    return ResolvedScenario(
-        spec=spec,
-        robot=robot,
-        cabin=cabin,
-        cabin_source=cabin_source,
-        payload=payload,
-        start_u=start_u,
-        start_q=start_q,
-        goal_u=goal_u,
-        goal_q=goal_q,
-        T_base_payload_goal=T_base_payload,
-        T_base_tool_goal=T_base_tool,
-        approach_direction=direction,
-        approach_distance_m=distance_m,
-        options=spec.options,
-        scenario_sha256=scenario_hash(spec),
-    )
-
-
-def load_scenario(path: Path, mesh_resolver: MeshResolver | None = None) -> ResolvedScenario:
-    """Read, validate and resolve a scenario file; relative mesh paths refer to the file's folder."""
-    path = Path(path)
-    return resolve_scenario(load_scenario_file(path), base_dir=path.parent, mesh_resolver=mesh_resolver)
-
-
-def _robot(spec: Scenario) -> Cabin8:
-    try:
-        robot = load_robot(spec.robot, spec.rail_length)
-    except UnknownRobot as exc:
-        raise UnknownRobot(exc.message, field="robot", **exc.details) from None
-    if not isinstance(robot, Cabin8):
-        raise InvalidInput(
-            f"robot: scenarios support cabin8-type robots only, got {spec.robot!r} ({robot.kind})",
-            field="robot",
-        )
-    return robot
-
-
-def _mesh_source(
-    name: str,
-    field_name: str,
-    base_dir: Path | None,
-    resolver: MeshResolver | None,
-    *,
-    allow_reference: bool,
-) -> tuple[Path | bytes, str]:
-    """(what to load, provenance label) of a mesh name; see :func:`resolve_scenario` for the order."""
-    if resolver is not None:
-        found = resolver(name)
-        if found is not None:
-            return found, name
-    if allow_reference:
-        reference = reference_cabin_path(name)
-        if reference is not None:
-            return reference, reference.stem
-    path = Path(name)
-    if not path.is_absolute():
-        path = (base_dir if base_dir is not None else Path.cwd()) / path
-    if path.is_file():
-        return path, str(path)
-    hint = f" nor a reference cabin ({', '.join(reference_cabins())})" if allow_reference else ""
-    raise InvalidInput(
-        f"{field_name}: {name!r} is neither an existing file (looked for {path}){hint}",
-        field=field_name,
-        path=str(path),
-    )
-
-
-def _load(
-    source: Path | bytes,
-    name: str,
-    field_name: str,
-    *,
-    units: Literal["m", "mm"],
-    pose: Array | None,
-    limits: MeshLimits | None,
-) -> LoadedMesh:
-    """:func:`load_mesh` with the scenario field named in any :class:`InvalidMesh` message."""
-    try:
-        return load_mesh(source, units=units, name=Path(name).name, pose=pose, limits=limits)
-    except InvalidMesh as exc:
-        if exc.message.startswith(f"{field_name}:"):
-            raise
-        details = {k: v for k, v in exc.details.items() if k != "field"}
-        raise InvalidMesh(f"{field_name}: {exc.message}", field=field_name, **details) from exc
-
-
-def _payload(
-    spec: PayloadSpec,
-    base_dir: Path | None,
-    resolver: MeshResolver | None,
-    limits: MeshLimits | None,
-) -> PayloadGeometry:
-    """Payload geometry of a box or mesh payload, with its inertial data validated."""
-    kwargs: dict[str, Any] = {
-        "T_tool_payload": spec.grasp.matrix(),
-        "mass": float(spec.mass),
-        "com_payload": np.array(spec.com if spec.com is not None else (0.0, 0.0, 0.0), dtype=float),
-        "inertia_payload": np.array(spec.inertia, dtype=float) if spec.inertia is not None else None,
-    }
-    if spec.box is not None:
-        payload = PayloadGeometry(size=spec.box, source="box", **kwargs)
-    else:
-        assert spec.mesh is not None  # the schema guarantees exactly one of box and mesh
-        source, _ = _mesh_source(spec.mesh, "payload.mesh", base_dir, resolver, allow_reference=False)
-        mesh = _load(source, spec.mesh, "payload.mesh", units=spec.units, pose=None, limits=limits)
-        try:
-            payload = PayloadGeometry.from_mesh_vertices(mesh.vertices, source=spec.mesh, **kwargs)
-        except InvalidInput as exc:
-            if exc.details.get("field") != "payload.box":
-                raise
-            raise InvalidInput(
-                f"payload.mesh: the mesh's oriented bounding box is degenerate ({exc.message}); "
-                "a payload needs a volume",
-                field="payload.mesh",
-            ) from exc
-    try:
-        payload.rigid_payload()  # raises InvalidInput naming payload.mass / payload.com / payload.inertia
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        raise InvalidInput(f"payload.inertia: {exc}", field="payload.inertia") from exc
-    return payload
-
-
-def _configuration(
-    robot: Cabin8,
-    drives: dict[str, float] | None,
-    joints: dict[str, float] | None,
-    prefix: str,
-) -> tuple[Array, Array]:
-    """(u, q) of a configuration given by drives or by joints; checks names and the stage workspace."""
-    if drives is not None:
-        where = f"{prefix}.drives"
-        u = robot.drives_from_dict(dict(drives), field=where)
-        try:
-            q = robot.joints_from_drives(u)
-        except OutsideWorkspace as exc:
-            raise _outside(where, exc, "the stage sliders do not assemble") from exc
-        return u, q
-    assert joints is not None  # the schema guarantees exactly one of drives and joints
-    where = f"{prefix}.joints"
-    q = robot.joints_from_dict(dict(joints), field=where)
-    try:
-        u = robot.drives_from_joints(q)
-    except OutsideWorkspace as exc:
-        raise _outside(where, exc, "no slider positions reach this platform pose") from exc
-    return u, q
-
-
-def _outside(where: str, exc: OutsideWorkspace, what: str) -> InvalidInput:
-    condition = exc.details.get("condition")
-    return InvalidInput(
-        f"{where}: outside the parallel stage's workspace, {what}: {exc.message}",
-        field=where,
-        condition=condition,
-    )
-
-
-def _rigid_inverse(T: Array) -> Array:
-    """Inverse of a rigid 4x4 transform: (R, p) -> (R^T, -R^T p)."""
-    R, p = T[:3, :3], T[:3, 3]
-    out = np.eye(4)
-    out[:3, :3] = R.T
-    out[:3, 3] = -R.T @ p
-    return out
-
-
-__all__ = [
-    "MAX_SCENARIO_BYTES",
-    "ApproachSpec",
-    "CabinSpec",
-    "ConfigurationSpec",
-    "GoalSpec",
-    "MeshResolver",
-    "PayloadSpec",
-    "PlanOptions",
-    "PlannerName",
-    "ResolvedScenario",
-    "Scenario",
-    "load_scenario",
-    "load_scenario_file",
-    "resolve_scenario",
-    "scenario_from_dict",
-    "scenario_hash",
-]

@@ -15,24 +15,21 @@ The parameter s is a *time-like* length: each straight segment's length is the t
 needs at its velocity limit (at the segment's start), so a uniform grid over s is a balanced grid for
 TOPP-RA.
 
-:class:`DriveGeometry` maps the joint path to the drive path u(s) = g(q(s)) with its derivatives
-u' = G q', u'' = G q'' + (dG/ds) q' (compiled CasADi, vectorised over grid points).
+The robot model maps a path to the drive path u(s) = g(q(s)) with its derivatives u' = G q',
+u'' = G q'' + (dG/ds) q' (:meth:`planner.robots.base.RobotModel.drive_path`).
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property
 
-import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from planner.core.types import Array
-from planner.kinematics.compiled import CHUNK, evaluate_mapped
-from planner.kinematics.native import native
-from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
+from planner.robots.cabin8 import Cabin8
 
 
 class Piece(ABC):
@@ -108,17 +105,22 @@ class JointPath:
         """Total parameter length."""
         return float(sum(p.length for p in self.pieces))
 
+    @cached_property
+    def dof(self) -> int:
+        """Number of coordinates of the path (cabin8: 8 joints; pprs6: the 6 pose coordinates)."""
+        return int(len(self.pieces[0].evaluate(np.zeros(1))[0][0]))
+
     @property
     def breaks(self) -> Array:
         """Cumulative piece boundaries (n_pieces + 1,)."""
         return np.concatenate([[0.0], np.cumsum([p.length for p in self.pieces])])
 
     def evaluate(self, s: Array) -> tuple[Array, Array, Array]:
-        """q, q', q'' at path parameters s (N,) -> three (N, 8) arrays."""
+        """q, q', q'' at path parameters s (N,) -> three (N, n joints) arrays."""
         s = np.clip(np.atleast_1d(np.asarray(s, dtype=float)), 0.0, self.length)
         br = self.breaks
         idx = np.clip(np.searchsorted(br, s, side="right") - 1, 0, len(self.pieces) - 1)
-        q = np.empty((len(s), 8))
+        q = np.empty((len(s), self.dof))
         dq = np.empty_like(q)
         ddq = np.empty_like(q)
         for k in np.unique(idx):
@@ -180,29 +182,3 @@ def blended_polyline(
             else:
                 blend_index.append(-1)
     return JointPath(tuple(pieces)), blend_index
-
-
-@lru_cache(maxsize=8)
-def _drive_path_function(kin: Cabin8Kinematics) -> ca.Function:
-    """u, u', u'' of a joint path, mapped over CHUNK points (a native build where available)."""
-    q = ca.SX.sym("q", 8)
-    dq = ca.SX.sym("dq", 8)
-    ddq = ca.SX.sym("ddq", 8)
-    u = kin.drives_sx(q)
-    du = ca.jtimes(u, q, dq)
-    ddu = ca.jtimes(du, q, dq) + ca.jtimes(u, q, ddq)
-    fn = ca.Function("drive_path", [q, dq, ddq], [u, du, ddu])
-    return native([fn.map(CHUNK)], "cabin8_drive_path")[0]
-
-
-class DriveGeometry:
-    """Drive-space derivatives of a joint path: u(s), u'(s), u''(s) (vectorised)."""
-
-    def __init__(self, robot: Cabin8) -> None:
-        self.robot = robot
-        self._fn = _drive_path_function(robot.kin)
-
-    def __call__(self, q: Array, dq: Array, ddq: Array) -> tuple[Array, Array, Array]:
-        """(N, 8) joint path values and derivatives -> (N, 8) u, u', u''."""
-        u, du, ddu = evaluate_mapped(self._fn, q, dq, ddq)
-        return u, du, ddu

@@ -10,23 +10,27 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from planner.core.exceptions import InvalidInput, OutsideWorkspace
-from planner.core.types import Array
-from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.core.types import Array, IntArray
+from planner.dynamics.models import DriveDynamics, drive_dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.robots.cabin8 import Cabin8
-from planner.timing.path import DriveGeometry
+from planner.robots.base import RobotModel
 from planner.timing.stage import TimedPath
 
 
 @dataclass(frozen=True)
 class DriveProfile:
-    """Sampled drive trajectory, arrays (N samples, 8 drives) in drive order, SI units."""
+    """Sampled drive trajectory, arrays (N samples, n drives) in drive order, SI units.
+
+    ``effort`` is None for a robot without a dynamics model (its profile carries no forces); ``joints``
+    (N, n joints) are the path coordinates the planner certified (cabin8: joints; pprs6: platform pose).
+    """
 
     drive_names: tuple[str, ...]
     drive_units: tuple[str, ...]
@@ -36,7 +40,7 @@ class DriveProfile:
     position: Array = field(repr=False)
     velocity: Array = field(repr=False)
     acceleration: Array = field(repr=False)
-    effort: Array = field(repr=False)
+    effort: Array | None = field(repr=False)
     joints: Array = field(repr=False)
 
     @property
@@ -45,39 +49,43 @@ class DriveProfile:
         return float(self.t[-1])
 
     def to_dict(self) -> dict[str, Any]:
-        """The profile's fields of the JSON output contract."""
-        return {
+        """The profile's fields of the JSON output contract (no ``effort`` without forces)."""
+        names = list(zip(self.drive_names, self.drive_units, strict=True))
+        units: dict[str, Any] = {
+            "t": "s",
+            "position": dict(names),
+            "velocity": {n: f"{u}/s" for n, u in names},
+            "acceleration": {n: f"{u}/s^2" for n, u in names},
+        }
+        doc: dict[str, Any] = {
             "drives": list(self.drive_names),
-            "units": {
-                "t": "s",
-                "position": dict(zip(self.drive_names, self.drive_units, strict=True)),
-                "velocity": {n: f"{u}/s" for n, u in zip(self.drive_names, self.drive_units, strict=True)},
-                "acceleration": {
-                    n: f"{u}/s^2" for n, u in zip(self.drive_names, self.drive_units, strict=True)
-                },
-                "effort": {
-                    n: ("N" if u == "m" else "N m")
-                    for n, u in zip(self.drive_names, self.drive_units, strict=True)
-                },
-            },
+            "units": units,
             "sample_period_s": self.sample_period_s,
             "t": self.t.tolist(),
             "position": self.position.tolist(),
             "velocity": self.velocity.tolist(),
             "acceleration": self.acceleration.tolist(),
-            "effort": self.effort.tolist(),
-            "joints": {"names": list(self.joint_names), "position": self.joints.tolist()},
-            "duration_s": self.duration_s,
         }
+        if self.effort is not None:
+            units["effort"] = {n: ("N" if u == "m" else "N m") for n, u in names}
+            doc["effort"] = self.effort.tolist()
+        doc["joints"] = {"names": list(self.joint_names), "position": self.joints.tolist()}
+        doc["duration_s"] = self.duration_s
+        return doc
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], robot: Cabin8) -> DriveProfile:
+    def from_dict(cls, data: dict[str, Any], robot: RobotModel) -> DriveProfile:
         """Read a profile written by :meth:`to_dict` (e.g. for ``cabinplan check``); validates shapes.
 
         Joint positions are recomputed from the drive positions (the drives are what a controller runs).
+        Forces are required of a robot with a dynamics model (the gate checks them).
         """
         arrays: dict[str, Array] = {}
-        for key in ("drives", "sample_period_s", "t", "position", "velocity", "acceleration", "effort"):
+        series = ["t", "position", "velocity", "acceleration"]
+        if drive_dynamics(robot) is not None or "effort" in data:
+            series.append("effort")
+        m = robot.n_drives
+        for key in ("drives", "sample_period_s", *series):
             if key not in data:
                 raise InvalidInput(f"profile.{key}: missing", field=f"profile.{key}")
         try:
@@ -91,11 +99,11 @@ class DriveProfile:
             raise InvalidInput(
                 "profile.sample_period_s: must be a number [s]", field="profile.sample_period_s"
             ) from None
-        for key in ("t", "position", "velocity", "acceleration", "effort"):
+        for key in series:
             try:
                 arrays[key] = np.asarray(data[key], dtype=float)
             except (TypeError, ValueError, OverflowError):
-                shape = "list of numbers" if key == "t" else "list of rows of 8 numbers"
+                shape = "list of numbers" if key == "t" else f"list of rows of {m} numbers"
                 raise InvalidInput(
                     f"profile.{key}: must be a {shape} (ragged or non-numeric)",
                     field=f"profile.{key}",
@@ -108,16 +116,17 @@ class DriveProfile:
         n = arrays["t"].shape
         if len(n) != 1 or n[0] < 2:
             raise InvalidInput("profile.t: need a 1-D list of at least 2 times", field="profile.t")
-        for k in ("position", "velocity", "acceleration", "effort"):
-            if arrays[k].shape != (n[0], 8):
+        for k in series[1:]:
+            if arrays[k].shape != (n[0], m):
                 raise InvalidInput(
-                    f"profile.{k}: expected {n[0]} rows of 8 values, got shape {arrays[k].shape}",
+                    f"profile.{k}: expected {n[0]} rows of {m} values, got shape {arrays[k].shape}",
                     field=f"profile.{k}",
                 )
         try:
             joints = robot.joints_from_drives(arrays["position"])
         except OutsideWorkspace:  # off the stage workspace: the gate reports it sample by sample
-            joints = np.full((n[0], 8), np.nan)
+            joints = np.full((n[0], len(robot.joint_names)), np.nan)
+        arrays.setdefault("effort", None)  # type: ignore[arg-type]
         return cls(robot.drive_names, robot.drive_units, robot.joint_names, period, joints=joints, **arrays)
 
     def to_csv(self) -> str:
@@ -129,27 +138,33 @@ class DriveProfile:
             header += [
                 f"{n}_{kind}_{u}{suffix}" for n, u in zip(self.drive_names, self.drive_units, strict=True)
             ]
-        header += [
-            f"{n}_effort_{'N' if u == 'm' else 'Nm'}"
-            for n, u in zip(self.drive_names, self.drive_units, strict=True)
-        ]
+        columns = [self.t, self.position, self.velocity, self.acceleration]
+        if self.effort is not None:
+            header += [
+                f"{n}_effort_{'N' if u == 'm' else 'Nm'}"
+                for n, u in zip(self.drive_names, self.drive_units, strict=True)
+            ]
+            columns.append(self.effort)
         w.writerow(header)
-        data = np.column_stack([self.t, self.position, self.velocity, self.acceleration, self.effort])
+        data = np.column_stack(columns)
         for row in data:
             w.writerow([f"{v:.9g}" for v in row])
         return buf.getvalue()
 
 
 def sample_legs(
-    robot: Cabin8,
-    legs: list[TimedPath],
+    robot: RobotModel,
+    legs: Sequence[TimedPath],
     period_s: float,
     payload: RigidPayload | None,
-    dynamics: Cabin8Dynamics | None = None,
-) -> tuple[DriveProfile, Array]:
-    """Sample consecutive legs at t_k = k * period; also returns each sample's leg index."""
-    geometry = DriveGeometry(robot)
-    dynamics = dynamics or Cabin8Dynamics.of(robot)
+    dynamics: DriveDynamics | None = None,
+) -> tuple[DriveProfile, IntArray]:
+    """Sample consecutive legs at t_k = k * period; also returns each sample's leg index (N,).
+
+    Forces come from the robot's dynamics model (``dynamics``, else
+    :func:`~planner.dynamics.models.drive_dynamics`); a robot without one gives a profile without forces.
+    """
+    dynamics = dynamics or drive_dynamics(robot)
     # Each leg is slowed uniformly (by at most one period) so that it lasts a whole number of periods:
     # its boundaries fall on samples, the last sample is exactly the goal at rest, and velocities and
     # accelerations only shrink (by k and k^2, k <= 1).
@@ -158,12 +173,12 @@ def sample_legs(
     n = int(first[-1]) + 1
     t = np.arange(n, dtype=float) * period_s
     leg_of = np.full(n, -1)
-    q = np.empty((n, 8))
+    q = np.empty((n, len(legs[0].path.start)))
     qd = np.zeros_like(q)
     qdd = np.zeros_like(q)
-    u = np.empty_like(q)
-    ud = np.zeros_like(q)
-    udd = np.zeros_like(q)
+    u = np.empty((n, robot.n_drives))
+    ud = np.zeros_like(u)
+    udd = np.zeros_like(u)
     for k, leg in enumerate(legs):
         idx = np.arange(first[k], first[k + 1] + 1)
         scale = leg.duration / (steps[k] * period_s)
@@ -171,7 +186,7 @@ def sample_legs(
         sd, sdd = sd * scale, sdd * scale**2
         sd[-1] = 0.0  # the leg ends at rest (the time law's last grid velocity is 0)
         pq, pdq, pddq = leg.path.evaluate(s)
-        pu, pdu, pddu = geometry(pq, pdq, pddq)
+        pu, pdu, pddu = robot.drive_path(pq, pdq, pddq)
         q[idx], u[idx] = pq, pu
         qd[idx] = pdq * sd[:, None]
         qdd[idx] = pdq * sdd[:, None] + pddq * (sd**2)[:, None]
@@ -183,7 +198,7 @@ def sample_legs(
     q[-1], u[-1] = legs[-1].path.end, robot.drives_from_joints(legs[-1].path.end)
     qd[[0, -1]] = ud[[0, -1]] = 0.0
     qdd[-1] = udd[-1] = 0.0
-    effort = dynamics.drive_forces_batch(q, qd, qdd, payload)
+    effort = dynamics.drive_forces_batch(q, qd, qdd, payload) if dynamics is not None else None
     profile = DriveProfile(
         robot.drive_names, robot.drive_units, robot.joint_names, float(period_s), t, u, ud, udd, effort, q
     )

@@ -5,7 +5,8 @@ TOPP-RA (Pham & Pham 2018, reachability analysis) on the drive path u(s) with
 
 - drive velocity limits |u'(s) sd| <= v_max,
 - drive acceleration limits |u'(s) sdd + u''(s) sd^2| <= a_max,
-- drive force limits |a(s) sdd + b(s) sd^2 + c(s)| <= F_max, with the inverse dynamics (payload included)
+- drive force limits (a robot with a dynamics model, :func:`planner.dynamics.models.drive_dynamics`)
+  |a(s) sdd + b(s) sd^2 + c(s)| <= F_max, with the inverse dynamics (payload included)
   split as tau_u(q, q' sd, q' sdd + q'' sd^2) = a sdd + b sd^2 + c; the coefficients come from three
   vectorised inverse-dynamics evaluations per grid point (c = tau_u(q, 0, 0), a = tau_u(q, 0, q') - c,
   b = tau_u(q, q', q'') - c),
@@ -31,10 +32,10 @@ from toppra.constraint.linear_constraint import canlinear_colloc_to_interpolate
 
 from planner.core.exceptions import RetimingFailed
 from planner.core.types import Array
-from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.models import DriveDynamics, drive_dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.robots.cabin8 import Cabin8
-from planner.timing.path import BlendPiece, DriveGeometry, JointPath, SplinePiece
+from planner.robots.base import RobotModel
+from planner.timing.path import BlendPiece, JointPath, SplinePiece
 
 log = logging.getLogger(__name__)
 logging.getLogger("toppra").setLevel(logging.ERROR)
@@ -74,9 +75,9 @@ class ToppraTimedPath:
 class _DrivePathAdapter(toppra.interpolator.AbstractGeometricPath):
     """toppra's view of the drive path u(s) (cached per grid)."""
 
-    def __init__(self, path: JointPath, geometry: DriveGeometry) -> None:
+    def __init__(self, path: JointPath, robot: RobotModel) -> None:
         self._path = path
-        self._geometry = geometry
+        self._robot = robot
         self._key: bytes | None = None
         self._value: tuple[Array, ...] = ()
 
@@ -85,7 +86,7 @@ class _DrivePathAdapter(toppra.interpolator.AbstractGeometricPath):
         key = ss.tobytes()
         if key != self._key:
             q, dq, ddq = self._path.evaluate(ss)
-            u, du, ddu = self._geometry(q, dq, ddq)
+            u, du, ddu = self._robot.drive_path(q, dq, ddq)
             self._key, self._value = key, (q, dq, ddq, u, du, ddu)
         return self._value
 
@@ -96,7 +97,7 @@ class _DrivePathAdapter(toppra.interpolator.AbstractGeometricPath):
 
     @property
     def dof(self) -> int:
-        return 8
+        return self._robot.n_drives
 
     @property
     def path_interval(self) -> Array:
@@ -110,11 +111,11 @@ class _DrivePathAdapter(toppra.interpolator.AbstractGeometricPath):
 class _DriveForceConstraint(toppra.constraint.LinearConstraint):
     """|tau_u| <= F_max along the path, coefficients from the vectorised inverse dynamics."""
 
-    def __init__(self, dynamics: Cabin8Dynamics, payload: RigidPayload | None, f_max: Array) -> None:
+    def __init__(self, dynamics: DriveDynamics, payload: RigidPayload | None, f_max: Array) -> None:
         super().__init__()
         self.set_discretization_type(toppra.constraint.DiscretizationType.Interpolation)
         self.dynamics, self.payload, self.f_max = dynamics, payload, f_max
-        self.dof = 8
+        self.dof = len(f_max)
         self.identical = False
 
     def compute_constraint_params(self, path: _DrivePathAdapter, gridpoints: Array) -> tuple[Any, ...]:
@@ -126,7 +127,8 @@ class _DriveForceConstraint(toppra.constraint.LinearConstraint):
         tau = self.dynamics.drive_forces_batch(stacked, qd, qdd, self.payload)
         n = len(gridpoints)
         c, a, b = tau[:n], tau[n : 2 * n] - tau[:n], tau[2 * n :] - tau[:n]
-        F = np.repeat(np.vstack([np.eye(8), -np.eye(8)])[None], n, axis=0)
+        eye = np.eye(self.dof)
+        F = np.repeat(np.vstack([eye, -eye])[None], n, axis=0)
         g = np.repeat(np.concatenate([self.f_max, self.f_max])[None], n, axis=0)
         return canlinear_colloc_to_interpolate(a, b, c, F, g, None, None, gridpoints)
 
@@ -169,7 +171,7 @@ class ToppraStage:
             both sides, and the constant-acceleration output holds between grid points.
     """
 
-    robot: Cabin8
+    robot: RobotModel
     payload: RigidPayload | None = None
     safety: tuple[float, float, float] = (0.995, 0.97, 0.97)
     grid_step: float = 0.08
@@ -178,26 +180,26 @@ class ToppraStage:
     name: str = "toppra"
 
     def __post_init__(self) -> None:
-        self.dynamics = Cabin8Dynamics.of(self.robot)
-        self.geometry = DriveGeometry(self.robot)
+        self.dynamics = drive_dynamics(self.robot)
 
     def time_path(self, path: JointPath) -> ToppraTimedPath:
         """TOPP-RA time law of ``path`` at rest at both ends (raises RetimingFailed)."""
         lim = self.robot.limits
         sv, sa, sf = self.safety
-        adapter = _DrivePathAdapter(path, self.geometry)
-        constraints = [
+        adapter = _DrivePathAdapter(path, self.robot)
+        constraints: list[toppra.constraint.Constraint] = [
             toppra.constraint.JointVelocityConstraint(np.column_stack([-sv * lim.v_max, sv * lim.v_max])),
             toppra.constraint.JointAccelerationConstraint(
                 np.column_stack([-sa * lim.a_max, sa * lim.a_max]),
                 discretization_scheme=toppra.constraint.DiscretizationType.Interpolation,
             ),
-            _DriveForceConstraint(self.dynamics, self.payload, sf * lim.effort_max),
         ]
+        if self.dynamics is not None:
+            constraints.append(_DriveForceConstraint(self.dynamics, self.payload, sf * lim.effort_max))
         grid = _grid(path, self.grid_step, self.min_points, self.max_points)
         # A drive that cannot even hold the payload somewhere makes the problem infeasible at any speed
         # (and gives toppra's LP a row 0 * x <= negative, which it divides by): refuse it first, by name.
-        overload = self._static_overload(path, grid)
+        overload = self._static_overload(path, grid) if self.dynamics is not None else None
         if overload is not None:
             raise overload
         algo = toppra.algorithm.TOPPRA(constraints, adapter, gridpoints=grid, solver_wrapper="seidel")
@@ -222,6 +224,7 @@ class ToppraStage:
         """The refusal for the first grid point whose forces at rest exceed a (scaled) limit, if any."""
         lim = self.robot.limits
         sf = self.safety[2]
+        assert self.dynamics is not None
         tau = self.dynamics.static_forces_batch(path.evaluate(grid)[0], self.payload)
         over = np.abs(tau) > sf * lim.effort_max
         if not over.any():

@@ -17,25 +17,7 @@ from pydantic import ValidationError
 
 from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Pose
-from planner.robots import load_robot
-from planner.robots.cabin8 import Cabin8
-
-
-def tool_pose_robot(robot_name: str) -> Cabin8:
-    """The model of ``robot_name`` if it has tool-pose kinematics (cabin8-type).
-
-    Raises:
-        UnknownRobot: no model of that name.
-        InvalidInput: the model has no tool-pose kinematics in these tools (``details['field'] = 'robot'``).
-    """
-    model = load_robot(robot_name)
-    if not isinstance(model, Cabin8):
-        raise InvalidInput(
-            f"robot {robot_name!r} has no tool-pose kinematics in this command",
-            field="robot",
-            robot=robot_name,
-        )
-    return model
+from planner.robots.registry import tool_pose_robot
 
 
 def pose_document(T_base_tool: NDArray[np.float64]) -> dict[str, Any]:

@@ -14,6 +14,7 @@ import numpy as np
 
 from planner.core.exceptions import InvalidInput
 from planner.kinematics import pprs6 as kin
+from planner.kinematics.workspace import two_pass_search
 from planner.plan.pose_path import (
     PAPER_PATH,
     Pprs6Profile,
@@ -22,7 +23,6 @@ from planner.plan.pose_path import (
     pose_path_from_spec,
 )
 from planner.robots.pprs6 import Pprs6
-from planner.tools.workspace import two_pass_search
 
 
 def _robot() -> Pprs6:
@@ -183,7 +183,7 @@ def profile_document(path_spec: Mapping[str, Any] | None = None) -> dict[str, An
 
 def _document(prof: Pprs6Profile) -> dict[str, Any]:
     robot = _robot()
-    s = prof.samples
+    s = prof.profile
     units = dict(zip(robot.drive_names, robot.drive_units, strict=True))
     return {
         "robot": robot.name,
@@ -212,7 +212,7 @@ def _document(prof: Pprs6Profile) -> dict[str, Any]:
         "position": s.position.tolist(),
         "velocity": s.velocity.tolist(),
         "acceleration": s.acceleration.tolist(),
-        "leg": s.leg.tolist(),
+        "leg": prof.leg.tolist(),
         "pose": prof.poses.tolist(),
         "provenance": {"robot_description_sha256": robot.description_sha256},
     }

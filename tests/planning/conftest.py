@@ -13,7 +13,7 @@ from planner.collision.world import CollisionWorld
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.plan.context import PLANNER_SLACK_M
 from planner.plan.goals import StaticForceCheck
-from planner.scenario.schema import ResolvedScenario
+from planner.scenario.resolve import ResolvedScenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 #: The pipeline's planning clearance for the reference scenarios (the requested 0.01 m plus its slack).

@@ -15,7 +15,7 @@ from planner.plan.goals import (
     line_speed_bounds,
 )
 from planner.redundancy.ik import normalised_margin
-from planner.scenario.schema import ResolvedScenario, load_scenario
+from planner.scenario.resolve import ResolvedScenario, load_scenario
 from tests.conftest import admissible_joints
 from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 

@@ -11,7 +11,8 @@ import pytest
 from planner.collision.world import CollisionWorld
 from planner.plan.connect import joint_box
 from planner.plan.ompl_adapter import PLANNERS, SearchResult, joint_scale, plan_joint_path
-from planner.scenario.schema import PlannerName, ResolvedScenario, load_scenario
+from planner.scenario.resolve import ResolvedScenario, load_scenario
+from planner.scenario.schema import PlannerName
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 CLEARANCE_M = 0.01

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -43,8 +45,10 @@ def test_rest_at_ends_and_at_every_corner(robot: Pprs6, document: dict) -> None:
     vel = np.array(document["velocity"])
     leg = np.array(document["leg"])
     assert np.abs(vel[0]).max() < 1e-12 and np.abs(vel[-1]).max() < 1e-12
-    for k in range(1, 4):  # the last sample of each leg is its corner, at rest
-        assert np.abs(vel[np.flatnonzero(leg == k - 1)[-1]]).max() < 1e-9
+    for k in range(1, 4):  # the first sample of each leg after the first is its corner, at rest
+        corner = np.flatnonzero(leg == k)[0]
+        assert np.abs(vel[corner]).max() < 1e-9
+        assert corner - 1 == np.flatnonzero(leg == k - 1)[-1]
 
 
 def test_pose_path_followed_and_closed(robot: Pprs6, document: dict) -> None:
@@ -68,11 +72,17 @@ def test_pose_path_followed_and_closed(robot: Pprs6, document: dict) -> None:
 def test_gate_refuses_a_corrupted_profile(robot: Pprs6) -> None:
     path = pose_path_from_spec(PAPER_PATH)
     prof = build_profile(robot, path, period_s=0.01)
-    s = prof.samples
-    fast = type(s)(s.t, s.position, 1.5 * s.velocity, s.acceleration, s.leg, s.s)
-    report, _ = validate(robot, path, fast, 0.01)
-    failed = {c["name"] for c in report["checks"] if not c["passed"]}
-    assert "velocity" in failed and "integrates_velocity" in failed
+    assert prof.gate.passed and prof.profile.effort is None
+    fast = dataclasses.replace(prof.profile, velocity=1.5 * prof.profile.velocity)
+    report, _ = validate(robot, path, fast, prof.leg, 0.01)
+    assert {"velocity", "consistency"} <= {c.name for c in report.failures}
+    # Off the path: drives of a pose 1 mm beside the leg at one sample.
+    position = prof.profile.position.copy()
+    i = len(position) // 3
+    position[i] = robot.ik(prof.poses[i] + np.array([0.0, 0.0, 1e-3, 0.0, 0.0, 0.0]))
+    off = dataclasses.replace(prof.profile, position=position)
+    report, _ = validate(robot, path, off, prof.leg, 0.01)
+    assert "pose_path_followed" in {c.name for c in report.failures}
 
 
 def test_refusals_are_typed(robot: Pprs6) -> None:

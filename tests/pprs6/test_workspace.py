@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from planner.core.exceptions import InvalidInput
+from planner.kinematics.workspace import boundary_search
 from planner.robots import load_robot
 from planner.tools.pprs6 import workspace_document
-from planner.tools.workspace import boundary_search
 
 
 @pytest.fixture(scope="module")

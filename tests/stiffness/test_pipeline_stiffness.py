@@ -19,7 +19,8 @@ from planner.dynamics.stiffness import StiffnessModel, deflected_pose
 from planner.gate.checks import validate_profile
 from planner.gate.requirements import requirements_for
 from planner.plan.pipeline import Planner, PlanResult
-from planner.scenario.schema import ResolvedScenario, resolve_scenario, scenario_from_dict
+from planner.scenario.resolve import ResolvedScenario, resolve_scenario
+from planner.scenario.schema import scenario_from_dict
 
 SCENARIOS = Path(__file__).parent.parent / "scenarios"
 

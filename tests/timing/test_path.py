@@ -13,7 +13,6 @@ from scipy.interpolate import CubicSpline
 from planner.robots.cabin8 import Cabin8
 from planner.timing.path import (
     BlendPiece,
-    DriveGeometry,
     JointPath,
     LinePiece,
     Piece,
@@ -198,7 +197,7 @@ def test_drive_geometry_matches_the_drive_map_and_its_finite_differences(
     path, _ = blended_polyline(robot, waypoints, 0.4)
     br = path.breaks
     s = np.concatenate([np.linspace(a + 1e-3, b - 1e-3, 5) for a, b in zip(br[:-1], br[1:], strict=True)])
-    u, du, ddu = DriveGeometry(robot)(*path.evaluate(s))
+    u, du, ddu = robot.drive_path(*path.evaluate(s))
 
     def g(x: np.ndarray) -> np.ndarray:
         return robot.drives_from_joints(path.evaluate(x)[0])
