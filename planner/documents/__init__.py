@@ -1,1 +1,1 @@
-"""documents."""
+"""Documents and pictures of results: the JSON output contract and the PNG plots (no math here)."""

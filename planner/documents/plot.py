@@ -5,7 +5,6 @@ Kept at the edge: nothing in the planning core imports this module.
 
 from __future__ import annotations
 
-import io
 from typing import TYPE_CHECKING
 
 import matplotlib
@@ -15,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from planner.core.types import Array
+from planner.documents.figures import png_bytes
 from planner.robots.cabin8 import Cabin8  # noqa: E402
 from planner.timing.profile import DriveProfile  # noqa: E402
 
@@ -83,13 +83,7 @@ def profile_png(
         ax.set_ylim(bottom=0)
         ax.legend(fontsize=7)
     axes[-1].set_xlabel("t [s]")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    return buf.getvalue()
+    return png_bytes(fig, title)
 
 
 def plan_png(sc: ResolvedScenario, result: PlanResult, world: CollisionWorld) -> bytes:

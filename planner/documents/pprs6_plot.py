@@ -5,8 +5,6 @@ Kept at the edge (matplotlib, Agg): nothing in the kinematics or timing core imp
 
 from __future__ import annotations
 
-import io
-
 import matplotlib
 
 matplotlib.use("Agg")
@@ -14,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from planner.core.types import Array
+from planner.documents.figures import png_bytes
 from planner.kinematics.workspace import Workspace  # noqa: E402
 
 
@@ -39,12 +38,7 @@ def workspace_png(ws: Workspace, title: str = "") -> bytes:
         ax.set_ylabel(f"{b} [mm]")
         ax.set_title(f"{a}-{b} view")
         ax.grid(alpha=0.3)
-    fig.suptitle(title or f"workspace: {1e6 * ws.volume_m3:.0f} cm^3")
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    return buf.getvalue()
+    return png_bytes(fig, title or f"workspace: {1e6 * ws.volume_m3:.0f} cm^3")
 
 
 def drives_png(t: Array, position: Array, drive_names: tuple[str, ...], title: str = "") -> bytes:
@@ -71,9 +65,4 @@ def drives_png(t: Array, position: Array, drive_names: tuple[str, ...], title: s
     a2.legend(loc="best", fontsize=8)
     for ax in (a1, a2):
         ax.grid(alpha=0.3)
-    fig.suptitle(title)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    return buf.getvalue()
+    return png_bytes(fig, title)
