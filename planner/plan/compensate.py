@@ -13,6 +13,7 @@ from planner.dynamics.stiffness import Compensation, compensate_goals, stiffness
 from planner.gate.requirements import compensates_deflection
 from planner.plan.context import PlanContext
 from planner.plan.goals import GoalCandidate
+from planner.plan.motion import path_clear
 
 
 def compensate_targets(
@@ -31,7 +32,7 @@ def compensate_targets(
             return False
         if len(path) == 2:
             return ctx.state_ok(path[0]) and ctx.state_ok(path[1]) and ctx.motion_ok(*path)
-        return ctx.world.check_path(path, ctx.clearances.planner_m, ctx.clearances.motion_margin_m).valid
+        return path_clear(ctx.world, path, ctx.clearances.planner_m, ctx.clearances.motion_margin_m)
 
     T_tool_payload = sc.payload.T_tool_payload if sc.payload is not None else np.eye(4)
     res = compensate_goals(

@@ -33,7 +33,7 @@ Progress = Callable[[str, float], None]
 
 #: Extra clearance the planner keeps beyond the requested one [m], so that the gate's own certification
 #: (which must prove a margin at the samples it starts from) passes on the planner's path.
-PLANNER_SLACK_M = 0.003
+PLANNER_SLACK_M = 0.0015
 #: A curved blend is certified with this much more than the planner's clearance [m] (its chords deviate).
 BLEND_EXTRA_M = 0.001
 #: Fraction of the time limit kept for timing and validation.

@@ -26,6 +26,7 @@ from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics.closed_form import redundant_family
+from planner.plan.motion import certify_motion
 from planner.redundancy.ik import IKOptions, comfort_margins, family_candidates, normalised_margin, track_pose
 from planner.robots.cabin8 import Cabin8
 
@@ -164,7 +165,7 @@ def approach_lines(
             continue
         if not (
             world.is_valid(q_goal, clearance)
-            and world.check_motion(q_pre, q_goal, clearance, motion_margin).valid
+            and certify_motion(world, q_pre, q_goal, clearance, motion_margin).valid
         ):
             stats["collision"] += 1
             continue
@@ -208,7 +209,7 @@ def track_approach(
         # One continuous branch: a step of a few millimetres never moves a joint far.
         if float(np.max(np.abs(q - qs[-1]))) > 20 * step_m + 0.05:
             return None
-        if not world.check_motion(qs[-1], q, clearance, motion_margin).valid or not forces.segment_ok(
+        if not certify_motion(world, qs[-1], q, clearance, motion_margin).valid or not forces.segment_ok(
             qs[-1], q
         ):
             return None
