@@ -25,17 +25,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import toppra
-import toppra.algorithm
-import toppra.constraint
-from toppra.constraint.linear_constraint import canlinear_colloc_to_interpolate
 
-from planner.core.exceptions import RetimingFailed
-from planner.core.types import Array
-from planner.dynamics.models import DriveDynamics, drive_dynamics
-from planner.dynamics.payload import RigidPayload
-from planner.robots.base import RobotModel
-from planner.timing.path import BlendPiece, JointPath, SplinePiece
+from planner.core.lazy import defer
+
+defer("matplotlib.pyplot")  # toppra imports pyplot eagerly, for plotting helpers the planner never calls
+import toppra  # noqa: E402
+import toppra.algorithm  # noqa: E402
+import toppra.constraint  # noqa: E402
+from toppra.constraint.linear_constraint import canlinear_colloc_to_interpolate  # noqa: E402
+
+from planner.core.exceptions import RetimingFailed  # noqa: E402
+from planner.core.types import Array  # noqa: E402
+from planner.dynamics.models import DriveDynamics, drive_dynamics  # noqa: E402
+from planner.dynamics.payload import RigidPayload  # noqa: E402
+from planner.robots.base import RobotModel  # noqa: E402
+from planner.timing.path import BlendPiece, JointPath, SplinePiece  # noqa: E402
 
 log = logging.getLogger(__name__)
 logging.getLogger("toppra").setLevel(logging.ERROR)
