@@ -65,7 +65,8 @@ def main() -> None:
         out = Path(tmp) / "out.json"
         _one(SCENARIOS[0], out)  # warm: kernels and native builds cached
         print(
-            f"cabinplan plan: wall time outside planning_time_s over {args.runs} fresh processes [<= {TARGET_S} s]"
+            f"cabinplan plan: wall time outside planning_time_s over {args.runs} fresh processes "
+            f"[<= {TARGET_S} s]"
         )
         print(f"{'scenario':<20} {'median s':>9} {'max s':>7} {'plan s (median)':>16}")
         for name in SCENARIOS:
