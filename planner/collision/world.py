@@ -730,6 +730,28 @@ class CollisionWorld:
         ob = self._object(b, st.R(b), st.p(b), st.length(b), margin / 2)
         return self._collide(oa, ob)
 
+    def _exact_spare(self, st: _State, kind_cabin: bool, idx: int, base: float) -> float:
+        """Exact distance beyond ``base`` of body ``idx`` to the cabin (or of pair ``idx``), by FCL distance.
+
+        A grown box is a larger box: near its edges and corners it overstates the clearance it tests by up
+        to (sqrt 3 - 1) times the growth, so a state whose grown bodies all hit may still be clear by the
+        margin. The certified walk asks this exact query (milliseconds against a mesh) only there.
+        """
+        req = fcl.DistanceRequest()
+        res = fcl.DistanceResult()
+        self._fcl_queries += 1
+        if kind_cabin:
+            assert self._cabin_obj is not None
+            body = self._object(idx, st.R(idx), st.p(idx), st.length(idx), 0.0)
+            return float(fcl.distance(self._cabin_obj, body, req, res)) - base
+        a, b = self.bodies.pairs[idx]
+        if self.bodies.shapes[a].kind == "box" and self.bodies.shapes[b].kind == "box":
+            first = fcl.CollisionObject(_box_bvh(self.bodies.shapes[b].size), fcl.Transform(st.R(b), st.p(b)))
+        else:
+            first = self._object(b, st.R(b), st.p(b), st.length(b), 0.0)
+        second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
+        return float(fcl.distance(first, second, req, res)) - base
+
     def _cabin_contact(self, b: int, margin: float) -> Contact:
         return Contact("cabin", (self.names[b],), f"{self.names[b]} within {margin:.4g} m of the cabin")
 
@@ -849,6 +871,9 @@ class CollisionWorld:
                     if not hit:
                         E = level
                         break
+                if E == 0.0 and not exact:  # every grown body hit: the exact distance decides
+                    spare = self._exact_spare(st, kind == "cabin", idx, base)
+                    E = spare if spare >= motion_margin else 0.0
                 last = max(E, motion_margin)
                 if E == 0.0:
                     contact = (
@@ -946,7 +971,8 @@ class CollisionWorld:
                 slot = int(ci[kernels.CI_SLOT])
                 st = _State(poses[slot], cabin[slot], pairs[slot])
                 first = kernels.CF_LEVEL0
-                for level in cf[first : first + int(ci[kernels.CI_LEVELS])].tolist():
+                levels = cf[first : first + int(ci[kernels.CI_LEVELS])].tolist()
+                for level in levels:
                     hit = (
                         self._cabin_hit(st, idx, base + level)
                         if is_cabin
@@ -955,6 +981,11 @@ class CollisionWorld:
                     if not hit:
                         cf[kernels.CF_E] = level
                         break
+                else:
+                    if levels and min(levels) <= motion_margin + 1e-12:  # the last resort: every level hit
+                        spare = self._exact_spare(st, is_cabin, idx, base)
+                        if spare >= motion_margin:
+                            cf[kernels.CF_E] = spare
 
     def _segment_reach(self, q_a: Array, q_b: Array, ratio: float | None = None) -> tuple[Array, Array]:
         """Reach bounds valid along the straight segment q_a -> q_b.

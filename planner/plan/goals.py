@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics.closed_form import redundant_family
-from planner.plan.motion import certify_motion
+from planner.plan.motion import MIN_MARGIN_M, certify_motion
 from planner.redundancy.ik import IKOptions, comfort_margins, family_candidates, normalised_margin, track_pose
 from planner.robots.cabin8 import Cabin8
 
@@ -72,6 +73,68 @@ class GoalCandidate:
     clearance_m: float = float("nan")
 
 
+def collision_evidence(world: CollisionWorld, q: Array, required_m: float, where: str) -> dict[str, Any]:
+    """What blocks configuration q: the closest bodies, their exact distance and the distance required.
+
+    ``required_m`` is the clearance the planner must certify there (the requested clearance, its slack and,
+    for a motion, the certified walk's smallest margin); a pair of robot bodies is held to the world's
+    self-clearance instead.
+    """
+    d = world.min_distance(q)
+    if d.bodies[1] != "cabin":
+        required_m = world.self_clearance
+    return {
+        "cause": "clearance",
+        "where": where,
+        "bodies": list(d.bodies),
+        "distance_m": float(d.distance_m),
+        "required_m": float(required_m),
+        "q": [float(v) for v in q],
+    }
+
+
+def force_evidence(forces: StaticForceCheck, q: Array, where: str) -> dict[str, Any]:
+    """The drive that cannot hold the payload at q, and its static force as a fraction of its limit."""
+    tau = forces.dynamics.static_forces_batch(np.atleast_2d(q), forces.payload)[0]
+    ratios = np.abs(tau) / forces.dynamics.robot.limits.effort_max
+    j = int(np.argmax(ratios))
+    return {
+        "cause": "force",
+        "where": where,
+        "drive": forces.dynamics.robot.drive_names[j],
+        "force_ratio": float(ratios[j]),
+        "allowed_ratio": float(forces.fraction),
+        "q": [float(v) for v in q],
+    }
+
+
+def describe(evidence: dict[str, Any]) -> str:
+    """One readable line of an evidence record (see :func:`collision_evidence`, :func:`force_evidence`)."""
+    if evidence["cause"] == "force":
+        return (
+            f"{evidence['drive']} needs {100 * evidence['force_ratio']:.0f}% of its force limit "
+            f"{evidence['where']} ({100 * evidence['allowed_ratio']:.0f}% allowed)"
+        )
+    a, b = evidence["bodies"]
+    other = "the cabin" if b == "cabin" else b
+    return (
+        f"{a} {1e3 * evidence['distance_m']:.1f} mm from {other} {evidence['where']}, "
+        f"{1e3 * evidence['required_m']:.1f} mm required"
+    )
+
+
+def dominant(evidence: list[dict[str, Any]], cause: str | None = None) -> dict[str, Any] | None:
+    """The record closest to passing (of ``cause`` only, when given): the smallest relative shortfall."""
+    evidence = [e for e in evidence if cause is None or e["cause"] == cause]
+
+    def shortfall(e: dict[str, Any]) -> float:
+        if e["cause"] == "force":
+            return e["force_ratio"] / e["allowed_ratio"] - 1.0
+        return (e["required_m"] - e["distance_m"]) / max(e["required_m"], 1e-6)
+
+    return min(evidence, key=shortfall) if evidence else None
+
+
 def goal_configurations(
     world: CollisionWorld,
     T_base_tool: Array,
@@ -79,10 +142,12 @@ def goal_configurations(
     forces: StaticForceCheck,
     u_ref: Array,
     max_candidates: int = 6,
+    evidence: list[dict[str, Any]] | None = None,
 ) -> tuple[list[GoalCandidate], dict[str, int]]:
     """Valid, diverse exact IK solutions for a tool pose, best margin first.
 
-    Returns the candidates and counts of why the others were dropped (for a clear refusal).
+    Returns the candidates and counts of why the others were dropped (for a clear refusal); each dropped
+    candidate's evidence is appended to ``evidence`` when given.
     """
     robot = world.robot
     opts = IKOptions(grid_gamma=15, grid_d5=15)
@@ -103,9 +168,13 @@ def goal_configurations(
         used.append(key)
         if not world.is_valid(sol.q, clearance):
             stats["collision"] += 1
+            if evidence is not None:
+                evidence.append(collision_evidence(world, sol.q, clearance, "at the goal"))
             continue
         if not forces.ok(sol.q):
             stats["force"] += 1
+            if evidence is not None:
+                evidence.append(force_evidence(forces, sol.q, "at the goal"))
             continue
         out.append(GoalCandidate(sol.q, normalised_margin(robot, sol.q)))
     out.sort(key=lambda c: -c.min_margin)
@@ -122,6 +191,7 @@ def approach_lines(
     forces: StaticForceCheck,
     max_lines: int = 3,
     grid: int = 21,
+    evidence: list[dict[str, Any]] | None = None,
 ) -> tuple[list[GoalCandidate], dict[str, int]]:
     """Straight approach lines with the redundancy fixed along each line, best margin first.
 
@@ -162,16 +232,36 @@ def approach_lines(
         q_goal, q_pre = Q[i], Q[i] + shift
         if not forces.segment_ok(q_pre, q_goal):
             stats["force"] += 1
+            if evidence is not None:
+                k_worst = int(np.argmax(forces.ratios(np.linspace(q_pre, q_goal, 11))))
+                frac = 1.0 - k_worst / 10.0
+                evidence.append(force_evidence(forces, q_pre + (1.0 - frac) * (q_goal - q_pre), _along(frac)))
             continue
-        if not (
-            world.is_valid(q_goal, clearance)
-            and certify_motion(world, q_pre, q_goal, clearance, motion_margin).valid
-        ):
+        if not world.is_valid(q_goal, clearance):
             stats["collision"] += 1
+            if evidence is not None:
+                evidence.append(collision_evidence(world, q_goal, clearance, "at the goal"))
+            continue
+        motion = certify_motion(world, q_pre, q_goal, clearance, motion_margin)
+        if not motion.valid:
+            stats["collision"] += 1
+            if evidence is not None and motion.report.t_fail is not None:
+                t = float(motion.report.t_fail)
+                q_at = q_pre + t * (q_goal - q_pre)
+                evidence.append(collision_evidence(world, q_at, clearance + MIN_MARGIN_M, _along(1.0 - t)))
             continue
         line = np.stack([q_pre, q_goal])
         out.append(GoalCandidate(q_goal, float(worst[i]), line, np.array([0.0, distance_m])))
     return out, stats
+
+
+def _along(remaining: float) -> str:
+    """Where on the insertion line: the goal, or how far before it (fraction of the line)."""
+    if remaining <= 1e-9:
+        return "at the goal"
+    if remaining >= 1.0 - 1e-9:
+        return "at the start of the insertion line"
+    return f"{100 * remaining:.0f}% of the insertion line before the goal"
 
 
 def track_approach(

@@ -92,10 +92,9 @@ def certify_motion(
             return AdaptiveMotion(rep, margin)
         q_fail = np.asarray(q_a, dtype=float) + rep.t_fail * (np.asarray(q_b, dtype=float) - q_a)
         spare = spare_clearance(world, q_fail, clearance)
-        nxt = min(0.5 * margin, SPARE_FRACTION * spare)
-        if nxt < MIN_MARGIN_M or margin <= MIN_MARGIN_M:
+        if spare <= MIN_MARGIN_M or margin <= MIN_MARGIN_M:
             return AdaptiveMotion(rep, margin, spare)
-        margin = max(nxt, MIN_MARGIN_M)
+        margin = max(MIN_MARGIN_M, min(0.5 * margin, SPARE_FRACTION * spare))
     return AdaptiveMotion(rep, margin, spare)
 
 
@@ -135,7 +134,6 @@ def path_clear(
         if rep.first_bad is None or any(c.kind == "limit" for c in rep.contacts) or margin <= MIN_MARGIN_M:
             return False
         spare = spare_clearance(world, np.atleast_2d(qs)[rep.first_bad], clearance)
-        nxt = min(0.5 * margin, SPARE_FRACTION * spare)
-        if nxt < MIN_MARGIN_M:
+        if spare <= MIN_MARGIN_M:
             return False
-        margin = nxt
+        margin = max(MIN_MARGIN_M, min(0.5 * margin, SPARE_FRACTION * spare))

@@ -49,7 +49,6 @@ PAPER_PATH: dict[str, Any] = {
 }
 
 
-
 @dataclass(frozen=True)
 class PosePath:
     """A polyline of platform poses, (K, 6) waypoints in the order travelled (closed: back to the first).

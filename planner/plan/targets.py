@@ -8,11 +8,20 @@ the redundancy free (:func:`~planner.plan.goals.track_approach`); the search tar
 
 from __future__ import annotations
 
+from typing import Any
+
 from planner.core.exceptions import ApproachInfeasible, GoalInCollision, GoalUnreachable
 from planner.core.types import Array
 from planner.plan.context import PlanContext
 from planner.plan.endpoints import check_configuration
-from planner.plan.goals import GoalCandidate, approach_lines, goal_configurations, track_approach
+from planner.plan.goals import (
+    GoalCandidate,
+    approach_lines,
+    describe,
+    dominant,
+    goal_configurations,
+    track_approach,
+)
 
 #: Goal candidates tracked back along the approach line when no line of fixed redundancy is clear.
 TRACKED_CANDIDATES = 4
@@ -25,6 +34,7 @@ def goal_targets(ctx: PlanContext) -> tuple[list[Array], list[GoalCandidate | No
         GoalUnreachable, GoalInCollision, ApproachInfeasible: no target, with the counts that explain why.
     """
     sc, c = ctx.sc, ctx.clearances
+    evidence: list[dict[str, Any]] = []
     if sc.goal_q is not None:
         check_configuration(ctx, sc.goal_q, "goal")
         return [sc.goal_q], [None]
@@ -38,25 +48,36 @@ def goal_targets(ctx: PlanContext) -> tuple[list[Array], list[GoalCandidate | No
             c.planner_m,
             c.motion_margin_m,
             ctx.forces,
+            evidence=evidence,
         )
         ctx.report["approach"] = {"method": "fixed_redundancy", "lines": len(lines), **line_stats}
         lines = [x for x in lines if x.line is not None]  # targets and their lines stay aligned
         if lines:
             return [x.line[0] for x in lines if x.line is not None], list(lines)
-    cands, stats = goal_configurations(ctx.world, sc.T_base_tool_goal, c.planner_m, ctx.forces, sc.start_u)
+    cands, stats = goal_configurations(
+        ctx.world, sc.T_base_tool_goal, c.planner_m, ctx.forces, sc.start_u, evidence=evidence
+    )
     ctx.report["goal_candidates"] = {"found": len(cands), **stats}
     if not cands:
         if stats["family_points"] == 0:
             raise GoalUnreachable("goal pose: no admissible configuration of the robot reaches it", **stats)
-        if stats["collision"] >= max(stats["force"], 1):
+        collided = stats["collision"] >= max(stats["force"], 1)
+        best = dominant(evidence, "clearance" if collided else "force")
+        cause = f"; closest: {describe(best)}" if best is not None else ""
+        if collided:
             raise GoalInCollision(
                 "goal pose: every configuration reaching it comes within the clearance of the cabin "
-                "or of itself",
+                f"or of itself{cause}",
                 **stats,
+                best=best,
+                candidates=evidence,
             )
         raise GoalUnreachable(
-            "goal pose: no configuration reaching it can hold the payload within the drive force limits",
+            "goal pose: no configuration reaching it can hold the payload within the drive force limits"
+            f"{cause}",
             **stats,
+            best=best,
+            candidates=evidence,
         )
     if sc.approach_direction is None:
         return [x.q for x in cands], [None] * len(cands)
@@ -77,10 +98,14 @@ def goal_targets(ctx: PlanContext) -> tuple[list[Array], list[GoalCandidate | No
         if tr is not None:
             tracked.append(tr)
     if not tracked:
+        best = dominant(evidence)
+        cause = f"; closest: {describe(best)}" if best is not None else ""
         raise ApproachInfeasible(
             f"approach: no goal configuration can be tracked {sc.approach_distance_m} m back along the "
-            "line within limits, margins, force limits and clearance",
-            candidates=len(cands[:TRACKED_CANDIDATES]),
+            f"line within limits, margins, force limits and clearance{cause}",
+            tracked_candidates=len(cands[:TRACKED_CANDIDATES]),
+            best=best,
+            candidates=evidence,
         )
     tracked.sort(key=lambda x: -x.clearance_m)
     ctx.report["approach"].update(
