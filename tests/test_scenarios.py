@@ -19,6 +19,7 @@ from planner.core.schemas import Pose
 from planner.core.so3 import pose_error
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.stiffness import StiffnessModel, deflected_pose
+from planner.gate.requirements import GATE_MOTION_MARGIN_M
 from planner.plan.pipeline import Planner, PlanResult
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 
@@ -103,7 +104,7 @@ def test_feasible_scenario_gives_a_profile_that_respects_every_limit(name: str) 
         assert k < len(q) - 10  # the insertion takes many samples
     # Certified clearance between consecutive samples, with a fresh world.
     world = CollisionWorld(robot, sc.cabin, sc.payload)
-    rep = world.check_path(q, sc.options.clearance_m, sc.options.motion_margin_m)
+    rep = world.check_path(q, sc.options.clearance_m, GATE_MOTION_MARGIN_M)
     assert rep.valid, rep.contacts
     assert res.gate.min_clearance_m >= sc.options.clearance_m
     # Near time-optimal: never faster than the slowest drive alone allows.

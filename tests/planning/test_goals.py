@@ -14,6 +14,7 @@ from planner.plan.goals import (
     goal_configurations,
     line_speed_bounds,
 )
+from planner.plan.motion import certify_motion
 from planner.redundancy.ik import normalised_margin
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 from tests.conftest import admissible_joints
@@ -100,7 +101,7 @@ def test_approach_lines_are_best_margin_first_certified_and_holdable(
         assert cand.min_margin == pytest.approx(min(normalised_margin(robot, q) for q in qs), abs=1e-9)
         assert cand.min_margin >= 0.0
         assert world.is_valid(cand.q, CLEARANCE_M)
-        assert world.check_motion(cand.line[0], cand.line[1], CLEARANCE_M, MOTION_MARGIN_M).valid
+        assert certify_motion(world, cand.line[0], cand.line[1], CLEARANCE_M, MOTION_MARGIN_M).valid
         dense = cand.line[0] + np.linspace(0, 1, 25)[:, None] * (cand.line[1] - cand.line[0])
         assert np.all(forces.ratios(dense) <= forces.fraction)
     for i in range(len(keys)):  # diverse redundancy: distinct (gamma, d5)

@@ -10,6 +10,7 @@ import pytest
 
 from planner.collision.world import CollisionWorld
 from planner.plan.connect import joint_box
+from planner.plan.motion import certify_motion
 from planner.plan.ompl_adapter import PLANNERS, SearchResult, joint_scale, plan_joint_path
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 from planner.scenario.schema import PlannerName
@@ -64,7 +65,7 @@ def test_offered_planners_are_the_scenario_schema_names() -> None:
 def test_the_problem_needs_a_planner(world: CollisionWorld, problem: tuple[np.ndarray, np.ndarray]) -> None:
     q_start, q_goal = problem
     assert world.is_valid(q_start, CLEARANCE_M) and world.is_valid(q_goal, CLEARANCE_M)
-    assert not world.check_motion(q_start, q_goal, CLEARANCE_M, MOTION_MARGIN_M).valid
+    assert not certify_motion(world, q_start, q_goal, CLEARANCE_M, MOTION_MARGIN_M).valid
 
 
 def _assert_certified(
@@ -77,7 +78,7 @@ def _assert_certified(
     lo, hi = joint_box(world)
     assert np.all(wp >= lo - 1e-12) and np.all(wp <= hi + 1e-12)
     for a, b in zip(wp[:-1], wp[1:], strict=True):
-        assert world.check_motion(a, b, CLEARANCE_M, MOTION_MARGIN_M).valid
+        assert certify_motion(world, a, b, CLEARANCE_M, MOTION_MARGIN_M).valid
 
 
 @pytest.mark.parametrize("planner", sorted(PLANNERS))

@@ -10,7 +10,7 @@ import pytest
 from planner.collision.world import CollisionWorld
 from planner.kinematics import chain
 from planner.plan.goals import StaticForceCheck
-from planner.plan.motion import motion_clear
+from planner.plan.motion import certify_motion, motion_clear
 from planner.plan.shortcut import MIN_GAIN_S, cut_corners, segment_times
 from planner.robots.cabin8 import Cabin8
 from planner.scenario.resolve import ResolvedScenario, load_scenario
@@ -71,7 +71,7 @@ def test_a_standstill_posture_change_moves_into_the_rail_move(
     assert after <= 1.05 * rail_alone
     # Every segment of the result is certified (independently of what the cutter was told).
     for a, b in zip(cut[:-1], cut[1:], strict=True):
-        assert world.check_motion(a, b, CLEARANCE_M, MOTION_MARGIN_M).valid
+        assert certify_motion(world, a, b, CLEARANCE_M, MOTION_MARGIN_M).valid
 
 
 def test_corner_cutting_is_deterministic_and_keeps_a_path_with_nothing_to_gain(
