@@ -492,7 +492,7 @@ def test_a_plate_the_rigid_robot_clears_but_the_sagging_payload_touches_is_refus
     import trimesh
 
     from planner.collision.world import CollisionWorld
-    from planner.meshio.load import load_mesh
+    from planner.meshio import load_mesh
 
     sc = _carry(1.3)
     res = Planner(sc).plan()

@@ -4,7 +4,7 @@ The mesh layer (:mod:`planner.meshio.load`) turns STL/OBJ/PLY/GLB/glTF files int
 triangle meshes in metres, in the robot base frame.
 """
 
-from planner.meshio.load import (
+from planner.meshio import (
     SUPPORTED_EXTENSIONS,
     LoadedMesh,
     MeshLimits,

@@ -56,7 +56,7 @@ from planner.collision.bodies import PayloadGeometry
 from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
 from planner.core.schemas import Pose
 from planner.dynamics.payload import RigidPayload
-from planner.meshio.load import LoadedMesh, MeshLimits, load_mesh
+from planner.meshio import LoadedMesh, MeshLimits, load_mesh
 from planner.robots import load_robot
 from planner.robots.cabin8 import Cabin8
 
