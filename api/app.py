@@ -24,7 +24,7 @@ from api.routes import cabins, health, keys, kinematics, plans, pprs6, robots, s
 from api.settings import Settings
 from api.store import MeshStore
 from planner import __version__
-from planner.meshio.load import MeshLimits
+from planner.meshio import MeshLimits
 
 _LOG = logging.getLogger(__name__)
 

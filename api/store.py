@@ -3,7 +3,7 @@
 A mesh's id is the SHA-256 of its bytes. The file is written once (atomically, fsynced) as
 ``<data_dir>/meshes/<sha256>.<ext>``, shared by tenants who upload the same bytes; each tenant has its
 own metadata row, so one tenant never sees another's meshes. Uploads are parsed and validated with
-:func:`planner.meshio.load.load_mesh` before anything is stored.
+:func:`planner.meshio.load_mesh` before anything is stored.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from api.db import ACTIVE_STATES, Database, Job, Mesh, now_s
 from api.problems import Problem
 from meshes import reference_cabin_path
 from planner.core.exceptions import InvalidInput, InvalidMesh
-from planner.meshio.load import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
+from planner.meshio import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
 from planner.scenario.resolve import MeshResolver
 
 _LOG = logging.getLogger(__name__)

@@ -5,8 +5,8 @@
 * exact minimum-distance queries (reports and clearance profiles)
 
 Each figure is also measured, in the same run and on the same inputs, on the reference route
-(``CollisionWorld(..., reference=True)``: CasADi poses, the motion walk in Python with the original
-always-probe policy), so the speed-up is not blurred by the load of a shared machine.
+(:class:`~planner.collision.reference.ReferenceWorld`: CasADi poses, the motion walk in Python with the
+original always-probe policy), so the speed-up is not blurred by the load of a shared machine.
 
 Configurations: random admissible joints along the whole rail, payload 0.45 x 0.35 x 0.50 m held 0.30 m
 along the tool z axis; validity is timed on valid and invalid states alike (both occur in planning).
@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
+from planner.collision.reference import ReferenceWorld
 from planner.collision.world import CollisionWorld
-from planner.meshio.load import load_mesh
+from planner.meshio import load_mesh
 from planner.redundancy.ik import random_admissible_joints
 from planner.robots.cabin8 import Cabin8
 
@@ -59,7 +60,7 @@ def main() -> None:
         mesh = load_mesh(MESHES / f"{cabin['name']}.stl", units="m")
         world = CollisionWorld(robot, mesh, payload)
         build_s = time.perf_counter() - t0
-        ref = CollisionWorld(robot, mesh, payload, reference=True)
+        ref = ReferenceWorld(robot, mesh, payload)
         valid = [world.is_valid(q) for q in qs]  # warm-up: compiled kernels, FCL objects, caches
         timed(world.is_valid, qs)
         t_valid = timed(world.is_valid, qs)

@@ -48,7 +48,7 @@ _PUBLIC: dict[str, str] = {
     "available_robots": "planner.robots.registry",
     "kinematics_tools": "planner.tools",
     "CollisionWorld": "planner.collision.world",
-    "load_mesh": "planner.meshio.load",
+    "load_mesh": "planner.meshio",
     "Pose": "planner.core.schemas",
     # errors
     "PlannerError": "planner.core.exceptions",
@@ -65,7 +65,7 @@ if TYPE_CHECKING:
     from planner.gate.check_profile import check_profile
     from planner.gate.checks import GateReport, validate_profile
     from planner.gate.requirements import GateRequirements
-    from planner.meshio.load import load_mesh
+    from planner.meshio import load_mesh
     from planner.plan.context import Clearances, SearchPreset
     from planner.plan.pipeline import Planner, PlanResult, plan_scenario
     from planner.robots.registry import available_robots, load_robot

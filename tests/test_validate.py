@@ -500,7 +500,7 @@ def test_a_plate_the_rigid_robot_clears_but_the_sagging_payload_touches_is_refus
     from planner.collision.world import CollisionWorld
     from planner.gate.checks import deflected_joints
     from planner.gate.requirements import GATE_MOTION_MARGIN_M
-    from planner.meshio.load import load_mesh
+    from planner.meshio import load_mesh
 
     sc = _carry(1.3)
     res = Planner(sc).plan()

@@ -1,16 +1,29 @@
-"""Collision world: cabin, payload and robot geometry.
+"""Collision world: cabin, payload and robot geometry; certified state, motion and path checks.
 
-The mesh layer (:mod:`planner.meshio.load`) turns STL/OBJ/PLY/GLB/glTF files into validated
-triangle meshes in metres, in the robot base frame.
+What callers use: :class:`CollisionWorld` (the state / path API), its reports (:class:`StateReport`,
+:class:`MotionReport`, :class:`PathReport`, :class:`Contact`, :class:`Distance`) and the payload's
+geometry (:class:`PayloadGeometry`). The rooms behind it are listed in :mod:`planner.collision.world`;
+mesh files are read by :mod:`planner.meshio`, outside this package.
 """
 
-from planner.meshio.load import (
-    SUPPORTED_EXTENSIONS,
-    LoadedMesh,
-    MeshLimits,
-    MeshReport,
-    Units,
-    load_mesh,
+from planner.collision.bodies import PayloadGeometry
+from planner.collision.reports import Contact, Distance, MotionReport, PathReport, StateReport
+from planner.collision.world import (
+    DEFAULT_CLEARANCE_M,
+    DEFAULT_MOTION_MARGIN_M,
+    DEFAULT_SELF_CLEARANCE_M,
+    CollisionWorld,
 )
 
-__all__ = ["SUPPORTED_EXTENSIONS", "LoadedMesh", "MeshLimits", "MeshReport", "Units", "load_mesh"]
+__all__ = [
+    "DEFAULT_CLEARANCE_M",
+    "DEFAULT_MOTION_MARGIN_M",
+    "DEFAULT_SELF_CLEARANCE_M",
+    "CollisionWorld",
+    "Contact",
+    "Distance",
+    "MotionReport",
+    "PathReport",
+    "PayloadGeometry",
+    "StateReport",
+]

@@ -26,14 +26,12 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
 from planner.core.exceptions import InvalidInput
+from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload, box_inertia
 from planner.kinematics import chain, parallel
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 BODY_NAMES = ("carriage", "link_ab", "link_cd", "link_ef", "platform", "column", "arm", "slide", "payload")
 #: Pairs joined by a joint (or resting on one another by design): never checked against each other.

@@ -29,16 +29,15 @@ import tempfile
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy import ndimage
 
 from planner.core.cache import cache_dir
+from planner.core.types import Array, IntArray
 
-Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
 
 
-def surface_samples(vertices: Array, faces: NDArray[np.int64], spacing: float) -> Array:
+def surface_samples(vertices: Array, faces: IntArray, spacing: float) -> Array:
     """Points on every triangle such that each surface point is within 2 * spacing of one of them.
 
     A triangle (v0, v1, v2) is sampled at v0 + a (v1 - v0) + b (v2 - v0) on a lattice with steps at most
@@ -98,7 +97,7 @@ class ClearanceGrid:
     def build(
         cls,
         vertices: Array,
-        faces: NDArray[np.int64],
+        faces: IntArray,
         step: float = 0.03,
         sample_spacing: float = 0.015,
         padding: float = 0.5,
@@ -129,7 +128,7 @@ class ClearanceGrid:
 GRID_VERSION = 1
 
 
-def cached_build(key: str, vertices: Array, faces: NDArray[np.int64], step: float) -> ClearanceGrid:
+def cached_build(key: str, vertices: Array, faces: IntArray, step: float) -> ClearanceGrid:
     """:meth:`ClearanceGrid.build`, cached on disk by ``key`` (the mesh's content and pose) and ``step``.
 
     Building costs about a second for a reference cabin (a Euclidean distance transform); loading the

@@ -17,209 +17,49 @@ Every decision that something is *clear* is certified; nothing is sampled at a f
   along the segment, not just at the checked states.
 * **Distances** (:meth:`CollisionWorld.min_distance`, :meth:`clearance_profile`): FCL distance queries,
   where a number is needed (reports), pruned by the same lower bounds (branch and bound).
+
+The rooms of ``planner/collision/``: this module (the state and path API), :mod:`.motion` (the certified
+motion walk), :mod:`.probes` (FCL), :mod:`.reports` (the values returned), :mod:`.bodies` (shapes, sphere
+covers, reach bounds), :mod:`.clearance_grid` (the cabin's distance lower bounds), :mod:`.pose_model` (the
+CasADi body poses), :mod:`.kernels` (the compiled hot path) and :mod:`.reference` (the pure-Python
+reference route, kept as the tests' oracle).
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
-import threading
-import weakref
-from dataclasses import dataclass, field
 from functools import cache
-from typing import Any
 
-import casadi as ca
-import fcl
 import numpy as np
-from numpy.typing import NDArray
 
-from planner.collision import kernels
-from planner.collision.bodies import (
-    BodySet,
-    PayloadGeometry,
-    Shape,
-    cabin8_bodies,
-    link_slope_bound,
-    segment_reach_bounds,
-)
+from planner.collision.bodies import BodySet, PayloadGeometry, cabin8_bodies, segment_reach_bounds
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
+from planner.collision.kernels import buffers, state, walk
+from planner.collision.kernels.bounds import cover_centres_batch
+from planner.collision.kernels.poses import N_CONSTRAINTS
+from planner.collision.motion import CertifiedMotion
+from planner.collision.pose_model import pose_functions
+from planner.collision.probes import Probes, cabin_bvh
+from planner.collision.reports import (
+    VALID,
+    BodyState,
+    Distance,
+    MotionReport,
+    PathReport,
+    StateReport,
+    body_contact,
+    limit_contacts,
+)
 from planner.core.exceptions import InvalidInput
-from planner.kinematics import chain, parallel
-from planner.kinematics.compiled import FastFunction, dense_function
-from planner.meshio.load import LoadedMesh
-from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
-
-Array = NDArray[np.float64]
+from planner.core.types import Array
+from planner.meshio import LoadedMesh
+from planner.robots.cabin8 import Cabin8
 
 DEFAULT_CLEARANCE_M = 0.01
 DEFAULT_MOTION_MARGIN_M = 0.005
 DEFAULT_SELF_CLEARANCE_M = 0.005
-#: Joint-space spacing [m or rad] at which limits and singularity margins are checked along a motion.
-LIMIT_STEP = 0.005
 MIN_MOTION_MARGIN_M = 1e-4
-
-
-@dataclass(frozen=True)
-class Contact:
-    """Why a state is invalid: a limit, a body against the cabin, or a pair of bodies."""
-
-    kind: str  # "limit" | "cabin" | "self"
-    bodies: tuple[str, ...]
-    detail: str
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form."""
-        return {"kind": self.kind, "bodies": list(self.bodies), "detail": self.detail}
-
-
-@dataclass(frozen=True)
-class StateReport:
-    """Result of a state check: ``valid`` and, when not, every contact found."""
-
-    valid: bool
-    contacts: tuple[Contact, ...] = ()
-
-
-@dataclass(frozen=True)
-class MotionReport:
-    """Result of a certified motion check."""
-
-    valid: bool
-    states_checked: int
-    fcl_queries: int
-    t_fail: float | None = None
-    contacts: tuple[Contact, ...] = ()
-
-
-@dataclass(frozen=True)
-class PathReport:
-    """Result of :meth:`CollisionWorld.check_path`.
-
-    ``first_bad`` is the index of the sample starting the first piece that failed (None if valid).
-    """
-
-    valid: bool
-    motion_checks: int
-    last_checked: int
-    first_bad: int | None
-    contacts: tuple[Contact, ...] = ()
-
-
-@dataclass(frozen=True)
-class _State:
-    """Body poses (flat: R column-major, p, length per body) and certified bounds at one configuration."""
-
-    flat: Array
-    cabin_lb: Array
-    pair_lb: Array
-    admissible: bool = True
-
-    def R(self, b: int) -> Array:
-        """Rotation of body b."""
-        return self.flat[b, :9].reshape(3, 3).T
-
-    def p(self, b: int) -> Array:
-        """Centre of body b."""
-        return self.flat[b, 9:12]
-
-    def length(self, b: int) -> float:
-        """Capsule length of body b (0 for boxes)."""
-        return float(self.flat[b, 12])
-
-
-_VALID = StateReport(True)
-
-
-@dataclass(frozen=True)
-class Distance:
-    """Minimum distance between the robot (with payload) and the cabin or itself, with witnesses."""
-
-    distance_m: float
-    bodies: tuple[str, str]
-    point_a: Array = field(repr=False)
-    point_b: Array = field(repr=False)
-
-
-def _pose_function(kin: Cabin8Kinematics, names: tuple[str, ...]) -> ca.Function:
-    """Compiled (q, T_tool_box) -> body poses and the admissibility vector c(q) of the named bodies.
-
-    Body poses: R column-major, p, capsule length -- 13 values per body.
-    """
-    q = kin.q_sx
-    T_tb = ca.SX.sym("T_tool_box", 4, 4)
-    frames = kin.frames_sx
-    pts = parallel.stage_points(kin.geometry, q[chain.X], q[chain.Y], q[chain.GAMMA], xp=ca)
-
-    def p3(pt: tuple[ca.SX, ca.SX]) -> ca.SX:
-        return ca.vertcat(pt[0], pt[1], q[chain.D1])
-
-    def seg(a: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
-        d = b - a
-        length = ca.norm_2(d)
-        z = d / length
-        # Any unit vector normal to z completes the frame (a capsule is symmetric about its axis).
-        helper = ca.if_else(ca.fabs(z[0]) < 0.9, ca.DM([1, 0, 0]), ca.DM([0, 1, 0]))
-        x = ca.cross(helper, z)
-        x = x / ca.norm_2(x)
-        y = ca.cross(z, x)
-        return ca.horzcat(x, y, z), 0.5 * (a + b), length
-
-    outs: list[ca.SX] = []
-    for name in names:
-        if name == "carriage":
-            R, p, length = ca.SX.eye(3), ca.vertcat(0, -0.06, q[chain.D1]), ca.SX(0)
-        elif name == "platform":
-            R, p, length = frames[2][0:3, 0:3], frames[2][0:3, 3], ca.SX(0)
-        elif name == "payload":
-            T = ca.mtimes(frames[6], T_tb)
-            R, p, length = T[0:3, 0:3], T[0:3, 3], ca.SX(0)
-        else:
-            a, b = {
-                "link_ab": (p3(pts.A), p3(pts.B)),
-                "link_cd": (p3(pts.C), p3(pts.D)),
-                "link_ef": (p3(pts.E), p3(pts.F)),
-                "column": (frames[2][0:3, 3], frames[3][0:3, 3]),
-                "arm": (frames[3][0:3, 3], frames[4][0:3, 3]),
-                "slide": (frames[4][0:3, 3], frames[6][0:3, 3]),
-            }[name]
-            R, p, length = seg(a, b)
-        outs.append(ca.vertcat(ca.vec(R), p, length))
-    return dense_function(
-        "body_poses",
-        [q, T_tb],
-        [ca.vertcat(*outs), kin.constraints_sx(q)],
-        {"cse": True},
-    )
-
-
-#: Compiled pose functions by kinematic model and body list (building one takes ~10 ms).
-_POSE_FUNCTIONS: weakref.WeakKeyDictionary[
-    Cabin8Kinematics, dict[tuple[str, ...], tuple[ca.Function, FastFunction]]
-]
-_POSE_FUNCTIONS = weakref.WeakKeyDictionary()
-
-
-def _pose_functions(kin: Cabin8Kinematics, names: tuple[str, ...]) -> tuple[ca.Function, FastFunction]:
-    """The pose function of :func:`_pose_function` and its buffered wrapper, built once per model."""
-    by_names = _POSE_FUNCTIONS.setdefault(kin, {})
-    key = tuple(names)
-    entry = by_names.get(key)
-    if entry is None:
-        fn = _pose_function(kin, key)
-        entry = by_names[key] = (fn, FastFunction(fn))
-    return entry
-
-
-@cache
-def _cabin_bvh(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> fcl.BVHModel:
-    vertices = np.frombuffer(vertices_bytes).reshape(-1, 3)
-    faces = np.frombuffer(faces_bytes, dtype=np.int64).reshape(-1, 3)
-    model = fcl.BVHModel()
-    model.beginModel(len(vertices), len(faces))
-    model.addSubModel(vertices, faces.astype(np.int32))
-    model.endModel()
-    return model
 
 
 @cache
@@ -231,27 +71,17 @@ def _cabin_grid(sha256: str, vertices_bytes: bytes, faces_bytes: bytes, step: fl
     return cached_build(key, vertices, faces, step)
 
 
-#: Carriage clearance tables by (cabin, carriage shape, rail travel): CollisionWorld._build_carriage_table.
+#: Carriage clearance tables by (cabin, carriage shape, rail travel), built once (``Probes.carriage_table``).
 _CARRIAGE_TABLES: dict[tuple[str, str, float, float], tuple[float, float, Array]] = {}
 
 
-@cache
-def _box_bvh(size: tuple[float, float, float]) -> fcl.BVHModel:
-    import trimesh
-
-    m = trimesh.creation.box(extents=size)
-    model = fcl.BVHModel()
-    model.beginModel(len(m.vertices), len(m.faces))
-    model.addSubModel(np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int32))
-    model.endModel()
-    return model
-
-
-def _fcl_geometry(shape: Shape, margin: float, length: float) -> Any:
-    grown = shape.inflated(margin)
-    if grown.kind == "box":
-        return fcl.Box(*grown.size)
-    return fcl.Capsule(grown.radius, length)
+def cabin_key(cabin: LoadedMesh) -> tuple[str, bytes, bytes]:
+    """The cache key of a cabin's geometry: (content hash + pose, vertices, faces) as loaded."""
+    return (
+        cabin.sha256 + cabin.T_base_mesh.tobytes().hex(),
+        cabin.vertices.tobytes(),
+        cabin.faces.astype(np.int64).tobytes(),
+    )
 
 
 class CollisionWorld:
@@ -263,12 +93,14 @@ class CollisionWorld:
         payload: The carried payload (``None``: none).
         grid_step_m: Node spacing of the clearance lower-bound grid [m].
         self_clearance: Distance [m] non-adjacent bodies keep from each other.
-        reference: Use the reference routes (CasADi poses, the motion walk in Python) instead of the
-            compiled kernels; same verdicts, slower (tests and the benchmark compare the two).
 
     Geometry that depends only on the cabin (FCL BVH, clearance grid) is cached per mesh content and pose,
     so several worlds on one cabin share it.
     """
+
+    #: Motion walks: probe for more than the bounds prove only where they prove nothing (states cost
+    #: ~2 us, an FCL probe 10-50 us); the reference route keeps the original always-probe policy.
+    probe_when_proven: bool = False
 
     def __init__(
         self,
@@ -277,186 +109,49 @@ class CollisionWorld:
         payload: PayloadGeometry | None = None,
         grid_step_m: float = 0.03,
         self_clearance: float = DEFAULT_SELF_CLEARANCE_M,
-        reference: bool = False,
     ) -> None:
         _check_clearance(self_clearance)
         self.self_clearance = float(self_clearance)
-        self.reference = bool(reference)
         self.robot = robot
         self.cabin = cabin
         self.payload = payload
         self.bodies: BodySet = cabin8_bodies(robot, payload)
         self.names = self.bodies.names
-        self._pose_fn, self._pose_fast = _pose_functions(robot.kin, self.bodies.names)
+        self._pose_fn, self._pose_fast = pose_functions(robot.kin, self.bodies.names)
         self._T_tool_box = payload.T_tool_box if payload is not None else np.eye(4)
-        self._cabin_obj: fcl.CollisionObject | None = None
-        self._grid: ClearanceGrid | None = None
-        if cabin is not None:
-            key = (
-                cabin.sha256 + cabin.T_base_mesh.tobytes().hex(),
-                cabin.vertices.tobytes(),
-                cabin.faces.astype(np.int64).tobytes(),
-            )
-            self._cabin_obj = fcl.CollisionObject(_cabin_bvh(*key), fcl.Transform())
-            self._grid = _cabin_grid(*key, grid_step_m)
-        self._geoms: dict[tuple[int, float, float], Any] = {}
-        self._local = threading.local()
-        self._req = fcl.CollisionRequest()
         self._n_bodies = len(self.names)
-        self._capsule = [s.kind == "capsule" for s in self.bodies.shapes]
-        self._link_mask = np.array([n in ("link_ab", "link_cd", "link_ef") for n in self.names])
-        self._fcl_queries = 0
-        # Fine cover (cabin bounds): radii and the first sphere of each body, for per-body minima. With a
-        # cabin the carriage's bound comes from its exact clearance table, so it needs no spheres.
-        self._carriage = self.names.index("carriage")
-        fine_centres = list(self.bodies.sphere_centres)
-        fine_radii = list(self.bodies.sphere_radii)
-        if cabin is not None:
-            fine_centres[self._carriage] = np.zeros((0, 3))
-            fine_radii[self._carriage] = np.zeros(0)
-        fine_counts = [len(r) for r in fine_radii]
-        self._fine_r = np.concatenate(fine_radii)
-        self._fine_start = np.concatenate([[0], np.cumsum(fine_counts)[:-1]]).astype(int)
-        self._fine_empty = np.array([n == 0 for n in fine_counts])
-        # Coarse cover (self bounds): every sphere pair of every checked body pair, grouped by body pair.
-        counts = [len(r) for r in self.bodies.coarse_radii]
-        self._sph_r = np.concatenate(self.bodies.coarse_radii)
-        self._sph_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
-        self._pair_a = np.array([a for a, _ in self.bodies.pairs], dtype=int)
-        self._pair_b = np.array([b for _, b in self.bodies.pairs], dtype=int)
-        ia, ib = [], []
-        for a, b in self.bodies.pairs:
-            ga, gb = np.meshgrid(
-                np.arange(self._sph_start[a], self._sph_start[a] + counts[a]),
-                np.arange(self._sph_start[b], self._sph_start[b] + counts[b]),
-                indexing="ij",
-            )
-            ia.append(ga.ravel())
-            ib.append(gb.ravel())
-        sizes = [len(x) for x in ia]
-        bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
-        self._pair_ia = np.concatenate(ia) if ia else np.zeros(0, dtype=int)
-        self._pair_ib = np.concatenate(ib) if ib else np.zeros(0, dtype=int)
-        self._pair_rsum = self._sph_r[self._pair_ia] + self._sph_r[self._pair_ib]
-        self._pair_sph = [np.arange(bounds[k], bounds[k + 1]) for k in range(len(self.bodies.pairs))]
+        self._grid: ClearanceGrid | None = None
         self._carriage_table: tuple[float, float, Array] | None = None
-        if self._cabin_obj is not None:
-            # The table depends on the cabin's geometry (the vertices as loaded, in the base frame: the file
-            # hash alone would not tell units apart), the carriage's shape and the rail: built once.
-            table_key = (
-                key[0] + hashlib.sha256(key[1] + key[2]).hexdigest(),
-                repr(self.bodies.shapes[self._carriage]),
-                robot.limits.lower[0],
-                robot.limits.upper[0],
-            )
-            table = _CARRIAGE_TABLES.get(table_key)
-            if table is None:
-                if len(_CARRIAGE_TABLES) >= 64:
-                    _CARRIAGE_TABLES.clear()
-                table = _CARRIAGE_TABLES[table_key] = self._build_carriage_table()
-            self._carriage_table = table
-        # Flat views and bounds for the compiled kernels.
-        self._fine_bounds = np.concatenate([self._fine_start, [len(self._fine_r)]]).astype(np.int64)
-        self._coarse_bounds = np.concatenate([self._sph_start, [len(self._sph_r)]]).astype(np.int64)
-        self._grid_flat = self._grid.lower_bound.reshape(-1) if self._grid is not None else np.zeros(1)
-        self._grid_shape = np.array(self._grid.lower_bound.shape if self._grid is not None else (1, 1, 1))
-        self._fine_cover = _cover_table(self.bodies.shapes, tuple(fine_centres))
-        self._coarse_cover = _cover_table(self.bodies.shapes, self.bodies.coarse_centres)
-        self._radius = np.array([s.radius for s in self.bodies.shapes])
-        self._capsule_pair = np.array(
-            [
-                self.bodies.shapes[a].kind == "capsule" and self.bodies.shapes[b].kind == "capsule"
-                for a, b in self.bodies.pairs
-            ],
-            dtype=np.bool_,
+        key = cabin_key(cabin) if cabin is not None else None
+        self._probes = Probes(self.bodies, cabin_bvh(*key) if key is not None else None)
+        if key is not None:
+            self._grid = _cabin_grid(*key, grid_step_m)
+            self._carriage_table = self._carriage_table_of(key)
+        self._kernel = buffers.build(robot, self.bodies, self._T_tool_box, self._grid, self._carriage_table)
+        self._motion = CertifiedMotion(robot, self.bodies, self._kernel, self._probes)
+        #: Fine-cover sphere radii (S,), grouped by body (the spheres of :meth:`cover_centres`).
+        self._fine_r = self._kernel.fine.radii
+
+    def _carriage_table_of(self, key: tuple[str, bytes, bytes]) -> tuple[float, float, Array]:
+        """The carriage's clearance table along the rail, built once per cabin, carriage shape and rail.
+
+        It depends on the cabin's geometry (the vertices as loaded, in the base frame: the file hash alone
+        would not tell units apart), the carriage's shape and the rail.
+        """
+        carriage = self.names.index("carriage")
+        lo, hi = float(self.robot.limits.lower[0]), float(self.robot.limits.upper[0])
+        table_key = (
+            key[0] + hashlib.sha256(key[1] + key[2]).hexdigest(),
+            repr(self.bodies.shapes[carriage]),
+            self.robot.limits.lower[0],
+            self.robot.limits.upper[0],
         )
-        shapes = self.bodies.shapes
-        self._half = np.array([np.array(s.size) / 2 if s.kind == "box" else np.zeros(3) for s in shapes])
-        self._capsule_box = np.array(
-            [
-                1
-                if shapes[a].kind == "capsule" and shapes[b].kind == "box"
-                else 2
-                if shapes[a].kind == "box" and shapes[b].kind == "capsule"
-                else 0
-                for a, b in self.bodies.pairs
-            ],
-            dtype=np.int64,
-        )
-        self._exact_pair = self._capsule_pair | (self._capsule_box > 0)
-        self._c_lo = robot.c_lower - 1e-9
-        self._c_hi = robot.c_upper + 1e-9
-        g = self._grid
-        self._kernel_args = (
-            *self._fine_cover,
-            self._fine_r,
-            self._fine_bounds,
-            self._grid_flat,
-            g.origin if g is not None else np.zeros(3),
-            1.0 / g.step if g is not None else 1.0,
-            self._grid_shape,
-            g is not None,
-            *self._coarse_cover,
-            self._sph_r,
-            self._coarse_bounds,
-            self._pair_a,
-            self._pair_b,
-            self._radius,
-            self._capsule_pair,
-            self._half,
-            self._capsule_box,
-            self._carriage,
-            *(
-                (self._carriage_table[2], self._carriage_table[0], self._carriage_table[1])
-                if self._carriage_table is not None
-                else (np.zeros(0), 0.0, 1.0)
-            ),
-        )
-        # Closed-form poses in the kernel (the CasADi pose function stays the reference, :meth:`poses`).
-        if len(robot.c_lower) != kernels.N_CONSTRAINTS:
-            raise InvalidInput(
-                f"robot: {len(robot.c_lower)} admissibility values, the collision kernels expect "
-                f"{kernels.N_CONSTRAINTS}",
-                field="robot",
-            )
-        links = robot.desc.serial_chain
-        mdh = np.array(
-            [
-                [link.alpha, link.a, link.theta, link.d, float(j), 1.0 if revolute else 0.0]
-                for link, (j, revolute) in zip(links, chain.LINK_VARIABLES, strict=True)
-            ]
-        )
-        geo = robot.geometry
-        table = self._carriage_table
-        self._fbuf, self._ibuf = kernels.pack(
-            np.ascontiguousarray(self._T_tool_box, dtype=float),
-            mdh,
-            np.array([geo.L1, geo.L2, geo.L3, geo.L4]),
-            np.array([kernels.KIND_CODES[n] for n in self.names], dtype=np.int64),
-            (*self._fine_cover, self._fine_r, self._fine_bounds),
-            g.origin if g is not None else np.zeros(3),
-            1.0 / g.step if g is not None else 1.0,
-            self._grid_shape,
-            g is not None,
-            (*self._coarse_cover, self._sph_r, self._coarse_bounds),
-            self._pair_a,
-            self._pair_b,
-            self._radius,
-            self._capsule_pair,
-            self._half,
-            self._capsule_box,
-            self._carriage,
-            table[2] if table is not None else np.zeros(0),
-            table[0] if table is not None else 0.0,
-            table[1] if table is not None else 1.0,
-            self._c_lo,
-            self._c_hi,
-        )
-        self._grid_flat = np.ascontiguousarray(self._grid_flat, dtype=float)
-        self._upper_slack = g.upper_slack if g is not None else -1.0
-        # Motion walks: probe for more than the bounds prove only where they prove nothing (states cost
-        # ~2 us, an FCL probe 10-50 us); the reference route keeps the original always-probe policy.
-        self.probe_when_proven = self.reference
+        table = _CARRIAGE_TABLES.get(table_key)
+        if table is None:
+            if len(_CARRIAGE_TABLES) >= 64:
+                _CARRIAGE_TABLES.clear()
+            table = _CARRIAGE_TABLES[table_key] = self._probes.carriage_table(carriage, lo, hi)
+        return table
 
     # ------------------------------------------------------------------ poses
     def _evaluate(self, q: Array) -> tuple[Array, Array]:
@@ -465,130 +160,29 @@ class CollisionWorld:
         n = q2.shape[0]
         if n == 1:
             flat, c = (x[None, :] for x in self._pose_fast(q2[0], self._T_tool_box))
-        elif not self.reference:  # the closed-form kernel, ~100x faster than CasADi's batch call
-            poses, c = np.empty((n, self._n_bodies, 13)), np.empty((n, kernels.N_CONSTRAINTS))
-            kernels.packed_poses(np.ascontiguousarray(q2), self._fbuf, self._ibuf, poses, c)
-            return poses, c
-        else:
-            # CasADi evaluates a function column-wise when given N stacked columns.
-            outs = self._pose_fn(ca.DM(q2.T), ca.DM(self._T_tool_box))
-            flat, c = (np.asarray(o.full(), dtype=float).T for o in outs)
-        return np.ascontiguousarray(flat.reshape(n, self._n_bodies, 13)), c
-
-    def _split(self, flat: Array) -> tuple[Array, Array, Array]:
-        n = flat.shape[0]
-        R = flat[:, :, :9].reshape(n, self._n_bodies, 3, 3).transpose(0, 1, 3, 2)
-        return R, flat[:, :, 9:12], flat[:, :, 12]
+            return np.ascontiguousarray(flat.reshape(n, self._n_bodies, 13)), c
+        # The closed-form kernel, ~100x faster than CasADi's batch call.
+        poses, c = np.empty((n, self._n_bodies, 13)), np.empty((n, N_CONSTRAINTS))
+        state.packed_poses(np.ascontiguousarray(q2), self._kernel.fbuf, self._kernel.ibuf, poses, c)
+        return poses, c
 
     def cover_centres(self, q: Array, coarse: bool = False) -> Array:
         """World centres (N, S, 3) of the fine (cabin) or coarse (self) sphere cover, grouped by body."""
         flat, _ = self._evaluate(q)
-        cover = self._coarse_cover if coarse else self._fine_cover
-        return kernels.cover_centres_batch(flat, *cover)
+        cover = self._kernel.coarse if coarse else self._kernel.fine
+        return cover_centres_batch(flat, *cover.table)
 
     def poses(self, q: Array) -> tuple[Array, Array, Array]:
         """(R (N, B, 3, 3), p (N, B, 3), lengths (N, B)) of every body for (N, 8) or (8,) joints.
 
         Each body frame is centred on the body; a capsule's axis is its frame's z axis.
         """
-        return self._split(self._evaluate(q)[0])
-
-    def cabin_lower_bounds(self, fine_centres: Array, d1: Array) -> Array:
-        """(N, B) certified lower bound of each body's distance to the cabin (inf without a cabin).
-
-        From the fine sphere cover and the clearance grid; for the carriage, which moves with d1 only, also
-        from its exact clearance table along the rail (whichever bound is larger).
-        """
-        n = fine_centres.shape[0]
-        if self._grid is None:
-            return np.full((n, self._n_bodies), np.inf)
-        lb = self._grid.query(fine_centres) - self._fine_r[None, :]
-        out = np.minimum.reduceat(lb, np.minimum(self._fine_start, lb.shape[1] - 1), axis=1)
-        out[:, self._fine_empty] = np.inf  # reduceat returns an element for an empty group
-        if self._carriage_table is not None:
-            z0, dz, table = self._carriage_table
-            k = np.clip(np.rint((d1 - z0) / dz).astype(int), 0, len(table) - 1)
-            exact = table[k] - np.abs(d1 - (z0 + k * dz))
-            current = out[:, self._carriage]
-            out[:, self._carriage] = np.where(np.isinf(current), exact, np.maximum(current, exact))
-        return out
-
-    def pair_lower_bounds(self, centres: Array, threshold: float) -> Array:
-        """(N, P) certified lower bound of the distance between the bodies of each checked pair.
-
-        First the separation of the bodies' boxes (from their coarse sphere covers) along the axes; where
-        that is not above ``threshold`` for some state, also the sphere-cover gap (the larger bound counts).
-        """
-        n = centres.shape[0]
-        if len(self._pair_a) == 0:
-            return np.full((n, 0), np.inf)
-        r = self._sph_r[None, :, None]
-        lo = np.minimum.reduceat(centres - r, self._sph_start, axis=1)
-        hi = np.maximum.reduceat(centres + r, self._sph_start, axis=1)
-        sep = np.maximum(lo[:, self._pair_b] - hi[:, self._pair_a], lo[:, self._pair_a] - hi[:, self._pair_b])
-        out = np.max(sep, axis=2)
-        close = np.flatnonzero(np.any(out <= threshold, axis=0))
-        if close.size:
-            idx = np.concatenate([self._pair_sph[k] for k in close])
-            starts = np.concatenate([[0], np.cumsum([len(self._pair_sph[k]) for k in close])[:-1]])
-            ia, ib = self._pair_ia[idx], self._pair_ib[idx]
-            gap = np.linalg.norm(centres[:, ia] - centres[:, ib], axis=2) - self._pair_rsum[idx][None, :]
-            out[:, close] = np.maximum(out[:, close], np.minimum.reduceat(gap, starts, axis=1))
-        return out
-
-    # ------------------------------------------------------------------- FCL
-    def _geometry(self, b: int, margin: float, length: float) -> Any:
-        shape = self.bodies.shapes[b]
-        key = (b, margin, round(length, 9) if shape.kind == "capsule" else 0.0)
-        geom = self._geoms.get(key)
-        if geom is None:
-            if len(self._geoms) > 4096:
-                self._geoms.clear()
-            geom = _fcl_geometry(shape, margin, length)
-            self._geoms[key] = geom
-        return geom
-
-    def _object(self, b: int, R: Array, p: Array, length: float, margin: float) -> fcl.CollisionObject:
-        """A posed FCL object of body b grown by ``margin``; objects are reused (per thread), only moved."""
-        key = (b, margin, round(length, 9) if self._capsule[b] else 0.0)
-        try:
-            objects: dict[tuple[int, float, float], fcl.CollisionObject] = self._local.objects
-        except AttributeError:
-            objects = self._local.objects = {}
-        obj = objects.get(key)
-        if obj is None:
-            if len(objects) > 4096:
-                objects.clear()
-            obj = objects[key] = fcl.CollisionObject(self._geometry(b, margin, length), fcl.Transform(R, p))
-        else:
-            obj.setRotation(R)
-            obj.setTranslation(p)
-        return obj
-
-    def _collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject) -> bool:
-        self._fcl_queries += 1
-        try:  # one result object per thread, emptied for each query (a new one costs more than the query)
-            res: fcl.CollisionResult = self._local.result
-        except AttributeError:
-            res = self._local.result = fcl.CollisionResult()
-        res.is_collision = False
-        res.contacts.clear()
-        res.cost_sources.clear()
-        return bool(fcl.collide(o1, o2, self._req, res) > 0)
+        flat = self._evaluate(q)[0]
+        n = flat.shape[0]
+        R = flat[:, :, :9].reshape(n, self._n_bodies, 3, 3).transpose(0, 1, 3, 2)
+        return R, flat[:, :, 9:12], flat[:, :, 12]
 
     # --------------------------------------------------------------- checks
-    def _limit_contacts(self, q: Array) -> list[Contact]:
-        return [
-            Contact(
-                "limit",
-                (v["name"],),
-                f"{v['name']}={v['value']:.6g} outside [{v['lower']:.6g}, {v['upper']:.6g}]"
-                if isinstance(v["value"], float)
-                else "non-finite configuration",
-            )
-            for v in self.robot.violations(q)
-        ]
-
     def check_state(
         self, q: Array, clearance: float = DEFAULT_CLEARANCE_M, all_contacts: bool = False
     ) -> StateReport:
@@ -602,34 +196,32 @@ class CollisionWorld:
         """
         _check_clearance(clearance)
         q = _joints(q)
-        if self.reference:
-            if not np.all(np.isfinite(q)):
-                return StateReport(False, tuple(self._limit_contacts(q)))
-            state = self._state(q, self.self_clearance)
-        else:
-            code, flat, cabin, pairs = kernels.packed_check(
-                q, self._fbuf, self._ibuf, self._grid_flat, clearance, self.self_clearance, -1.0
-            )
-            if code == kernels.CLEAR:  # the bounds prove everything: no FCL query
-                return _VALID
-            if code == kernels.NOT_FINITE:
-                return StateReport(False, tuple(self._limit_contacts(q)))
-            state = _State(flat, cabin, pairs, code != kernels.INADMISSIBLE)
-        contacts = [] if state.admissible else self._limit_contacts(q)
+        screened = self._screen(q, clearance)
+        if isinstance(screened, StateReport):
+            return screened
+        contacts = [] if screened.admissible else limit_contacts(self.robot, q)
         if contacts and not all_contacts:
             return StateReport(False, tuple(contacts))
-        for b in np.flatnonzero(state.cabin_lb <= clearance).tolist():
-            if self._cabin_hit(state, b, clearance):
-                contacts.append(self._cabin_contact(b, clearance))
-                if not all_contacts:
-                    break
-        else:
-            for k in np.flatnonzero(state.pair_lb <= self.self_clearance).tolist():
-                if self._pair_hit(state, k, self.self_clearance):
-                    contacts.append(self._pair_contact(k, self.self_clearance))
-                    if not all_contacts:
-                        break
+        own = self.self_clearance
+        for is_cabin, bound, margin in ((True, screened.cabin_lb, clearance), (False, screened.pair_lb, own)):
+            for idx in np.flatnonzero(bound <= margin).tolist():
+                if self._probes.hit(screened, is_cabin, idx, margin):
+                    contacts.append(body_contact(self.names, self.bodies.pairs, is_cabin, idx, margin))
+                    if not all_contacts:  # the first contact found (cabin before self) is the report
+                        return StateReport(False, tuple(contacts))
         return StateReport(not contacts, tuple(contacts))
+
+    def _screen(self, q: Array, clearance: float) -> StateReport | BodyState:
+        """The compiled part of :meth:`check_state`: a final report, or the state for the FCL probes."""
+        d = self._kernel
+        code, flat, cabin, pairs = state.packed_check(
+            q, d.fbuf, d.ibuf, d.grid, clearance, self.self_clearance, -1.0
+        )
+        if code == state.CLEAR:  # the bounds prove everything: no FCL query
+            return VALID
+        if code == state.NOT_FINITE:
+            return StateReport(False, tuple(limit_contacts(self.robot, q)))
+        return BodyState(flat, cabin, pairs, code != state.INADMISSIBLE)
 
     def is_valid(self, q: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
         """True when limits, margins, cabin clearance and self-clearance all hold at q.
@@ -637,131 +229,32 @@ class CollisionWorld:
         The verdict of :meth:`check_state`, without building a report: one kernel call, then FCL queries
         only for what the bounds cannot prove clear.
         """
-        if self.reference:
-            return self.check_state(q, clearance).valid
         _check_clearance(clearance)
         q = _joints(q)
         own = self.self_clearance
-        code, flat, cabin, pairs = kernels.packed_check(
-            q, self._fbuf, self._ibuf, self._grid_flat, clearance, own, self._upper_slack
+        d = self._kernel
+        code, flat, cabin, pairs = state.packed_check(
+            q, d.fbuf, d.ibuf, d.grid, clearance, own, d.upper_slack
         )
-        if code != kernels.UNDECIDED:
-            return code == kernels.CLEAR  # a certain contact is as invalid as an FCL-found one
-        st = _State(flat, cabin, pairs, True)
+        if code != state.UNDECIDED:
+            return code == state.CLEAR  # a certain contact is as invalid as an FCL-found one
+        st = BodyState(flat, cabin, pairs, True)
         for b, lb in enumerate(cabin.tolist()):
-            if lb <= clearance and self._cabin_hit(st, b, clearance):
+            if lb <= clearance and self._probes.cabin_hit(st, b, clearance):
                 return False
         for k, lb in enumerate(pairs.tolist()):
-            if lb <= own and self._pair_hit(st, k, own):
+            if lb <= own and self._probes.pair_hit(st, k, own):
                 return False
         return True
 
-    def _states(self, qs: Array, threshold: float) -> list[_State]:
-        """Poses and certified bounds for (N, 8) configurations."""
-        qs = np.array(np.atleast_2d(qs), dtype=float)  # a writeable, contiguous copy
-        return [self._state(q, threshold) for q in qs]
-
-    def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> _State:
+    def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
         """Poses and certified bounds at one configuration (8,), contiguous float64: one kernel call.
 
         ``threshold``: pairs whose bound is not above it get their exact distance where one is known.
         """
-        if self.reference:
-            return self._state_reference(q, threshold)
-        flat, cabin, pairs, ok = kernels.packed_state(q, self._fbuf, self._ibuf, self._grid_flat, threshold)
-        return _State(flat, cabin, pairs, ok)
-
-    def _state_reference(self, q: Array, threshold: float) -> _State:
-        """:meth:`_state` by the reference route: CasADi pose function, then the bound kernel."""
-        slot = self._pose_fast._slot()  # shared by every world of this model: the payload box each time
-        slot.args[1][:] = self._T_tool_box.ravel(order="F")
-        slot.args[0][:] = q
-        slot.trigger()
-        flat = slot.res[0].reshape(self._n_bodies, 13).copy()
-        cabin, pairs, ok = kernels.state_bounds(
-            flat, *self._kernel_args, slot.res[1].copy(), self._c_lo, self._c_hi, threshold
-        )
-        return _State(flat, cabin, pairs, ok)
-
-    def _carriage_clearance(self, d1_a: float, d1_b: float) -> float:
-        """Certified carriage-to-cabin clearance for every d1 between d1_a and d1_b (table minimum)."""
-        assert self._carriage_table is not None
-        z0, dz, table = self._carriage_table
-        lo, hi = sorted((d1_a, d1_b))
-        k0 = int(np.clip(np.floor((lo - z0) / dz), 0, len(table) - 1))
-        k1 = int(np.clip(np.ceil((hi - z0) / dz), 0, len(table) - 1))
-        if lo < z0 or hi > z0 + dz * (len(table) - 1):
-            return -np.inf
-        # Every d1 in [lo, hi] is within dz/2 of a sample in k0..k1; the distance is 1-Lipschitz in d1.
-        return float(table[k0 : k1 + 1].min()) - 0.5 * dz
-
-    def _build_carriage_table(self, step: float = 0.01) -> tuple[float, float, Array]:
-        """Exact carriage-to-cabin distance every ``step`` along the rail (the carriage moves with d1 only).
-
-        Between samples the distance changes by at most the rail displacement (it is 1-Lipschitz in d1),
-        which the lookup subtracts.
-        """
-        assert self._cabin_obj is not None
-        lo, hi = float(self.robot.limits.lower[0]), float(self.robot.limits.upper[0])
-        z = np.arange(lo, hi + step, step)
-        b = self._carriage
-        geom = self._geometry(b, 0.0, 0.0)
-        req = fcl.DistanceRequest()
-        table = np.array(
-            [
-                fcl.distance(
-                    fcl.CollisionObject(geom, fcl.Transform(np.array([0.0, -0.06, zi]))),
-                    self._cabin_obj,
-                    req,
-                    fcl.DistanceResult(),
-                )
-                for zi in z
-            ]
-        )
-        return lo, step, np.where(table < 0, -np.inf, table)
-
-    def _cabin_hit(self, st: _State, b: int, margin: float) -> bool:
-        assert self._cabin_obj is not None
-        return self._collide(self._object(b, st.R(b), st.p(b), st.length(b), margin), self._cabin_obj)
-
-    def _pair_hit(self, st: _State, k: int, margin: float) -> bool:
-        a, b = self.bodies.pairs[k]
-        oa = self._object(a, st.R(a), st.p(a), st.length(a), margin / 2)
-        ob = self._object(b, st.R(b), st.p(b), st.length(b), margin / 2)
-        return self._collide(oa, ob)
-
-    def _exact_spare(self, st: _State, kind_cabin: bool, idx: int, base: float) -> float:
-        """Exact distance beyond ``base`` of body ``idx`` to the cabin (or of pair ``idx``), by FCL distance.
-
-        A grown box is a larger box: near its edges and corners it overstates the clearance it tests by up
-        to (sqrt 3 - 1) times the growth, so a state whose grown bodies all hit may still be clear by the
-        margin. The certified walk asks this exact query (milliseconds against a mesh) only there.
-        """
-        req = fcl.DistanceRequest()
-        res = fcl.DistanceResult()
-        self._fcl_queries += 1
-        if kind_cabin:
-            assert self._cabin_obj is not None
-            body = self._object(idx, st.R(idx), st.p(idx), st.length(idx), 0.0)
-            return float(fcl.distance(self._cabin_obj, body, req, res)) - base
-        a, b = self.bodies.pairs[idx]
-        if self.bodies.shapes[a].kind == "box" and self.bodies.shapes[b].kind == "box":
-            first = fcl.CollisionObject(_box_bvh(self.bodies.shapes[b].size), fcl.Transform(st.R(b), st.p(b)))
-        else:
-            first = self._object(b, st.R(b), st.p(b), st.length(b), 0.0)
-        second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
-        return float(fcl.distance(first, second, req, res)) - base
-
-    def _cabin_contact(self, b: int, margin: float) -> Contact:
-        return Contact("cabin", (self.names[b],), f"{self.names[b]} within {margin:.4g} m of the cabin")
-
-    def _pair_contact(self, k: int, margin: float) -> Contact:
-        a, b = self.bodies.pairs[k]
-        return Contact(
-            "self",
-            (self.names[a], self.names[b]),
-            f"{self.names[a]} within {margin:.4g} m of {self.names[b]}",
-        )
+        d = self._kernel
+        flat, cabin, pairs, ok = state.packed_state(q, d.fbuf, d.ibuf, d.grid, threshold)
+        return BodyState(flat, cabin, pairs, ok)
 
     def check_motion(
         self,
@@ -784,7 +277,7 @@ class CollisionWorld:
         last time (longer steps); with ``probe_when_proven`` (the reference route's setting) also where
         it does -- by default not, as a state costs a few microseconds and an FCL probe tens. Limits and
         margins (smooth functions of q) are checked at every joint step of at most ``LIMIT_STEP``
-        (5 mm / 5 mrad) along the segment.
+        (5 mm / 5 mrad) along the segment. The walk itself is :mod:`planner.collision.motion`.
 
         ``self_clearance`` overrides the world's self-clearance for this check and ``reach_ratio`` raises
         the link-height ratio the reach bounds assume (both used by :meth:`check_path`).
@@ -796,211 +289,13 @@ class CollisionWorld:
                 f"motion_margin: must be in [{MIN_MOTION_MARGIN_M}, 0.1] m, got {motion_margin}",
                 field="motion_margin",
             )
-        q_a, q_b = _joints(q_a), _joints(q_b)
-        dq = q_b - q_a
-        if not self.reference:
-            return self._check_motion_compiled(q_a, q_b, dq, clearance, motion_margin, own, reach_ratio)
-        rho, pair_rho = self._segment_reach(q_a, q_b, reach_ratio)
-        reach = rho @ np.abs(dq)
-        n_fine = int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
-        t_fine = np.linspace(0.0, 1.0, n_fine + 1)
-        qs = q_a[None, :] + t_fine[:, None] * dq[None, :]
-        bad = ~self.robot.admissible_batch(qs)
-        if bad.any():
-            i = int(np.argmax(bad))
-            return MotionReport(False, n_fine + 1, 0, float(t_fine[i]), tuple(self._limit_contacts(qs[i])))
-        before = self._fcl_queries
-        levels = (4 * motion_margin, 2 * motion_margin, motion_margin)
-        tasks: list[tuple[str, int, float]] = []
-        if self._cabin_obj is not None:
-            tasks += [("cabin", b, float(reach[b])) for b in range(self._n_bodies)]
-        pair_reach = pair_rho @ np.abs(dq)
-        tasks += [("self", k, float(pair_reach[k])) for k in range(len(self.bodies.pairs))]
-        # One schedule for all: spacing such that no body or pair moves more than motion_margin between
-        # neighbouring states; each task's next check is snapped down onto it (a shorter step stays
-        # certified).
-        d_max = max((d for _, _, d in tasks), default=0.0)
-        # Not capped: one schedule step must never exceed a proven step (at least 2 motion_margin of motion).
-        n = int(max(1, np.ceil(d_max / motion_margin)))
+        return self._walk(_joints(q_a), _joints(q_b), clearance, motion_margin, own, reach_ratio)
 
-        def t_of(i: int) -> float:
-            return i / n
-
-        cache: dict[int, _State] = {}
-
-        def state(i: int) -> _State:  # evaluated lazily: the walks visit few of the n + 1 states
-            st = cache.get(i)
-            if st is None:
-                # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
-                st = cache[i] = self._state(q_a + t_of(i) * dq, own + 0.06)
-            return st
-
-        # Both end states: a task whose spare clearance at the two ends covers the segment from both sides
-        # (free_0 / D + free_1 / D >= 1) needs nothing in between.
-        s0, s1 = state(0), state(n)
-        for kind, idx, D in tasks:
-            base = clearance if kind == "cabin" else own
-            f0 = (s0.cabin_lb[idx] if kind == "cabin" else s0.pair_lb[idx]) - base
-            f1 = (s1.cabin_lb[idx] if kind == "cabin" else s1.pair_lb[idx]) - base
-            if f0 >= motion_margin and f1 >= motion_margin and f0 + f1 >= D:
-                continue
-            if kind == "cabin" and idx == self._carriage and self._carriage_table is not None:
-                # The carriage moves with d1 only: its exact clearance table covers the whole segment.
-                if self._carriage_clearance(q_a[chain.D1], q_b[chain.D1]) > clearance:
-                    continue
-            t_stop = 1.0 - f1 / D if f1 >= motion_margin and D > 0.0 else 1.0
-            i, last = 0, motion_margin
-            while True:
-                st = state(i)
-                free = (st.cabin_lb[idx] if kind == "cabin" else st.pair_lb[idx]) - base
-                E = free if free >= motion_margin else 0.0
-                # Probe for more spare clearance than the bound proves (twice what held last time), then fall
-                # back level by level; where the bound proves a margin, only with ``probe_when_proven``.
-                exact = kind == "self" and bool(self._exact_pair[idx])  # E is the exact spare clearance
-                optimistic = D > 0.0 and not exact and (E == 0.0 or self.probe_when_proven)
-                probes = [min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))] if optimistic else []
-                probes += [lv for lv in levels if E == 0.0 and not exact]
-                for level in probes:
-                    if level <= E:
-                        continue
-                    hit = (
-                        self._cabin_hit(st, idx, base + level)
-                        if kind == "cabin"
-                        else self._pair_hit(st, idx, base + level)
-                    )
-                    if not hit:
-                        E = level
-                        break
-                if E == 0.0 and not exact:  # every grown body hit: the exact distance decides
-                    spare = self._exact_spare(st, kind == "cabin", idx, base)
-                    E = spare if spare >= motion_margin else 0.0
-                last = max(E, motion_margin)
-                if E == 0.0:
-                    contact = (
-                        self._cabin_contact(idx, base + motion_margin)
-                        if kind == "cabin"
-                        else self._pair_contact(idx, base + motion_margin)
-                    )
-                    return MotionReport(False, len(cache), self._fcl_queries - before, t_of(i), (contact,))
-                # Done when the proven interval reaches the end state's own certified interval.
-                if i == n or D <= 0.0 or t_of(i) + E / D >= t_stop:
-                    break
-                i = min(n, max(i + 1, int(np.floor((t_of(i) + (E + motion_margin) / D) * n + 1e-9))))
-        return MotionReport(True, len(cache), self._fcl_queries - before)
-
-    def _check_motion_compiled(
-        self,
-        q_a: Array,
-        q_b: Array,
-        dq: Array,
-        clearance: float,
-        motion_margin: float,
-        own: float,
-        ratio: float | None,
+    def _walk(
+        self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
     ) -> MotionReport:
-        """:meth:`check_motion` through the compiled kernels: the same samples, bounds and walk.
-
-        Limits at the same samples, the same reach bounds (:meth:`_segment_reach`), then
-        :func:`~planner.collision.kernels.motion_walk`, which evaluates states lazily in compiled code and
-        returns here only when a task needs FCL probes on a grown body.
-        """
-        adq = np.abs(dq)
-        n_fine = int(min(10_000, max(1, np.ceil(float(adq.max()) / LIMIT_STEP))))
-        bad = kernels.first_inadmissible(q_a, dq, n_fine, self._fbuf, self._ibuf)
-        if bad >= 0:
-            t = bad * (1.0 / n_fine) if bad < n_fine else 1.0  # numpy.linspace's samples
-            return MotionReport(False, n_fine + 1, 0, t, tuple(self._limit_contacts(q_a + t * dq)))
-        g = self.robot.geometry
-        end = kernels.end_ratio(q_a, q_b, self._fbuf)
-        dev = 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
-        if ratio is not None:
-            end = max(end, ratio)
-        reach, pair_reach = kernels.segment_reach(
-            self.bodies.rho,
-            self._link_mask,
-            link_slope_bound(end + dev),
-            0.5 * g.L2,
-            self._pair_a,
-            self._pair_b,
-            self.bodies.pair_rigid,
-            adq,
-        )
-        has_cabin = self._cabin_obj is not None
-        d_max = max([*(reach.tolist() if has_cabin else []), *pair_reach.tolist()], default=0.0)
-        n = int(max(1, np.ceil(d_max / motion_margin)))
-        cap = min(n + 1, 32)
-        slot_of = np.full(n + 1, -1, dtype=np.int64)
-        poses = np.empty((cap, self._n_bodies, 13))
-        cabin = np.empty((cap, self._n_bodies))
-        pairs = np.empty((cap, len(self._pair_a)))
-        ci = np.zeros(kernels.CI_SIZE, dtype=np.int64)
-        cf = np.zeros(kernels.CF_SIZE)
-        ci[kernels.CI_N], ci[kernels.CI_CABIN] = n, has_cabin
-        cf[kernels.CF_CLEARANCE], cf[kernels.CF_OWN], cf[kernels.CF_MARGIN] = clearance, own, motion_margin
-        # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
-        cf[kernels.CF_THRESHOLD] = own + 0.06
-        cf[kernels.CF_PROBE_PROVEN] = self.probe_when_proven
-        n_cabin = self._n_bodies if has_cabin else 0
-        before = self._fcl_queries
-        while True:
-            code = kernels.motion_walk(
-                ci, cf, q_a, q_b, dq, reach, pair_reach, self._fbuf, self._ibuf, self._grid_flat,
-                slot_of, poses, cabin, pairs,
-            )  # fmt: skip
-            task = int(ci[kernels.CI_TASK])
-            is_cabin = task < n_cabin
-            idx = task if is_cabin else task - n_cabin
-            base = clearance if is_cabin else own
-            if code == kernels.WALK_DONE:
-                return MotionReport(True, int(ci[kernels.CI_COUNT]), self._fcl_queries - before)
-            if code == kernels.WALK_GROW:
-                grow = poses.shape[0]
-                poses = np.concatenate([poses, np.empty_like(poses[:grow])])
-                cabin = np.concatenate([cabin, np.empty_like(cabin[:grow])])
-                pairs = np.concatenate([pairs, np.empty_like(pairs[:grow])])
-            elif code == kernels.WALK_FAIL:
-                contact = (
-                    self._cabin_contact(idx, base + motion_margin)
-                    if is_cabin
-                    else self._pair_contact(idx, base + motion_margin)
-                )
-                states = int(ci[kernels.CI_COUNT])
-                t_fail = float(cf[kernels.CF_TFAIL])
-                return MotionReport(False, states, self._fcl_queries - before, t_fail, (contact,))
-            else:  # WALK_PROBE: the first level at which the grown body is clear becomes the spare clearance
-                slot = int(ci[kernels.CI_SLOT])
-                st = _State(poses[slot], cabin[slot], pairs[slot])
-                first = kernels.CF_LEVEL0
-                levels = cf[first : first + int(ci[kernels.CI_LEVELS])].tolist()
-                for level in levels:
-                    hit = (
-                        self._cabin_hit(st, idx, base + level)
-                        if is_cabin
-                        else self._pair_hit(st, idx, base + level)
-                    )
-                    if not hit:
-                        cf[kernels.CF_E] = level
-                        break
-                else:
-                    if levels and min(levels) <= motion_margin + 1e-12:  # the last resort: every level hit
-                        spare = self._exact_spare(st, is_cabin, idx, base)
-                        if spare >= motion_margin:
-                            cf[kernels.CF_E] = spare
-
-    def _segment_reach(self, q_a: Array, q_b: Array, ratio: float | None = None) -> tuple[Array, Array]:
-        """Reach bounds valid along the straight segment q_a -> q_b.
-
-        The link-height ratios y_B/L1, y_C/L3, y_E/L4 are affine in y and in sin(gamma); along the segment
-        they exceed the larger endpoint value by at most (L2/2) dgamma^2 / 8 over the shortest length
-        (the sine's deviation from its chord), which bounds the links' slopes.
-        """
-        c = self.robot.constraint_values_batch(np.stack([q_a, q_b]))
-        g = self.robot.geometry
-        end = float(np.nanmax(c[:, -3:])) if np.all(np.isfinite(c[:, -3:])) else 1.0
-        dev = 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
-        if ratio is not None:
-            end = max(end, ratio)
-        return segment_reach_bounds(self.robot, self.bodies, end + dev)
+        """The motion walk of :meth:`check_motion` on validated arguments."""
+        return self._motion.check(q_a, q_b, clearance, motion_margin, own, ratio, self.probe_when_proven)
 
     def check_path(
         self,
@@ -1037,7 +332,7 @@ class CollisionWorld:
         i, checks, cap = 0, 0, max_run
         while i < n - 1:
             # Both bodies of a self pair may move: the kernel doubles the reach-weighted deviation.
-            j, extra = kernels.run_extent(qs, i, min(n - 1, i + cap), rho_joint, float(max_extra_m))
+            j, extra = walk.run_extent(qs, i, min(n - 1, i + cap), rho_joint, float(max_extra_m))
             motion = self.check_motion(
                 qs[i],
                 qs[j],
@@ -1055,10 +350,6 @@ class CollisionWorld:
                 cap = max(1, (j - i) // 2)  # the run again in halves
         return PathReport(True, checks, n - 1, None, ())
 
-    def motion_valid(self, q_a: Array, q_b: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
-        """True when the straight motion q_a -> q_b is certified clear (see :meth:`check_motion`)."""
-        return self.check_motion(q_a, q_b, clearance).valid
-
     # ------------------------------------------------------------- distances
     def min_distance(self, q: Array, include_self: bool = True) -> Distance:
         """Smallest distance from any body to the cabin (and between non-adjacent bodies), with witnesses.
@@ -1067,58 +358,25 @@ class CollisionWorld:
         already exceeds the best distance found are skipped (branch and bound). Penetration gives <= 0.
         """
         st = self._state(_joints(q))
-        candidates: list[tuple[float, str, int]] = []
-        if self._cabin_obj is not None:
-            candidates += [(float(lb), "cabin", b) for b, lb in enumerate(st.cabin_lb)]
+        candidates: list[tuple[float, bool, int]] = []
+        if self._probes.cabin_obj is not None:
+            candidates += [(float(lb), True, b) for b, lb in enumerate(st.cabin_lb)]
         if include_self:
-            candidates += [(float(lb), "self", k) for k, lb in enumerate(st.pair_lb)]
+            candidates += [(float(lb), False, k) for k, lb in enumerate(st.pair_lb)]
         best = Distance(np.inf, ("", ""), np.full(3, np.nan), np.full(3, np.nan))
-        req = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
-        for lb, kind, idx in sorted(candidates, key=lambda x: x[0]):
+        for lb, is_cabin, idx in sorted(candidates, key=lambda x: x[0]):
             if lb >= best.distance_m:
                 break
-            # FCL returns the witness points of a shape-vs-mesh query in swapped order, and its box-box
-            # distance is wrong in degenerate (face-parallel) cases: so the first object is always a mesh
-            # (the cabin, or the first box of a box pair as a triangle mesh), whose point comes first.
-            if kind == "cabin":
-                a, other = idx, "cabin"
-                first = self._cabin_obj
-                second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
-            else:
-                a, b = self.bodies.pairs[idx]
-                other = self.names[b]
-                if self.bodies.shapes[a].kind == "box" and self.bodies.shapes[b].kind == "box":
-                    first = fcl.CollisionObject(
-                        _box_bvh(self.bodies.shapes[b].size), fcl.Transform(st.R(b), st.p(b))
-                    )
-                    second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
-                else:
-                    first = self._object(b, st.R(b), st.p(b), st.length(b), 0.0)
-                    second = self._object(a, st.R(a), st.p(a), st.length(a), 0.0)
-            res = fcl.DistanceResult()
-            d = float(fcl.distance(first, second, req, res))
+            d, a, other, p_body, p_other = self._probes.distance(st, is_cabin, idx)
             if d < best.distance_m:
-                p_other, p_body = res.nearest_points
-                best = Distance(d, (self.names[a], other), np.array(p_body), np.array(p_other))
+                best = Distance(
+                    d, (self.names[a], "cabin" if other < 0 else self.names[other]), p_body, p_other
+                )
         return best
 
     def clearance_profile(self, qs: Array, include_self: bool = True) -> Array:
         """Minimum distance [m] at each configuration of a path, shape (N,)."""
         return np.array([self.min_distance(q, include_self).distance_m for q in np.atleast_2d(qs)])
-
-
-def _cover_table(shapes: tuple[Shape, ...], centres: tuple[Array, ...]) -> tuple[Array, Array, Array]:
-    """(body index, local centre, capsule-length fraction) of every sphere of a cover, for the kernels."""
-    body, local, frac = [], [], []
-    for b, (shape, c) in enumerate(zip(shapes, centres, strict=True)):
-        body.append(np.full(len(c), b, dtype=np.int64))
-        if shape.kind == "capsule":
-            local.append(np.zeros_like(c))
-            frac.append(c[:, 2])
-        else:
-            local.append(c)
-            frac.append(np.zeros(len(c)))
-    return np.concatenate(body), np.ascontiguousarray(np.concatenate(local)), np.concatenate(frac)
 
 
 def _joints(q: Array) -> Array:

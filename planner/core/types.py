@@ -1,13 +1,18 @@
-"""Array aliases shared by every module (each docstring gives the shape, e.g. (N samples, dof))."""
+"""Array aliases shared by the whole planner: one name per element type.
+
+Shapes are written in each function's docstring ("(N, 8)", "(B, 13)"); the aliases only fix the dtype.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-#: A float64 array.
+#: Float64 arrays: joints [m or rad], positions [m], bounds [m].
 Array = NDArray[np.float64]
-#: An int64 array.
+#: Int64 arrays: indices and counts.
 IntArray = NDArray[np.int64]
-#: A boolean array.
+#: Boolean masks.
 BoolArray = NDArray[np.bool_]
+
+__all__ = ["Array", "BoolArray", "IntArray"]

@@ -9,9 +9,10 @@ import pytest
 import trimesh
 
 from planner.collision.bodies import PayloadGeometry
+from planner.collision.reference import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.kinematics.parallel import stage_points
-from planner.meshio.load import LoadedMesh, load_mesh
+from planner.meshio import LoadedMesh, load_mesh
 from planner.robots.cabin8 import Cabin8
 
 CLEARANCE_M = 0.01
@@ -187,6 +188,6 @@ def test_one_cabin_file_in_two_units_gets_two_carriage_tables(robot: Cabin8) -> 
     in_mm = CollisionWorld(robot, load_mesh(data, units="mm", name="cabin.stl"), None)
     assert in_m._carriage_table is not in_mm._carriage_table
     q = home(robot, d1=0.006)  # on the millimetre slab's carriage: a contact
-    reference = CollisionWorld(robot, load_mesh(data, units="mm", name="cabin.stl"), None, reference=True)
+    reference = ReferenceWorld(robot, load_mesh(data, units="mm", name="cabin.stl"), None)
     assert not reference.check_state(q, CLEARANCE_M).valid
     assert not in_mm.is_valid(q, CLEARANCE_M) and not in_mm.check_state(q, CLEARANCE_M).valid

@@ -12,11 +12,13 @@ import fcl
 import numpy as np
 import pytest
 
-from planner.collision import kernels
 from planner.collision.bodies import PayloadGeometry
+from planner.collision.kernels import bounds, buffers, state, walk
+from planner.collision.kernels.poses import N_CONSTRAINTS, body_poses
+from planner.collision.reference import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
-from planner.meshio.load import load_mesh
+from planner.meshio import load_mesh
 from planner.robots.cabin8 import Cabin8
 from tests.conftest import admissible_joints
 
@@ -32,9 +34,9 @@ def payload() -> PayloadGeometry:
 
 
 @pytest.fixture(scope="module")
-def worlds(robot: Cabin8, payload: PayloadGeometry) -> tuple[CollisionWorld, CollisionWorld]:
+def worlds(robot: Cabin8, payload: PayloadGeometry) -> tuple[CollisionWorld, ReferenceWorld]:
     mesh = load_mesh(MESHES / "cabin-cluttered.stl", units="m")
-    return CollisionWorld(robot, mesh, payload), CollisionWorld(robot, mesh, payload, reference=True)
+    return CollisionWorld(robot, mesh, payload), ReferenceWorld(robot, mesh, payload)
 
 
 def along_rail(robot: Cabin8, n: int, seed: int) -> np.ndarray:
@@ -48,11 +50,11 @@ def test_closed_form_poses_equal_the_casadi_model(robot: Cabin8, worlds: tuple[C
     world = worlds[0]
     qs = along_rail(robot, 200, seed=11)
     wild = qs + np.random.default_rng(12).normal(0.0, 0.3, qs.shape)  # inadmissible, some links unreachable
-    u = kernels._unpack(world._fbuf, world._ibuf)
+    u = buffers.unpack(world._kernel.fbuf, world._kernel.ibuf)
     for q in np.vstack([qs, wild]):
         ref_poses, ref_c = world._evaluate(q)
-        poses, c = np.empty((len(world.names), 13)), np.empty(kernels.N_CONSTRAINTS)
-        kernels.body_poses(q, u[0], u[1], u[2], u[3], poses, c)
+        poses, c = np.empty((len(world.names), 13)), np.empty(N_CONSTRAINTS)
+        body_poses(q, u.T_tool_box, u.mdh, u.stage, u.kinds, poses, c)
         finite = np.isfinite(ref_c[0])
         np.testing.assert_array_equal(np.isfinite(c), finite)  # NaN exactly where a link cannot close
         np.testing.assert_allclose(c[finite], ref_c[0][finite], rtol=0, atol=1e-12)
@@ -152,7 +154,7 @@ def test_default_probe_policy_certifies_as_much_with_fewer_queries(
 
 
 def test_self_only_world_motion_equals_the_reference(robot: Cabin8, payload: PayloadGeometry) -> None:
-    fast, ref = CollisionWorld(robot, None, payload), CollisionWorld(robot, None, payload, reference=True)
+    fast, ref = CollisionWorld(robot, None, payload), ReferenceWorld(robot, None, payload)
     fast.probe_when_proven = True  # the reference walk's policy (pairs: the bounds decide the probes)
     rng = np.random.default_rng(51)
     for q in admissible_joints(robot, 40, seed=51):
@@ -163,7 +165,7 @@ def test_self_only_world_motion_equals_the_reference(robot: Cabin8, payload: Pay
 def test_clearance_grid_upper_bound(worlds: tuple[CollisionWorld, ...]) -> None:
     """Inside the grid, distance <= LB + upper_slack (exact point distances by FCL)."""
     world = worlds[0]
-    grid, cabin = world._grid, world._cabin_obj
+    grid, cabin = world._grid, world._probes.cabin_obj
     assert grid is not None and cabin is not None and world.cabin is not None
     rng = np.random.default_rng(2)
     pts = rng.uniform(
@@ -183,29 +185,24 @@ def test_clearance_grid_upper_bound(worlds: tuple[CollisionWorld, ...]) -> None:
 def test_certain_contacts_are_real(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
     """Every body the kernel calls certainly in contact collides in FCL (grown by the clearance)."""
     world = worlds[0]
-    cabin = world._cabin_obj
+    cabin = world._probes.cabin_obj
     assert cabin is not None
+    data = world._kernel
     found = 0
     for q in along_rail(robot, 200, seed=61):
         for clearance in (0.0, 0.01, 0.05):
-            code, flat, _, _ = kernels.packed_check(
-                q,
-                world._fbuf,
-                world._ibuf,
-                world._grid_flat,
-                clearance,
-                world.self_clearance,
-                world._upper_slack,
+            code, flat, _, _ = state.packed_check(
+                q, data.fbuf, data.ibuf, data.grid, clearance, world.self_clearance, data.upper_slack
             )
             R, p, lengths = world.poses(q)
             for b in range(len(world.names)):
-                if kernels.certain_cabin_contact(
-                    b, flat, clearance, world._fbuf, world._ibuf, world._grid_flat, world._upper_slack
+                if bounds.certain_cabin_contact(
+                    b, flat, clearance, data.fbuf, data.ibuf, data.grid, data.upper_slack
                 ):
                     found += 1
-                    o = world._object(b, R[0, b], p[0, b], lengths[0, b], clearance)
+                    o = world._probes.object(b, R[0, b], p[0, b], lengths[0, b], clearance)
                     assert fcl.collide(o, cabin, fcl.CollisionRequest(), fcl.CollisionResult()) > 0
-            if code == kernels.CONTACT:
+            if code == state.CONTACT:
                 assert not worlds[1].is_valid(q, clearance)
     assert found > 20  # the test recognises a good share of the contacts
 
@@ -216,7 +213,7 @@ def test_worlds_of_one_model_share_its_pose_function_but_not_their_payloads(robo
     grasp = np.eye(4)
     grasp[:3, 3] = [0.0, 0.0, 0.4]
     large = PayloadGeometry((0.5, 0.4, 0.6), T_tool_payload=grasp, mass=80.0)
-    a_ref, b_ref = (CollisionWorld(robot, None, p, reference=True) for p in (small, large))
+    a_ref, b_ref = (ReferenceWorld(robot, None, p) for p in (small, large))
     a, b = (CollisionWorld(robot, None, p) for p in (small, large))
     assert a_ref._pose_fn is b_ref._pose_fn is a._pose_fn
     for q in along_rail(robot, 20, seed=41):  # interleaved: the shared buffers must not carry a payload over
@@ -244,6 +241,6 @@ def test_run_extent_is_the_halving_rule_of_check_path() -> None:
             if extra <= max_extra:
                 break
             j, extra = i + max(1, (j - i) // 2), 0.0
-        got_j, got_extra = kernels.run_extent(qs, i, j0, rho, max_extra)
+        got_j, got_extra = walk.run_extent(qs, i, j0, rho, max_extra)
         assert got_j == j, trial
         assert got_extra == pytest.approx(extra, rel=1e-9, abs=1e-15)

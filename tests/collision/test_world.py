@@ -13,9 +13,10 @@ import trimesh
 
 from planner.collision.bodies import ADJACENT, PayloadGeometry
 from planner.collision.clearance_grid import ClearanceGrid, surface_samples
+from planner.collision.reference import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
-from planner.meshio.load import LoadedMesh, load_mesh
+from planner.meshio import LoadedMesh, load_mesh
 from planner.redundancy.ik import IKOptions, family_candidates
 from planner.robots.cabin8 import Cabin8
 from tests.conftest import admissible_joints
@@ -95,12 +96,14 @@ def brute_force_valid(world: CollisionWorld, q: np.ndarray, clearance: float) ->
     R, p, lengths = world.poses(q)
     req = fcl.CollisionRequest()
     for b in range(len(world.names)):
-        o = world._object(b, R[0, b], p[0, b], lengths[0, b], clearance)
-        if world._cabin_obj is not None and fcl.collide(o, world._cabin_obj, req, fcl.CollisionResult()):
+        o = world._probes.object(b, R[0, b], p[0, b], lengths[0, b], clearance)
+        if world._probes.cabin_obj is not None and fcl.collide(
+            o, world._probes.cabin_obj, req, fcl.CollisionResult()
+        ):
             return False
     for a, b in world.bodies.pairs:
-        oa = world._object(a, R[0, a], p[0, a], lengths[0, a], world.self_clearance / 2)
-        ob = world._object(b, R[0, b], p[0, b], lengths[0, b], world.self_clearance / 2)
+        oa = world._probes.object(a, R[0, a], p[0, a], lengths[0, a], world.self_clearance / 2)
+        ob = world._probes.object(b, R[0, b], p[0, b], lengths[0, b], world.self_clearance / 2)
         if fcl.collide(oa, ob, req, fcl.CollisionResult()):
             return False
     return True
@@ -131,7 +134,7 @@ def test_limits_are_part_of_validity(robot: Cabin8, aisle: CollisionWorld) -> No
 
 def test_clearance_grid_is_a_lower_bound(aisle: CollisionWorld) -> None:
     grid = aisle._grid
-    assert grid is not None and aisle._cabin_obj is not None
+    assert grid is not None and aisle._probes.cabin_obj is not None
     rng = np.random.default_rng(1)
     lo = aisle.cabin.vertices.min(axis=0) - 0.3  # type: ignore[union-attr]
     hi = aisle.cabin.vertices.max(axis=0) + 0.3  # type: ignore[union-attr]
@@ -141,7 +144,7 @@ def test_clearance_grid_is_a_lower_bound(aisle: CollisionWorld) -> None:
         [
             fcl.distance(
                 fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform(p)),
-                aisle._cabin_obj,
+                aisle._probes.cabin_obj,
                 req,
                 fcl.DistanceResult(),
             )
@@ -242,17 +245,18 @@ def test_reference_bays_have_collision_free_ik(robot: Cabin8, payload: PayloadGe
 
 def test_compiled_bounds_equal_the_numpy_reference(robot: Cabin8, aisle: CollisionWorld) -> None:
     """The numba kernels compute exactly the bounds of the vectorised numpy reference."""
+    reference = ReferenceWorld(robot, aisle.cabin, aisle.payload)
     qs = admissible_joints(robot, 40, seed=77)
     qs[:, 0] = np.linspace(0.3, 5.7, len(qs))
     for threshold in (0.005, 0.1):
-        states = aisle._states(qs, threshold)
-        cabin = aisle.cabin_lower_bounds(aisle.cover_centres(qs), qs[:, 0])
-        pairs = aisle.pair_lower_bounds(aisle.cover_centres(qs, coarse=True), threshold)
+        states = [aisle._state(q, threshold) for q in qs]
+        cabin = reference.cabin_lower_bounds(aisle.cover_centres(qs), qs[:, 0])
+        pairs = reference.pair_lower_bounds(aisle.cover_centres(qs, coarse=True), threshold)
         np.testing.assert_allclose(np.array([s.cabin_lb for s in states]), cabin, atol=1e-12)
         got = np.array([s.pair_lb for s in states])
         # Where a pair's box separation exceeds the threshold the kernel may skip the sphere gap (both
         # values then exceed the threshold); elsewhere they are equal.
-        caps = aisle._exact_pair[None, :]
+        caps = aisle._kernel.exact_pair[None, :]
         near = (pairs <= threshold) & ~caps
         np.testing.assert_allclose(got[near], pairs[near], atol=1e-12)
         assert np.all(got[~near & ~caps] > threshold)
@@ -270,10 +274,10 @@ def test_capsule_pairs_use_exact_distances(robot: Cabin8, payload: PayloadGeomet
         st = world._state(q, 10.0)  # exact distances for every pair within 10 m
         R, p, lengths = world.poses(q)
         for k, (a, b) in enumerate(world.bodies.pairs):
-            if not world._exact_pair[k]:
+            if not world._kernel.exact_pair[k]:
                 continue
-            oa = world._object(a, R[0, a], p[0, a], lengths[0, a], 0.0)
-            ob = world._object(b, R[0, b], p[0, b], lengths[0, b], 0.0)
+            oa = world._probes.object(a, R[0, a], p[0, a], lengths[0, a], 0.0)
+            ob = world._probes.object(b, R[0, b], p[0, b], lengths[0, b], 0.0)
             via_fcl = fcl.distance(oa, ob, req, fcl.DistanceResult())
             if via_fcl <= 0:
                 continue
@@ -299,7 +303,7 @@ def test_capsule_pairs_use_exact_distances(robot: Cabin8, payload: PayloadGeomet
 
 
 def test_segment_box_distance_known_answers() -> None:
-    from planner.collision.kernels import segment_box_distance, segment_distance
+    from planner.collision.kernels.distances import segment_box_distance, segment_distance
 
     half = np.array([0.5, 0.25, 0.1])
     cases = [

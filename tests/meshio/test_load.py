@@ -23,9 +23,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from meshes import generate
-from planner.collision import LoadedMesh, MeshLimits, load_mesh
 from planner.core.exceptions import InvalidInput, InvalidMesh, PlannerError
-from planner.meshio import load as mesh_loader
+from planner.meshio import LoadedMesh, MeshLimits, load_mesh
+from planner.meshio import build as mesh_build
 
 MESH_DIR = Path(__file__).resolve().parents[2] / "meshes"
 MANIFEST = json.loads((MESH_DIR / "cabins.json").read_text(encoding="utf-8"))
@@ -224,7 +224,7 @@ def test_pose_places_the_mesh_in_the_base_frame():
 def test_vertex_merge_is_exact_even_when_every_hash_collides(monkeypatch):
     data = stl_binary(box_mesh().triangles)  # 36 corners, 8 distinct
     fast = load_mesh(data, units="m", name="box.stl")
-    monkeypatch.setattr(mesh_loader, "_mix64", lambda x: x & np.uint64(0))  # every key equal
+    monkeypatch.setattr(mesh_build, "_mix64", lambda x: x & np.uint64(0))  # every key equal
     slow = load_mesh(data, units="m", name="box.stl")
     assert_is_box(fast)
     np.testing.assert_array_equal(fast.vertices, slow.vertices)
@@ -351,7 +351,7 @@ def _sphere_with_degenerate_faces() -> tuple[np.ndarray, list[list[int]]]:
 
 def test_degenerate_faces_are_dropped_and_counted(caplog):
     vertices, faces = _sphere_with_degenerate_faces()
-    with caplog.at_level(logging.WARNING, logger="planner.meshio.load"):
+    with caplog.at_level(logging.WARNING, logger="planner.meshio"):
         mesh = load_mesh(obj_text(vertices, faces), units="m", name="sphere.obj")
     r = mesh.report
     assert (r.n_faces_read, r.n_faces) == (324, 320)

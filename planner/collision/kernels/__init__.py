@@ -1,0 +1,16 @@
+"""Compiled (numba) kernels of the collision hot path.
+
+By concern, each module importing only those above it:
+
+
+* :mod:`.distances` -- exact segment, capsule-capsule and capsule-box distances;
+* :mod:`.poses` -- body poses and the admissibility vector c(q) in closed form (paper eq. 4, MDH eq. 10-12);
+* :mod:`.buffers` -- a world's constant data, built once (:func:`~.buffers.build`), packed into two flat
+  buffers and read back by name (:class:`~.buffers.Packed`);
+* :mod:`.bounds` -- certified lower bounds from sphere covers (all at once or one by one) and certain
+  contacts from the grid's upper bound;
+* :mod:`.state` -- one state check in one call (poses, bounds, verdict code);
+* :mod:`.walk` -- the certified motion walk, resumable around the FCL probes that stay in Python.
+
+Every kernel is compiled with ``cache=True`` (numba's on-disk cache next to these files).
+"""

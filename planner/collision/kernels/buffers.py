@@ -1,0 +1,317 @@
+"""A world's constant kernel data: built once (:func:`build`), packed into two flat buffers, read as views.
+
+A Python call into a compiled function costs ~0.1 us per argument, so the kernels take four arguments
+(``fbuf``, ``ibuf``, the flat clearance grid, the query) instead of thirty-odd. :func:`pack` lays a
+:class:`Packed` value out in the two buffers (float64, int64); the compiled :func:`unpack` takes views of
+them (no copies) back into a :class:`Packed`, whose fields the kernels read by name (``u.fine_local``).
+
+What the buffers hold, per body b (B bodies), sphere s and checked pair k:
+
+* the payload box frame ``T_tool_box``, the MDH table and the stage lengths (closed-form poses);
+* the fine sphere cover (cabin bounds on the grid) and the coarse one (self bounds): sphere body, local
+  centre, capsule-length fraction, radius, and the first sphere of each body;
+* pairs (a_k, b_k), capsule radii and box half sizes (exact capsule-capsule / capsule-box distances);
+* the carriage's exact clearance table along the rail (empty: no cabin);
+* the admissibility bounds c_lo, c_hi (already widened by 1e-9).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from planner.collision.bodies import BodySet, Shape
+from planner.collision.clearance_grid import ClearanceGrid
+from planner.collision.kernels.poses import KIND_CODES, N_CONSTRAINTS
+from planner.core.exceptions import InvalidInput
+from planner.core.types import Array, BoolArray, IntArray
+from planner.kinematics import chain
+from planner.robots.cabin8 import Cabin8
+
+#: Integers before the int64 arrays: counts (bodies, fine spheres, coarse spheres, pairs, table length),
+#: has_grid, carriage, grid shape (3).
+_HEADER = 10
+
+
+class Packed(NamedTuple):
+    """A world's kernel data by name (arrays as views of the packed buffers inside the kernels)."""
+
+    T_tool_box: Array  # (4, 4) payload box frame in the tool frame
+    mdh: Array  # (4, 6) per MDH link: alpha, a, theta offset, d offset, joint index, revolute (1/0)
+    stage: Array  # (4,) L1, L2, L3, L4
+    kinds: IntArray  # (B,) body kind codes (KIND_CODES)
+    fine_body: IntArray  # (S,) body of each fine sphere
+    fine_local: Array  # (S, 3) centre in the body frame (boxes)
+    fine_frac: Array  # (S,) fraction of the capsule length along the body z axis (capsules)
+    fine_r: Array  # (S,)
+    fine_bounds: IntArray  # (B + 1,) first sphere of each body, then S
+    origin: Array  # (3,) grid origin
+    inv_step: float  # 1 / grid step
+    shape: IntArray  # (3,) grid shape
+    has_grid: bool
+    coarse_body: IntArray  # the coarse cover, as the fine one
+    coarse_local: Array
+    coarse_frac: Array
+    coarse_r: Array
+    coarse_bounds: IntArray
+    pair_a: IntArray  # (P,)
+    pair_b: IntArray  # (P,)
+    radius: Array  # (B,) capsule radius (0 for boxes)
+    capsule_pair: IntArray  # (P,) 1: both bodies are capsules
+    half: Array  # (B, 3) box half sizes (zeros for capsules)
+    capsule_box: IntArray  # (P,) 0 none, 1 a is the capsule, 2 b is the capsule
+    carriage: int  # index of the carriage body
+    table: Array  # exact carriage clearance along the rail (empty: none)
+    table_z0: float
+    table_dz: float
+    c_lo: Array  # (16,) admissibility bounds
+    c_hi: Array
+
+
+def pack(data: Packed) -> tuple[Array, IntArray]:
+    """(fbuf, ibuf) of a world's kernel data, in the layout :func:`unpack` reads."""
+    d = data
+    counts = [len(d.kinds), len(d.fine_r), len(d.coarse_r), len(d.pair_a), len(d.table)]
+    header = [*counts, int(d.has_grid), int(d.carriage), *(int(x) for x in d.shape)]
+    ints = [np.array(header + [0] * (_HEADER - len(header)))]
+    ints += [d.kinds, d.fine_body, d.fine_bounds, d.coarse_body, d.coarse_bounds, d.pair_a, d.pair_b]
+    ints += [d.capsule_pair, d.capsule_box]
+    floats = [d.T_tool_box, d.mdh, d.stage, d.fine_local, d.fine_frac, d.fine_r, d.origin, [d.inv_step]]
+    floats += [d.coarse_local, d.coarse_frac, d.coarse_r, d.radius, d.half, d.table]
+    floats += [[d.table_z0, d.table_dz], d.c_lo, d.c_hi]
+    fbuf = np.ascontiguousarray(np.concatenate([np.asarray(f, dtype=np.float64).ravel() for f in floats]))
+    ibuf = np.ascontiguousarray(np.concatenate([np.asarray(i, dtype=np.int64).ravel() for i in ints]))
+    return fbuf, ibuf
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _cover_ints(ibuf: np.ndarray, o: int, n: int, n_b: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """(sphere body (n,), body bounds (n_b + 1,), next offset) of a packed sphere cover at ``o``."""
+    return ibuf[o : o + n], ibuf[o + n : o + n + n_b + 1], o + n + n_b + 1
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _cover_floats(fbuf: np.ndarray, f: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(local centres (n, 3), length fractions (n,), radii (n,), next offset) of a packed cover at ``f``."""
+    return (
+        fbuf[f : f + 3 * n].reshape((n, 3)),
+        fbuf[f + 3 * n : f + 4 * n],
+        fbuf[f + 4 * n : f + 5 * n],
+        f + 5 * n,
+    )
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def unpack(fbuf: np.ndarray, ibuf: np.ndarray) -> Packed:
+    """Views of the packed world data (:func:`pack`'s layout), by name."""
+    n_b, n_s, n_c, n_p, n_t = ibuf[0], ibuf[1], ibuf[2], ibuf[3], ibuf[4]
+    kinds = ibuf[_HEADER : _HEADER + n_b]
+    fine_body, fine_bounds, o = _cover_ints(ibuf, _HEADER + n_b, n_s, n_b)
+    coarse_body, coarse_bounds, o = _cover_ints(ibuf, o, n_c, n_b)
+    pair_a = ibuf[o : o + n_p]
+    pair_b = ibuf[o + n_p : o + 2 * n_p]
+    capsule_pair = ibuf[o + 2 * n_p : o + 3 * n_p]
+    capsule_box = ibuf[o + 3 * n_p : o + 4 * n_p]
+    # Floats: T_tool_box (16), mdh (24), stage (4), fine cover, grid origin (3) and 1 / step, coarse cover.
+    fine_local, fine_frac, fine_r, f = _cover_floats(fbuf, 44, n_s)
+    origin, inv_step = fbuf[f : f + 3], fbuf[f + 3]
+    coarse_local, coarse_frac, coarse_r, f = _cover_floats(fbuf, f + 4, n_c)
+    radius = fbuf[f : f + n_b]
+    half = fbuf[f + n_b : f + 4 * n_b].reshape((n_b, 3))
+    table = fbuf[f + 4 * n_b : f + 4 * n_b + n_t]
+    f += 4 * n_b + n_t
+    return Packed(
+        fbuf[0:16].reshape((4, 4)),
+        fbuf[16:40].reshape((4, 6)),
+        fbuf[40:44],
+        kinds,
+        fine_body,
+        fine_local,
+        fine_frac,
+        fine_r,
+        fine_bounds,
+        origin,
+        inv_step,
+        ibuf[7:10],
+        ibuf[5] != 0,
+        coarse_body,
+        coarse_local,
+        coarse_frac,
+        coarse_r,
+        coarse_bounds,
+        pair_a,
+        pair_b,
+        radius,
+        capsule_pair,
+        half,
+        capsule_box,
+        ibuf[6],
+        table,
+        fbuf[f],
+        fbuf[f + 1],
+        fbuf[f + 2 : f + 2 + N_CONSTRAINTS],
+        fbuf[f + 2 + N_CONSTRAINTS : f + 2 + 2 * N_CONSTRAINTS],
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Cover:
+    """A sphere cover flattened for the kernels: every sphere's body, local centre, length fraction, radius.
+
+    ``start[b]`` is the first sphere of body b (a body may have none).
+    """
+
+    body: IntArray  # (S,)
+    local: Array  # (S, 3)
+    frac: Array  # (S,)
+    radii: Array  # (S,)
+    start: IntArray  # (B,)
+
+    @property
+    def table(self) -> tuple[IntArray, Array, Array]:
+        """(body, local, frac): the arguments of ``cover_centres``."""
+        return self.body, self.local, self.frac
+
+    @property
+    def bounds(self) -> IntArray:
+        """(B + 1,) first sphere of each body, then S."""
+        return np.concatenate([self.start, [len(self.radii)]]).astype(np.int64)
+
+
+def cover(shapes: tuple[Shape, ...], centres: tuple[Array, ...], radii: tuple[Array, ...]) -> Cover:
+    """The flat :class:`Cover` of per-body sphere centres (capsules: along z, as length fractions)."""
+    body, local, frac = [], [], []
+    for b, (shape, c) in enumerate(zip(shapes, centres, strict=True)):
+        body.append(np.full(len(c), b, dtype=np.int64))
+        if shape.kind == "capsule":
+            local.append(np.zeros_like(c))
+            frac.append(c[:, 2])
+        else:
+            local.append(c)
+            frac.append(np.zeros(len(c)))
+    counts = [len(r) for r in radii]
+    return Cover(
+        np.concatenate(body),
+        np.ascontiguousarray(np.concatenate(local)),
+        np.concatenate(frac),
+        np.concatenate(radii),
+        np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class KernelData:
+    """Everything a world's kernels read, built once per world by :func:`build`.
+
+    ``fbuf``/``ibuf`` are the packed buffers, ``grid`` the flat clearance lower-bound grid (C order; one
+    dummy value without a cabin), ``upper_slack`` the grid's upper-bound slack (-1: no grid, which disables
+    the certain-contact test). The covers and pair masks stay for the Python side (sphere centres for
+    :mod:`planner.plan.transit`, the reference route, the motion walk's reach bounds).
+    """
+
+    fbuf: Array
+    ibuf: IntArray
+    grid: Array
+    upper_slack: float
+    fine: Cover
+    coarse: Cover
+    pair_a: IntArray
+    pair_b: IntArray
+    exact_pair: BoolArray  # (P,) the pair bound is the exact distance (capsule-capsule, capsule-box)
+    link_mask: BoolArray  # (B,) the stage links (their reach bounds depend on the slope)
+    c_lo: Array
+    c_hi: Array
+
+
+def build(
+    robot: Cabin8,
+    bodies: BodySet,
+    T_tool_box: Array,
+    grid: ClearanceGrid | None,
+    carriage_table: tuple[float, float, Array] | None,
+) -> KernelData:
+    """The kernel data of a world: covers, pair tables, closed-form pose data, packed.
+
+    With a cabin (``grid`` given) the carriage's cabin bound comes from its exact clearance table
+    ``carriage_table`` = (z0, dz, distances) along the rail, so its fine cover is left empty.
+    """
+    if len(robot.c_lower) != N_CONSTRAINTS:
+        raise InvalidInput(
+            f"robot: {len(robot.c_lower)} admissibility values, the collision kernels expect {N_CONSTRAINTS}",
+            field="robot",
+        )
+    names, shapes = bodies.names, bodies.shapes
+    carriage = names.index("carriage")
+    fine_centres, fine_radii = list(bodies.sphere_centres), list(bodies.sphere_radii)
+    if grid is not None:
+        fine_centres[carriage], fine_radii[carriage] = np.zeros((0, 3)), np.zeros(0)
+    fine = cover(shapes, tuple(fine_centres), tuple(fine_radii))
+    coarse = cover(shapes, bodies.coarse_centres, bodies.coarse_radii)
+    pair_a = np.array([a for a, _ in bodies.pairs], dtype=int)
+    pair_b = np.array([b for _, b in bodies.pairs], dtype=int)
+    kinds = [(shapes[a].kind, shapes[b].kind) for a, b in bodies.pairs]
+    capsule_pair = np.array([k == ("capsule", "capsule") for k in kinds], dtype=np.bool_)
+    capsule_box = np.array(
+        [1 if k == ("capsule", "box") else 2 if k == ("box", "capsule") else 0 for k in kinds], dtype=np.int64
+    )
+    mdh = np.array(
+        [
+            [link.alpha, link.a, link.theta, link.d, float(j), 1.0 if revolute else 0.0]
+            for link, (j, revolute) in zip(robot.desc.serial_chain, chain.LINK_VARIABLES, strict=True)
+        ]
+    )
+    geo = robot.geometry
+    z0, dz, table = carriage_table if carriage_table is not None else (0.0, 1.0, np.zeros(0))
+    c_lo, c_hi = robot.c_lower - 1e-9, robot.c_upper + 1e-9
+    fbuf, ibuf = pack(
+        Packed(
+            T_tool_box=np.ascontiguousarray(T_tool_box, dtype=float),
+            mdh=mdh,
+            stage=np.array([geo.L1, geo.L2, geo.L3, geo.L4]),
+            kinds=np.array([KIND_CODES[n] for n in names], dtype=np.int64),
+            fine_body=fine.body,
+            fine_local=fine.local,
+            fine_frac=fine.frac,
+            fine_r=fine.radii,
+            fine_bounds=fine.bounds,
+            origin=grid.origin if grid is not None else np.zeros(3),
+            inv_step=1.0 / grid.step if grid is not None else 1.0,
+            shape=np.array(grid.lower_bound.shape if grid is not None else (1, 1, 1)),
+            has_grid=grid is not None,
+            coarse_body=coarse.body,
+            coarse_local=coarse.local,
+            coarse_frac=coarse.frac,
+            coarse_r=coarse.radii,
+            coarse_bounds=coarse.bounds,
+            pair_a=pair_a,
+            pair_b=pair_b,
+            radius=np.array([s.radius for s in shapes]),
+            capsule_pair=np.asarray(capsule_pair, dtype=np.int64),
+            half=np.array([np.array(s.size) / 2 if s.kind == "box" else np.zeros(3) for s in shapes]),
+            capsule_box=capsule_box,
+            carriage=carriage,
+            table=table,
+            table_z0=z0,
+            table_dz=dz,
+            c_lo=c_lo,
+            c_hi=c_hi,
+        )
+    )
+    flat_grid = grid.lower_bound.reshape(-1) if grid is not None else np.zeros(1)
+    return KernelData(
+        fbuf=fbuf,
+        ibuf=ibuf,
+        grid=np.ascontiguousarray(flat_grid, dtype=float),
+        upper_slack=grid.upper_slack if grid is not None else -1.0,
+        fine=fine,
+        coarse=coarse,
+        pair_a=pair_a,
+        pair_b=pair_b,
+        exact_pair=capsule_pair | (capsule_box > 0),
+        link_mask=np.array([n in ("link_ab", "link_cd", "link_ef") for n in names]),
+        c_lo=c_lo,
+        c_hi=c_hi,
+    )

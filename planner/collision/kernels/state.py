@@ -1,0 +1,94 @@
+"""One state check in one compiled call: poses, bounds, verdict (the hot path of OMPL's validity checks).
+
+:func:`packed_state` gives a state's poses and certified bounds, :func:`packed_check` the verdict code the
+world acts on (``CLEAR`` needs no FCL query at all), :func:`packed_poses` the poses of many states.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from planner.collision.kernels.bounds import bounds_of_state, certain_contact
+from planner.collision.kernels.buffers import Packed, unpack
+from planner.collision.kernels.poses import N_CONSTRAINTS, body_poses
+
+#: Codes of :func:`packed_check`.
+CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def poses_at(q: np.ndarray, u: Packed, poses: np.ndarray, c: np.ndarray) -> None:
+    """:func:`~.poses.body_poses` at q (8,) into ``poses`` (B, 13) and ``c`` (16,), on unpacked data."""
+    body_poses(q, u.T_tool_box, u.mdh, u.stage, u.kinds, poses, c)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _packed_state(
+    q: np.ndarray, u: Packed, grid: np.ndarray, threshold: float, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Poses into ``poses`` and (cabin bounds, pair bounds, admissible) at q."""
+    c = np.empty(N_CONSTRAINTS)
+    poses_at(q, u, poses, c)
+    return bounds_of_state(poses, u, grid, c, threshold)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def packed_state(
+    q: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, grid: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """(poses, cabin bounds, pair bounds, admissible) at q from the packed data."""
+    poses = np.empty((ibuf[0], 13))
+    cabin, pairs, ok = _packed_state(q, unpack(fbuf, ibuf), grid, threshold, poses)
+    return poses, cabin, pairs, ok
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def packed_poses(
+    qs: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, poses: np.ndarray, c: np.ndarray
+) -> None:
+    """:func:`~.poses.body_poses` at every row of ``qs`` (N, 8) into ``poses`` (N, B, 13), ``c`` (N, 16)."""
+    u = unpack(fbuf, ibuf)
+    for i in range(qs.shape[0]):
+        poses_at(qs[i], u, poses[i], c[i])
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def packed_check(
+    q: np.ndarray,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
+    grid: np.ndarray,
+    clearance: float,
+    self_clearance: float,
+    upper_slack: float,
+) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """The compiled part of a state check: (code, poses, cabin bounds, pair bounds).
+
+    ``CLEAR``: admissible and the bounds prove every body ``clearance`` from the cabin and every pair
+    ``self_clearance`` apart. ``INADMISSIBLE``: a limit or margin fails. ``CONTACT``: admissible, and
+    the cabin certainly enters some body grown by ``clearance`` (:func:`~.bounds.certain_cabin_contact`;
+    a negative ``upper_slack`` disables the test). ``UNDECIDED``: admissible, but some body or pair needs
+    an exact (FCL) query. ``NOT_FINITE``: a joint is NaN or infinite.
+    """
+    poses = np.empty((ibuf[0], 13))
+    for i in range(q.shape[0]):
+        if not math.isfinite(q[i]):
+            return NOT_FINITE, poses, np.empty(0), np.empty(0)
+    u = unpack(fbuf, ibuf)
+    cabin, pairs, ok = _packed_state(q, u, grid, self_clearance, poses)
+    if not ok:
+        return INADMISSIBLE, poses, cabin, pairs
+    code = CLEAR
+    for b in range(cabin.shape[0]):
+        if not cabin[b] > clearance:
+            if upper_slack >= 0.0 and certain_contact(b, poses, clearance, u, grid, upper_slack):
+                return CONTACT, poses, cabin, pairs
+            code = UNDECIDED
+    if code == CLEAR:
+        for k in range(pairs.shape[0]):
+            if not pairs[k] > self_clearance:
+                return UNDECIDED, poses, cabin, pairs
+    return code, poses, cabin, pairs

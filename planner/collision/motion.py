@@ -1,0 +1,152 @@
+"""The certified motion walk of :meth:`~planner.collision.world.CollisionWorld.check_motion`, compiled.
+
+Along the straight joint-space segment q(t) = q_a + t (q_b - q_a): limits and margins at every joint step
+of at most :data:`LIMIT_STEP`; reach bounds D (how far any point of a body, or a pair's relative
+position, can move over the segment); then :func:`~planner.collision.kernels.walk.motion_walk`, which
+advances each body and pair with certified steps (its proven spare clearance E over D) and returns here
+only when a state needs FCL probes on a grown body (:class:`~planner.collision.probes.Probes`).
+The pure-Python walk with the same schedule is :mod:`planner.collision.reference` (the tests' oracle).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.collision.bodies import BodySet, link_slope_bound
+from planner.collision.kernels import walk
+from planner.collision.kernels.buffers import KernelData
+from planner.collision.probes import Probes
+from planner.collision.reports import BodyState, MotionReport, body_contact, limit_contacts
+from planner.core.types import Array
+from planner.kinematics import chain
+from planner.robots.cabin8 import Cabin8
+
+#: Joint-space spacing [m or rad] at which limits and singularity margins are checked along a motion.
+LIMIT_STEP = 0.005
+
+
+def limit_samples(dq: Array) -> int:
+    """Number of pieces n of the limit samples t_i = i / n: joint steps of at most ``LIMIT_STEP``."""
+    return int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
+
+
+def slope_deviation(robot: Cabin8, q_a: Array, q_b: Array) -> float:
+    """How far the link-height ratios can exceed the larger endpoint value along the segment.
+
+    The ratios y_B/L1, y_C/L3, y_E/L4 are affine in y and in sin(gamma); along the segment they exceed the
+    larger endpoint value by at most (L2/2) dgamma^2 / 8 over the shortest length (the sine's deviation
+    from its chord), which bounds the links' slopes.
+    """
+    g = robot.geometry
+    return 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
+
+
+class CertifiedMotion:
+    """The compiled motion walk of one world, with its FCL probes.
+
+    Args:
+        robot: The cabin8 model.
+        bodies: The world's bodies.
+        data: The world's kernel data.
+        probes: The world's FCL probes.
+    """
+
+    def __init__(self, robot: Cabin8, bodies: BodySet, data: KernelData, probes: Probes) -> None:
+        self.robot = robot
+        self.bodies = bodies
+        self.data = data
+        self.probes = probes
+
+    def check(
+        self,
+        q_a: Array,
+        q_b: Array,
+        clearance: float,
+        motion_margin: float,
+        own: float,
+        ratio: float | None,
+        probe_when_proven: bool,
+    ) -> MotionReport:
+        """The motion report of q_a -> q_b (contiguous (8,) joints; arguments already validated).
+
+        ``own`` is the self-clearance, ``ratio`` a floor on the link-height ratio the reach bounds assume,
+        ``probe_when_proven`` the probe policy (see ``CollisionWorld.check_motion``).
+        """
+        d = self.data
+        dq = q_b - q_a
+        adq = np.abs(dq)
+        n_fine = limit_samples(dq)
+        bad = walk.first_inadmissible(q_a, dq, n_fine, d.fbuf, d.ibuf)
+        if bad >= 0:
+            t = bad * (1.0 / n_fine) if bad < n_fine else 1.0  # numpy.linspace's samples
+            return MotionReport(False, n_fine + 1, 0, t, tuple(limit_contacts(self.robot, q_a + t * dq)))
+        end = walk.end_ratio(q_a, q_b, d.fbuf, d.ibuf)
+        if ratio is not None:
+            end = max(end, ratio)
+        reach, pair_reach = walk.segment_reach(
+            self.bodies.rho,
+            d.link_mask,
+            link_slope_bound(end + slope_deviation(self.robot, q_a, q_b)),
+            0.5 * self.robot.geometry.L2,
+            d.pair_a,
+            d.pair_b,
+            self.bodies.pair_rigid,
+            adq,
+        )
+        has_cabin = self.probes.cabin_obj is not None
+        d_max = max([*(reach.tolist() if has_cabin else []), *pair_reach.tolist()], default=0.0)
+        n = int(max(1, np.ceil(d_max / motion_margin)))
+        n_bodies = len(self.bodies.names)
+        cap = min(n + 1, 32)
+        slot_of = np.full(n + 1, -1, dtype=np.int64)
+        poses = np.empty((cap, n_bodies, 13))
+        cabin = np.empty((cap, n_bodies))
+        pairs = np.empty((cap, len(d.pair_a)))
+        ci = np.zeros(walk.CI_SIZE, dtype=np.int64)
+        cf = np.zeros(walk.CF_SIZE)
+        ci[walk.CI_N], ci[walk.CI_CABIN] = n, has_cabin
+        cf[walk.CF_CLEARANCE], cf[walk.CF_OWN], cf[walk.CF_MARGIN] = clearance, own, motion_margin
+        # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
+        cf[walk.CF_THRESHOLD] = own + 0.06
+        cf[walk.CF_PROBE_PROVEN] = probe_when_proven
+        n_cabin = n_bodies if has_cabin else 0
+        before = self.probes.queries
+        while True:
+            code = walk.motion_walk(
+                ci, cf, q_a, q_b, dq, reach, pair_reach, d.fbuf, d.ibuf, d.grid, slot_of, poses, cabin, pairs
+            )
+            task = int(ci[walk.CI_TASK])
+            is_cabin = task < n_cabin
+            idx = task if is_cabin else task - n_cabin
+            base = clearance if is_cabin else own
+            if code == walk.WALK_DONE:
+                return MotionReport(True, int(ci[walk.CI_COUNT]), self.probes.queries - before)
+            if code == walk.WALK_GROW:
+                grow = poses.shape[0]
+                poses = np.concatenate([poses, np.empty_like(poses[:grow])])
+                cabin = np.concatenate([cabin, np.empty_like(cabin[:grow])])
+                pairs = np.concatenate([pairs, np.empty_like(pairs[:grow])])
+            elif code == walk.WALK_FAIL:
+                contact = body_contact(
+                    self.bodies.names, self.bodies.pairs, is_cabin, idx, base + motion_margin
+                )
+                states = int(ci[walk.CI_COUNT])
+                t_fail = float(cf[walk.CF_TFAIL])
+                return MotionReport(False, states, self.probes.queries - before, t_fail, (contact,))
+            else:  # WALK_PROBE: the first level at which the grown body is clear becomes the spare clearance
+                slot = int(ci[walk.CI_SLOT])
+                st = BodyState(poses[slot], cabin[slot], pairs[slot])
+                first = walk.CF_LEVEL0
+                levels = cf[first : first + int(ci[walk.CI_LEVELS])].tolist()
+                for level in levels:
+                    if not self.probes.hit(st, is_cabin, idx, base + level):
+                        cf[walk.CF_E] = level
+                        break
+                else:
+                    # Every grown body hit. A grown box is a larger box: near its edges and corners it
+                    # overstates the clearance it tests by up to (sqrt 3 - 1) times the growth, so the exact
+                    # distance (milliseconds against a mesh, asked only here) decides.
+                    if levels and min(levels) <= motion_margin + 1e-12:
+                        exact_spare = self.probes.distance(st, is_cabin, idx)[0] - base
+                        if exact_spare >= motion_margin:
+                            cf[walk.CF_E] = exact_spare

@@ -1,0 +1,180 @@
+"""FCL probes of one collision world: collision queries on grown bodies, exact distances, the carriage table.
+
+Bodies are FCL boxes and capsules grown by a margin (:meth:`Probes.object`: reused per thread and only
+moved, since building one costs more than the query); the cabin is one BVH mesh, cached per mesh content
+and pose so that several worlds on one cabin share it. *Collision* queries (microseconds) decide; distance
+queries (milliseconds) only where a number is needed (reports, the carriage's clearance table).
+"""
+
+from __future__ import annotations
+
+import threading
+from functools import cache
+from typing import Any
+
+import fcl
+import numpy as np
+
+from planner.collision.bodies import BodySet, Shape
+from planner.collision.reports import BodyState
+from planner.core.types import Array, IntArray
+
+
+def _bvh(vertices: Array, faces: IntArray) -> fcl.BVHModel:
+    model = fcl.BVHModel()
+    model.beginModel(len(vertices), len(faces))
+    model.addSubModel(vertices, faces.astype(np.int32))
+    model.endModel()
+    return model
+
+
+@cache
+def cabin_bvh(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> fcl.BVHModel:
+    """The cabin's FCL mesh, cached by (content hash and pose, vertices, faces) -- see ``world.cabin_key``."""
+    vertices = np.frombuffer(vertices_bytes).reshape(-1, 3)
+    faces = np.frombuffer(faces_bytes, dtype=np.int64).reshape(-1, 3)
+    return _bvh(vertices, faces)
+
+
+@cache
+def _box_bvh(size: tuple[float, float, float]) -> fcl.BVHModel:
+    import trimesh
+
+    m = trimesh.creation.box(extents=size)
+    return _bvh(np.asarray(m.vertices), np.asarray(m.faces))
+
+
+def _fcl_geometry(shape: Shape, margin: float, length: float) -> Any:
+    grown = shape.inflated(margin)
+    if grown.kind == "box":
+        return fcl.Box(*grown.size)
+    return fcl.Capsule(grown.radius, length)
+
+
+class Probes:
+    """FCL objects of a world's bodies and its cabin, and the queries on them (counted in ``queries``).
+
+    Args:
+        bodies: The world's bodies (shapes, checked pairs).
+        cabin: The cabin's FCL mesh (``None``: free space).
+    """
+
+    def __init__(self, bodies: BodySet, cabin: fcl.BVHModel | None) -> None:
+        self.bodies = bodies
+        self.cabin_obj = fcl.CollisionObject(cabin, fcl.Transform()) if cabin is not None else None
+        self.queries = 0
+        self._capsule = [s.kind == "capsule" for s in bodies.shapes]
+        self._geoms: dict[tuple[int, float, float], Any] = {}
+        self._local = threading.local()
+        self._req = fcl.CollisionRequest()
+
+    def geometry(self, b: int, margin: float, length: float) -> Any:
+        """FCL shape of body b grown by ``margin`` (a capsule with its posed ``length``), cached."""
+        shape = self.bodies.shapes[b]
+        key = (b, margin, round(length, 9) if shape.kind == "capsule" else 0.0)
+        geom = self._geoms.get(key)
+        if geom is None:
+            if len(self._geoms) > 4096:
+                self._geoms.clear()
+            geom = _fcl_geometry(shape, margin, length)
+            self._geoms[key] = geom
+        return geom
+
+    def object(self, b: int, R: Array, p: Array, length: float, margin: float) -> fcl.CollisionObject:
+        """A posed FCL object of body b grown by ``margin``; objects are reused (per thread), only moved."""
+        key = (b, margin, round(length, 9) if self._capsule[b] else 0.0)
+        try:
+            objects: dict[tuple[int, float, float], fcl.CollisionObject] = self._local.objects
+        except AttributeError:
+            objects = self._local.objects = {}
+        obj = objects.get(key)
+        if obj is None:
+            if len(objects) > 4096:
+                objects.clear()
+            obj = objects[key] = fcl.CollisionObject(self.geometry(b, margin, length), fcl.Transform(R, p))
+        else:
+            obj.setRotation(R)
+            obj.setTranslation(p)
+        return obj
+
+    def posed(self, st: BodyState, b: int, margin: float) -> fcl.CollisionObject:
+        """:meth:`object` of body b at the state ``st``."""
+        return self.object(b, st.R(b), st.p(b), st.length(b), margin)
+
+    def collide(self, o1: fcl.CollisionObject, o2: fcl.CollisionObject) -> bool:
+        """One FCL collision query (counted)."""
+        self.queries += 1
+        try:  # one result object per thread, emptied for each query (a new one costs more than the query)
+            res: fcl.CollisionResult = self._local.result
+        except AttributeError:
+            res = self._local.result = fcl.CollisionResult()
+        res.is_collision = False
+        res.contacts.clear()
+        res.cost_sources.clear()
+        return bool(fcl.collide(o1, o2, self._req, res) > 0)
+
+    def cabin_hit(self, st: BodyState, b: int, margin: float) -> bool:
+        """Body b grown by ``margin`` touches the cabin."""
+        assert self.cabin_obj is not None
+        return self.collide(self.posed(st, b, margin), self.cabin_obj)
+
+    def pair_hit(self, st: BodyState, k: int, margin: float) -> bool:
+        """The bodies of checked pair k, each grown by ``margin / 2``, touch."""
+        a, b = self.bodies.pairs[k]
+        return self.collide(self.posed(st, a, margin / 2), self.posed(st, b, margin / 2))
+
+    def hit(self, st: BodyState, is_cabin: bool, idx: int, margin: float) -> bool:
+        """:meth:`cabin_hit` of body ``idx`` or :meth:`pair_hit` of pair ``idx``."""
+        return self.cabin_hit(st, idx, margin) if is_cabin else self.pair_hit(st, idx, margin)
+
+    def carriage_table(
+        self, carriage: int, lo: float, hi: float, step: float = 0.01
+    ) -> tuple[float, float, Array]:
+        """Exact carriage-to-cabin distance every ``step`` along the rail [lo, hi]: (lo, step, distances).
+
+        The carriage moves with d1 only; between samples the distance changes by at most the rail
+        displacement (it is 1-Lipschitz in d1), which the lookup subtracts. Penetration gives -inf.
+        """
+        assert self.cabin_obj is not None
+        z = np.arange(lo, hi + step, step)
+        geom = self.geometry(carriage, 0.0, 0.0)
+        req = fcl.DistanceRequest()
+        table = np.array(
+            [
+                fcl.distance(
+                    fcl.CollisionObject(geom, fcl.Transform(np.array([0.0, -0.06, zi]))),
+                    self.cabin_obj,
+                    req,
+                    fcl.DistanceResult(),
+                )
+                for zi in z
+            ]
+        )
+        return lo, step, np.where(table < 0, -np.inf, table)
+
+    def distance(self, st: BodyState, is_cabin: bool, idx: int) -> tuple[float, int, int, Array, Array]:
+        """Exact distance of body ``idx`` to the cabin (or of pair ``idx``) on the un-grown shapes.
+
+        Returns (distance, body a, other body (-1: the cabin), witness on a, witness on the other).
+        FCL returns the witness points of a shape-vs-mesh query in swapped order, and its box-box distance
+        is wrong in degenerate (face-parallel) cases: so the first object is always a mesh (the cabin, or
+        the first box of a box pair as a triangle mesh), whose point comes first.
+        """
+        shapes = self.bodies.shapes
+        if is_cabin:
+            a, other = idx, -1
+            first = self.cabin_obj
+        else:
+            a, other = self.bodies.pairs[idx]
+            if shapes[a].kind == "box" and shapes[other].kind == "box":
+                first = fcl.CollisionObject(
+                    _box_bvh(shapes[other].size), fcl.Transform(st.R(other), st.p(other))
+                )
+            else:
+                first = self.posed(st, other, 0.0)
+        second = self.posed(st, a, 0.0)
+        req = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
+        res = fcl.DistanceResult()
+        d = float(fcl.distance(first, second, req, res))
+        p_other, p_body = res.nearest_points
+        return d, a, other, np.array(p_body), np.array(p_other)

@@ -1,0 +1,239 @@
+"""The reference route of the collision world: the tests' oracle and the benchmark's baseline.
+
+:class:`ReferenceWorld` answers every question of :class:`~planner.collision.world.CollisionWorld` by the
+original, independent routes -- poses from the CasADi model (:mod:`.pose_model`), the certified motion
+walk in plain Python with the original always-probe policy, the lower bounds also vectorised in numpy
+(:meth:`ReferenceWorld.cabin_lower_bounds`, :meth:`ReferenceWorld.pair_lower_bounds`) -- and must give the
+compiled route's verdicts and reports exactly (tests/collision/test_kernels.py). It is not used by the
+planner.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import casadi as ca
+import numpy as np
+
+from planner.collision.bodies import segment_reach_bounds
+from planner.collision.kernels.bounds import state_bounds
+from planner.collision.motion import limit_samples, slope_deviation
+from planner.collision.reports import BodyState, MotionReport, StateReport, body_contact, limit_contacts
+from planner.collision.world import DEFAULT_CLEARANCE_M, CollisionWorld
+from planner.core.types import Array, IntArray
+from planner.kinematics import chain
+
+
+class ReferenceWorld(CollisionWorld):
+    """:class:`CollisionWorld` by the reference routes: same verdicts and reports, slower (same arguments)."""
+
+    #: The original always-probe policy of the motion walk.
+    probe_when_proven = True
+
+    @cached_property
+    def _pair_spheres(self) -> tuple[IntArray, IntArray, Array, list[IntArray]]:
+        """Every sphere pair of every checked body pair, grouped by body pair: (ia, ib, rsum, groups)."""
+        coarse = self._kernel.coarse
+        counts = np.diff(coarse.bounds)
+        ia, ib = [], []
+        for a, b in self.bodies.pairs:
+            ga, gb = np.meshgrid(
+                np.arange(coarse.start[a], coarse.start[a] + counts[a]),
+                np.arange(coarse.start[b], coarse.start[b] + counts[b]),
+                indexing="ij",
+            )
+            ia.append(ga.ravel())
+            ib.append(gb.ravel())
+        bounds = np.concatenate([[0], np.cumsum([len(x) for x in ia])]).astype(int)
+        pair_ia = np.concatenate(ia) if ia else np.zeros(0, dtype=int)
+        pair_ib = np.concatenate(ib) if ib else np.zeros(0, dtype=int)
+        groups = [np.arange(bounds[k], bounds[k + 1]) for k in range(len(self.bodies.pairs))]
+        return pair_ia, pair_ib, coarse.radii[pair_ia] + coarse.radii[pair_ib], groups
+
+    # ------------------------------------------------------------------ poses
+    def _evaluate(self, q: Array) -> tuple[Array, Array]:
+        """Poses by the CasADi function, which evaluates column-wise when given N stacked columns."""
+        q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        if q2.shape[0] == 1:
+            return super()._evaluate(q2)
+        outs = self._pose_fn(ca.DM(q2.T), ca.DM(self._T_tool_box))
+        flat, c = (np.asarray(o.full(), dtype=float).T for o in outs)
+        return np.ascontiguousarray(flat.reshape(q2.shape[0], self._n_bodies, 13)), c
+
+    def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
+        """Poses by the CasADi function, then the bound kernel."""
+        slot = self._pose_fast._slot()  # shared by every world of this model: the payload box each time
+        slot.args[1][:] = self._T_tool_box.ravel(order="F")
+        slot.args[0][:] = q
+        slot.trigger()
+        flat = slot.res[0].reshape(self._n_bodies, 13).copy()
+        d = self._kernel
+        cabin, pairs, ok = state_bounds(flat, slot.res[1].copy(), d.fbuf, d.ibuf, d.grid, threshold)
+        return BodyState(flat, cabin, pairs, ok)
+
+    def cabin_lower_bounds(self, fine_centres: Array, d1: Array) -> Array:
+        """(N, B) certified lower bound of each body's distance to the cabin (inf without a cabin).
+
+        From the fine sphere cover and the clearance grid; for the carriage, which moves with d1 only, also
+        from its exact clearance table along the rail (whichever bound is larger).
+        """
+        n = fine_centres.shape[0]
+        if self._grid is None:
+            return np.full((n, self._n_bodies), np.inf)
+        fine = self._kernel.fine
+        lb = self._grid.query(fine_centres) - fine.radii[None, :]
+        out = np.minimum.reduceat(lb, np.minimum(fine.start, lb.shape[1] - 1), axis=1)
+        out[:, np.diff(fine.bounds) == 0] = np.inf  # reduceat returns an element for an empty group
+        if self._carriage_table is not None:
+            z0, dz, table = self._carriage_table
+            k = np.clip(np.rint((d1 - z0) / dz).astype(int), 0, len(table) - 1)
+            exact = table[k] - np.abs(d1 - (z0 + k * dz))
+            carriage = self.names.index("carriage")
+            current = out[:, carriage]
+            out[:, carriage] = np.where(np.isinf(current), exact, np.maximum(current, exact))
+        return out
+
+    def pair_lower_bounds(self, centres: Array, threshold: float) -> Array:
+        """(N, P) certified lower bound of the distance between the bodies of each checked pair.
+
+        First the separation of the bodies' boxes (from their coarse sphere covers) along the axes; where
+        that is not above ``threshold`` for some state, also the sphere-cover gap (the larger bound counts).
+        """
+        n = centres.shape[0]
+        pair_a, pair_b = self._kernel.pair_a, self._kernel.pair_b
+        if len(pair_a) == 0:
+            return np.full((n, 0), np.inf)
+        coarse = self._kernel.coarse
+        r = coarse.radii[None, :, None]
+        lo = np.minimum.reduceat(centres - r, coarse.start, axis=1)
+        hi = np.maximum.reduceat(centres + r, coarse.start, axis=1)
+        sep = np.maximum(lo[:, pair_b] - hi[:, pair_a], lo[:, pair_a] - hi[:, pair_b])
+        out = np.max(sep, axis=2)
+        close = np.flatnonzero(np.any(out <= threshold, axis=0))
+        if close.size:
+            pair_ia, pair_ib, rsum, groups = self._pair_spheres
+            idx = np.concatenate([groups[k] for k in close])
+            starts = np.concatenate([[0], np.cumsum([len(groups[k]) for k in close])[:-1]])
+            ia, ib = pair_ia[idx], pair_ib[idx]
+            gap = np.linalg.norm(centres[:, ia] - centres[:, ib], axis=2) - rsum[idx][None, :]
+            out[:, close] = np.maximum(out[:, close], np.minimum.reduceat(gap, starts, axis=1))
+        return out
+
+    # --------------------------------------------------------------- checks
+    def _screen(self, q: Array, clearance: float) -> StateReport | BodyState:
+        if not np.all(np.isfinite(q)):
+            return StateReport(False, tuple(limit_contacts(self.robot, q)))
+        return self._state(q, self.self_clearance)
+
+    def is_valid(self, q: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
+        """The verdict of :meth:`check_state`."""
+        return self.check_state(q, clearance).valid
+
+    def _carriage_clearance(self, d1_a: float, d1_b: float) -> float:
+        """Certified carriage-to-cabin clearance for every d1 between d1_a and d1_b (table minimum)."""
+        assert self._carriage_table is not None
+        z0, dz, table = self._carriage_table
+        lo, hi = sorted((d1_a, d1_b))
+        k0 = int(np.clip(np.floor((lo - z0) / dz), 0, len(table) - 1))
+        k1 = int(np.clip(np.ceil((hi - z0) / dz), 0, len(table) - 1))
+        if lo < z0 or hi > z0 + dz * (len(table) - 1):
+            return -np.inf
+        # Every d1 in [lo, hi] is within dz/2 of a sample in k0..k1; the distance is 1-Lipschitz in d1.
+        return float(table[k0 : k1 + 1].min()) - 0.5 * dz
+
+    def _segment_reach(self, q_a: Array, q_b: Array, ratio: float | None = None) -> tuple[Array, Array]:
+        """Reach bounds valid along the straight segment q_a -> q_b (see ``motion.slope_deviation``)."""
+        c = self.robot.constraint_values_batch(np.stack([q_a, q_b]))
+        end = float(np.nanmax(c[:, -3:])) if np.all(np.isfinite(c[:, -3:])) else 1.0
+        if ratio is not None:
+            end = max(end, ratio)
+        return segment_reach_bounds(self.robot, self.bodies, end + slope_deviation(self.robot, q_a, q_b))
+
+    def _walk(
+        self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
+    ) -> MotionReport:
+        """The motion walk of ``check_motion`` in Python: the schedule the compiled walk follows."""
+        dq = q_b - q_a
+        rho, pair_rho = self._segment_reach(q_a, q_b, ratio)
+        reach = rho @ np.abs(dq)
+        n_fine = limit_samples(dq)
+        t_fine = np.linspace(0.0, 1.0, n_fine + 1)
+        qs = q_a[None, :] + t_fine[:, None] * dq[None, :]
+        bad = ~self.robot.admissible_batch(qs)
+        if bad.any():
+            i = int(np.argmax(bad))
+            contacts = tuple(limit_contacts(self.robot, qs[i]))
+            return MotionReport(False, n_fine + 1, 0, float(t_fine[i]), contacts)
+        probes = self._probes
+        before = probes.queries
+        levels = (4 * motion_margin, 2 * motion_margin, motion_margin)
+        tasks: list[tuple[bool, int, float]] = []
+        if probes.cabin_obj is not None:
+            tasks += [(True, b, float(reach[b])) for b in range(self._n_bodies)]
+        pair_reach = pair_rho @ np.abs(dq)
+        tasks += [(False, k, float(pair_reach[k])) for k in range(len(self.bodies.pairs))]
+        # One schedule for all: spacing such that no body or pair moves more than motion_margin between
+        # neighbouring states; each task's next check is snapped down onto it (a shorter step stays
+        # certified).
+        d_max = max((d for _, _, d in tasks), default=0.0)
+        # Not capped: one schedule step must never exceed a proven step (at least 2 motion_margin of motion).
+        n = int(max(1, np.ceil(d_max / motion_margin)))
+
+        def t_of(i: int) -> float:
+            return i / n
+
+        cache: dict[int, BodyState] = {}
+
+        def state(i: int) -> BodyState:  # evaluated lazily: the walks visit few of the n + 1 states
+            st = cache.get(i)
+            if st is None:
+                # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
+                st = cache[i] = self._state(q_a + t_of(i) * dq, own + 0.06)
+            return st
+
+        def spare(st: BodyState, is_cabin: bool, idx: int, base: float) -> float:
+            return float((st.cabin_lb[idx] if is_cabin else st.pair_lb[idx]) - base)
+
+        carriage = self.names.index("carriage")
+        # Both end states: a task whose spare clearance at the two ends covers the segment from both sides
+        # (free_0 / D + free_1 / D >= 1) needs nothing in between.
+        s0, s1 = state(0), state(n)
+        for is_cabin, idx, D in tasks:
+            base = clearance if is_cabin else own
+            f0, f1 = spare(s0, is_cabin, idx, base), spare(s1, is_cabin, idx, base)
+            if f0 >= motion_margin and f1 >= motion_margin and f0 + f1 >= D:
+                continue
+            if is_cabin and idx == carriage and self._carriage_table is not None:
+                # The carriage moves with d1 only: its exact clearance table covers the whole segment.
+                if self._carriage_clearance(q_a[chain.D1], q_b[chain.D1]) > clearance:
+                    continue
+            t_stop = 1.0 - f1 / D if f1 >= motion_margin and D > 0.0 else 1.0
+            i, last = 0, motion_margin
+            while True:
+                st = state(i)
+                free = spare(st, is_cabin, idx, base)
+                E = free if free >= motion_margin else 0.0
+                # Probe for more spare clearance than the bound proves (twice what held last time), then fall
+                # back level by level; where the bound proves a margin, only with ``probe_when_proven``.
+                exact = not is_cabin and bool(self._kernel.exact_pair[idx])  # E is the exact spare clearance
+                optimistic = D > 0.0 and not exact and (E == 0.0 or self.probe_when_proven)
+                trials = [min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))] if optimistic else []
+                trials += [lv for lv in levels if E == 0.0 and not exact]
+                for level in trials:
+                    if level <= E:
+                        continue
+                    if not probes.hit(st, is_cabin, idx, base + level):
+                        E = level
+                        break
+                if E == 0.0 and not exact:  # every grown body hit: the exact distance decides
+                    exact_spare = probes.distance(st, is_cabin, idx)[0] - base
+                    E = exact_spare if exact_spare >= motion_margin else 0.0
+                last = max(E, motion_margin)
+                if E == 0.0:
+                    contact = body_contact(self.names, self.bodies.pairs, is_cabin, idx, base + motion_margin)
+                    return MotionReport(False, len(cache), probes.queries - before, t_of(i), (contact,))
+                # Done when the proven interval reaches the end state's own certified interval.
+                if i == n or D <= 0.0 or t_of(i) + E / D >= t_stop:
+                    break
+                i = min(n, max(i + 1, int(np.floor((t_of(i) + (E + motion_margin) / D) * n + 1e-9))))
+        return MotionReport(True, len(cache), probes.queries - before)

@@ -1,0 +1,123 @@
+"""Values the collision world returns and passes around: contacts, state/motion/path reports, distances.
+
+All frozen: a report compares equal field for field, which is how the tests hold the compiled route to
+the reference route (:mod:`planner.collision.reference`). :class:`BodyState` is the internal value of one
+evaluated configuration (poses and certified bounds) that the FCL probes read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from planner.core.types import Array
+from planner.robots.cabin8 import Cabin8
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Why a state is invalid: a limit, a body against the cabin, or a pair of bodies."""
+
+    kind: str  # "limit" | "cabin" | "self"
+    bodies: tuple[str, ...]
+    detail: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"kind": self.kind, "bodies": list(self.bodies), "detail": self.detail}
+
+
+@dataclass(frozen=True)
+class StateReport:
+    """Result of a state check: ``valid`` and, when not, every contact found."""
+
+    valid: bool
+    contacts: tuple[Contact, ...] = ()
+
+
+#: The report of a state the bounds prove clear (shared: reports are immutable).
+VALID = StateReport(True)
+
+
+@dataclass(frozen=True)
+class MotionReport:
+    """Result of a certified motion check."""
+
+    valid: bool
+    #: States evaluated along the segment (limit samples when a limit failed first).
+    states_checked: int
+    #: FCL collision queries the check needed (probes on grown bodies).
+    fcl_queries: int
+    #: Segment parameter t in [0, 1] of the state that failed (None if valid).
+    t_fail: float | None = None
+    contacts: tuple[Contact, ...] = ()
+
+
+@dataclass(frozen=True)
+class PathReport:
+    """Result of :meth:`~planner.collision.world.CollisionWorld.check_path`."""
+
+    valid: bool
+    #: Motion checks run (runs of samples certified together, halved where they failed).
+    motion_checks: int
+    #: The last sample certified (index into the path).
+    last_checked: int
+    #: The sample starting the first piece that failed (None if valid).
+    first_bad: int | None
+    contacts: tuple[Contact, ...] = ()
+
+
+@dataclass(frozen=True)
+class Distance:
+    """Minimum distance between the robot (with payload) and the cabin or itself, with witnesses."""
+
+    distance_m: float
+    bodies: tuple[str, str]
+    point_a: Array = field(repr=False)
+    point_b: Array = field(repr=False)
+
+
+@dataclass(frozen=True)
+class BodyState:
+    """Body poses (flat: R column-major, p, length per body) and certified bounds at one configuration."""
+
+    flat: Array
+    cabin_lb: Array
+    pair_lb: Array
+    admissible: bool = True
+
+    def R(self, b: int) -> Array:
+        """Rotation of body b."""
+        return self.flat[b, :9].reshape(3, 3).T
+
+    def p(self, b: int) -> Array:
+        """Centre of body b."""
+        return self.flat[b, 9:12]
+
+    def length(self, b: int) -> float:
+        """Capsule length of body b (0 for boxes)."""
+        return float(self.flat[b, 12])
+
+
+def limit_contacts(robot: Cabin8, q: Array) -> list[Contact]:
+    """One ``limit`` contact per violated limit or margin of the robot at q."""
+    return [
+        Contact(
+            "limit",
+            (v["name"],),
+            f"{v['name']}={v['value']:.6g} outside [{v['lower']:.6g}, {v['upper']:.6g}]"
+            if isinstance(v["value"], float)
+            else "non-finite configuration",
+        )
+        for v in robot.violations(q)
+    ]
+
+
+def body_contact(
+    names: tuple[str, ...], pairs: tuple[tuple[int, int], ...], is_cabin: bool, idx: int, margin: float
+) -> Contact:
+    """The contact of body ``idx`` with the cabin, or of checked pair ``idx``, within ``margin`` [m]."""
+    if is_cabin:
+        return Contact("cabin", (names[idx],), f"{names[idx]} within {margin:.4g} m of the cabin")
+    a, b = pairs[idx]
+    return Contact("self", (names[a], names[b]), f"{names[a]} within {margin:.4g} m of {names[b]}")
