@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run serve test lint typecheck check bench lock clean
+.PHONY: run serve test lint typecheck check bench lock clean chromium
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -25,6 +25,11 @@ test: $(STAMP)  ## lint, type-check and the whole test suite
 	$(BIN)/ruff check planner api tests bench
 	$(BIN)/mypy planner api
 	$(BIN)/python -m pytest -q
+
+chromium:  ## Debian's Chromium for the viewer's browser tests (skipped without it); never a downloaded browser
+	@command -v chromium >/dev/null 2>&1 || { apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; }
+	@chromium --version 2>/dev/null
 
 lint: $(STAMP)
 	$(BIN)/ruff check planner api tests bench

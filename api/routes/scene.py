@@ -185,7 +185,7 @@ class Pprs6SceneRequest(BaseModel):
 
     path: PosePath | None = None
     workspace_step_m: Annotated[
-        float, Field(ge=0.005, le=0.02, description="Grid step of the workspace search [m].")
+        float, Field(ge=0.01, le=0.02, description="Grid step of the workspace search [m] (a display).")
     ] = 0.01
 
 
@@ -198,7 +198,11 @@ def _workspace_points(orientation: Orientation, step_m: float) -> bytes:
     return np.ascontiguousarray(workspace_boundary_points(ws.inside, ws.axes)).tobytes()
 
 
-@router.post("/robots/pprs6/scene", summary="pprs6 pose path -> profile, chain points per frame, workspace")
+@router.post(
+    "/robots/pprs6/scene",
+    summary="pprs6 pose path -> profile, chain points per frame, workspace",
+    tags=["pprs6"],
+)
 def pprs6_scene(body: Pprs6SceneRequest, _principal: CurrentPrincipal) -> Response:
     """The validated profile (as ``POST /robots/pprs6/profiles``) and its scene (``planner.scene``).
 

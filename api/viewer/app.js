@@ -277,6 +277,7 @@ async function buildScene(scene, withCabin) {
   const v = ensure3d();
   if (!v) return;
   v.setBodies(scene.bodies);
+  if (scene.frames) v.showFrame(scene.frames, 0, null); // posed before the camera frames them
   if (withCabin) {
     try { await v.loadCabin(`${API}/plans/${state.planId}/cabin.glb`, apiKey()); } catch (err) {
       status(`the cabin mesh could not be loaded: ${err.message}`, true);

@@ -295,6 +295,7 @@ export class Scene3D {
     group.rotation.x = -Math.PI / 2;
     this.root.add(group);
     this.pprs6 = { group, chains, platform };
+    this.showPprs6Frame(scene.frames, 0);
   }
 
   showPprs6Frame(frames, i) {

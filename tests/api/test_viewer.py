@@ -194,7 +194,10 @@ def _scrub(page: Any, t: float) -> dict[str, Any]:
 def _canvas_variance(page: Any, path: Path) -> float:
     from PIL import Image
 
-    png = page.locator("#scene-canvas").screenshot(path=str(path))
+    # A page screenshot clipped to the canvas (what is on screen; an element screenshot waits for the page's
+    # animation loop to settle, seconds under software rendering).
+    box = page.locator("#scene-canvas").bounding_box()
+    png = page.screenshot(path=str(path), clip=box)
     pixels = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
     return float(pixels.var(axis=(0, 1)).sum())
 
