@@ -484,7 +484,7 @@ async function submitPprs6(ev) {
     row('duration', `${fmt(doc.profile.duration_s)} s`),
     row('samples', `${doc.profile.t.length}`),
     row('waypoints', `${doc.profile.path.waypoints.length}`),
-    row('workspace volume points', `${doc.scene.workspace.count}`),
+    row('workspace boundary points', `${doc.scene.workspace.count}`),
   ].join('');
   $('#provenance').innerHTML = row('robot description', doc.profile.provenance.robot_description_sha256, 'hash');
   $('#drive-panel').hidden = false;
