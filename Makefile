@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run serve test lint typecheck check bench lock clean
+.PHONY: run serve test lint typecheck check bench lock clean chromium
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -21,10 +21,16 @@ run: $(STAMP)  ## the main job on embedded defaults: plan the reference bay inse
 serve: $(STAMP)  ## the HTTP service on 127.0.0.1:8000 (embedded defaults; prints the local API key)
 	$(BIN)/python -m api
 
-test: $(STAMP)  ## lint, type-check and the whole test suite
+test: $(STAMP) chromium  ## lint, type-check and the whole test suite (installs Debian's Chromium first)
 	$(BIN)/ruff check planner api tests bench
 	$(BIN)/mypy planner api
 	$(BIN)/python -m pytest -q
+
+chromium:  ## Debian's Chromium for the viewer's browser tests (they skip without it); never a downloaded browser
+	@command -v chromium >/dev/null 2>&1 || { apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } || \
+		echo "chromium: not installed (needs root and Debian's packages): the browser tests will skip"
+	@chromium --version 2>/dev/null || true
 
 lint: $(STAMP)
 	$(BIN)/ruff check planner api tests bench

@@ -44,6 +44,7 @@ def main() -> None:
         sys.stdout.write(
             f"cabinplan: local API key (tenant {LOCAL_TENANT!r}, loopback only): {key}\n"
             f"cabinplan: try: curl -H 'X-API-Key: {key}' http://{settings.host}:{settings.port}/api/v1/robots\n"
+            f"cabinplan: operator page: http://{settings.host}:{settings.port}/viewer/ (key: as above)\n"
         )
         sys.stdout.flush()
     uvicorn.run(app, host=settings.host, port=settings.port, log_level="info", access_log=False)

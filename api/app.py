@@ -10,9 +10,11 @@ from __future__ import annotations
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI
+from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -20,7 +22,7 @@ from api import problems
 from api.context import AppContext
 from api.db import Database
 from api.jobs import JobRunner, ProcessJobRunner, recover_jobs
-from api.routes import cabins, health, keys, kinematics, plans, pprs6, robots, stiffness
+from api.routes import cabins, health, keys, kinematics, plans, pprs6, robots, scene, stiffness
 from api.settings import Settings
 from api.store import MeshStore
 from planner import __version__
@@ -29,6 +31,9 @@ from planner.meshio import MeshLimits
 _LOG = logging.getLogger(__name__)
 
 API_PREFIX = "/api/v1"
+#: Where the operator page is served, and the folder of its static files.
+VIEWER_PATH = "/viewer"
+VIEWER_DIR = Path(__file__).resolve().parent / "viewer"
 
 
 class BodyTooLarge(StarletteHTTPException):
@@ -130,10 +135,12 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         max_body_bytes=settings.max_body_bytes,
         max_upload_bytes=settings.max_upload_bytes,
     )
-    for module in (health, robots, cabins, plans, kinematics, pprs6, stiffness, keys):
+    for module in (health, robots, cabins, plans, scene, kinematics, pprs6, stiffness, keys):
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
+    # The operator page: static files of the package (three.js and uPlot vendored, no CDN; api/viewer).
+    app.mount(VIEWER_PATH, StaticFiles(directory=VIEWER_DIR, html=True), name="viewer")
     return app
 
 
-__all__ = ["API_PREFIX", "BodyLimitMiddleware", "BodyTooLarge", "create_app"]
+__all__ = ["API_PREFIX", "VIEWER_DIR", "VIEWER_PATH", "BodyLimitMiddleware", "BodyTooLarge", "create_app"]

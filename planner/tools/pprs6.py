@@ -14,7 +14,7 @@ import numpy as np
 
 from planner.core.exceptions import InvalidInput
 from planner.kinematics import pprs6 as kin
-from planner.kinematics.workspace import two_pass_search
+from planner.kinematics.workspace import Workspace, two_pass_search
 from planner.plan.pose_path import (
     PAPER_PATH,
     Pprs6Profile,
@@ -85,20 +85,15 @@ def ik_document(pose: Mapping[str, float]) -> dict[str, Any]:
     }
 
 
-def workspace_document(
-    orientation: Mapping[str, float] | None = None,
-    step_m: float = 0.005,
-    png: bool = True,
-) -> tuple[dict[str, Any], bytes]:
-    """Reachable positions at a fixed orientation (boundary search), figures and the three-view PNG.
+def search_workspace(orientation: Mapping[str, float] | None, step_m: float) -> tuple[Workspace, np.ndarray]:
+    """The reachable positions of the platform centre at a fixed orientation (two-pass boundary search).
 
     Args:
         orientation: ``{"phi","theta","psi"}`` [rad] (default: all zero, as in the paper's Fig. 5).
         step_m: Grid step of the fine pass [m], in [0.001, 0.02].
-        png: Also draw the views (else the bytes are empty).
 
     Returns:
-        (figures: volume, extents, sizes, condition numbers over the inside grid points; PNG bytes).
+        (the workspace grid, the orientation angles (3,) [rad]).
     """
     robot = _robot()
     angles = np.zeros(3)
@@ -131,6 +126,26 @@ def workspace_document(
     z_top = float(robot.limits.upper[3:].max() + max(g.L) + g.r)
     bounds = np.array([[-reach, reach], [-reach, reach], [-g.r - max(g.L), z_top]])
     ws = two_pass_search(admissible, bounds, float(step_m), coarse_step_m=max(4 * float(step_m), 0.01))
+    return ws, angles
+
+
+def workspace_document(
+    orientation: Mapping[str, float] | None = None,
+    step_m: float = 0.005,
+    png: bool = True,
+) -> tuple[dict[str, Any], bytes]:
+    """Reachable positions at a fixed orientation (boundary search), figures and the three-view PNG.
+
+    Args:
+        orientation: ``{"phi","theta","psi"}`` [rad] (default: all zero, as in the paper's Fig. 5).
+        step_m: Grid step of the fine pass [m], in [0.001, 0.02].
+        png: Also draw the views (else the bytes are empty).
+
+    Returns:
+        (figures: volume, extents, sizes, condition numbers over the inside grid points; PNG bytes).
+    """
+    robot = _robot()
+    ws, angles = search_workspace(orientation, step_m)
     doc: dict[str, Any] = {
         "robot": robot.name,
         "orientation": dict(zip(("phi", "theta", "psi"), angles.tolist(), strict=True)),
