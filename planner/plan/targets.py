@@ -71,6 +71,7 @@ def goal_targets(ctx: PlanContext) -> tuple[list[Array], list[GoalCandidate | No
                 **stats,
                 best=best,
                 candidates=evidence,
+                **({"q": best["q"]} if best is not None else {}),
             )
         raise GoalUnreachable(
             "goal pose: no configuration reaching it can hold the payload within the drive force limits"
@@ -78,6 +79,7 @@ def goal_targets(ctx: PlanContext) -> tuple[list[Array], list[GoalCandidate | No
             **stats,
             best=best,
             candidates=evidence,
+            **({"q": best["q"]} if best is not None else {}),
         )
     if sc.approach_direction is None:
         return [x.q for x in cands], [None] * len(cands)
@@ -106,6 +108,7 @@ def goal_targets(ctx: PlanContext) -> tuple[list[Array], list[GoalCandidate | No
             tracked_candidates=len(cands[:TRACKED_CANDIDATES]),
             best=best,
             candidates=evidence,
+            **({"q": best["q"]} if best is not None else {}),
         )
     tracked.sort(key=lambda x: -x.clearance_m)
     ctx.report["approach"].update(
