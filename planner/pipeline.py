@@ -55,6 +55,7 @@ from planner.planning.motion import motion_clear
 from planner.planning.ompl_adapter import plan_joint_path
 from planner.planning.shortcut import cut_corners, segment_times
 from planner.planning.transit import find_transit
+from planner.robots.description import TRUSTED_STIFFNESS_SOURCES
 
 if TYPE_CHECKING:
     from planner.scenario import ResolvedScenario
@@ -64,6 +65,9 @@ from planner.timing.stage import TimedPath, TimingStage, ToppraStage
 from planner.validate import GateReport, GateRequirements, validate_profile
 
 Array = NDArray[np.float64]
+
+#: The stiffness model's name in plan reports and provenance.
+STIFFNESS_MODEL_NAME = "cabin8 beam/spring/pin stiffness model (paper section 4, planner.dynamics.stiffness)"
 log = logging.getLogger(__name__)
 
 Progress = Callable[[str, float], None]
@@ -123,7 +127,11 @@ def single_drive_lower_bound(robot: Any, u0: Array, u1: Array) -> float:
 
 
 def compensates_deflection(sc: ResolvedScenario) -> bool:
-    """Whether a scenario's pose goal is deflection-compensated (option, default: with a payload).
+    """Whether a scenario's pose goal is deflection-compensated.
+
+    The option decides when given; by default (null) a pose goal with a payload is compensated only when
+    the robot's stiffness data are trustworthy (``stiffness.source`` paper-fit or calibrated, issue 15):
+    compensating with guessed data can make the placement worse than not compensating.
 
     Raises:
         InvalidInput: compensation asked for explicitly on a robot without stiffness data.
@@ -134,9 +142,43 @@ def compensates_deflection(sc: ResolvedScenario) -> bool:
             f"options.compensate_deflection: robot {sc.robot.name!r} has no stiffness data",
             field="options.compensate_deflection",
         )
-    if sc.T_base_payload_goal is None or sc.robot.desc.stiffness is None:
+    spec = sc.robot.desc.stiffness
+    if sc.T_base_payload_goal is None or spec is None:
         return False
-    return sc.payload is not None if option is None else bool(option)
+    if option is None:
+        return sc.payload is not None and spec.source in TRUSTED_STIFFNESS_SOURCES
+    return bool(option)
+
+
+def stiffness_provenance(sc: ResolvedScenario) -> dict[str, Any]:
+    """Which stiffness model and data a plan used, and whether its goal was compensated (issue 15).
+
+    ``{"model", "source", "compensated", "note"}``; ``source`` is None without stiffness data.
+    """
+    spec = sc.robot.desc.stiffness
+    compensated = compensates_deflection(sc)
+    if spec is None:
+        return {"model": None, "source": None, "compensated": False, "note": "no stiffness data"}
+    if compensated and spec.source not in TRUSTED_STIFFNESS_SOURCES:
+        note = (
+            f"compensated on request with {spec.source} stiffness data (guesses): the command may "
+            "miss the request by more than the predicted sag"
+        )
+    elif compensated:
+        note = f"goal compensated with {spec.source} stiffness data"
+    elif (
+        sc.T_base_payload_goal is not None
+        and sc.payload is not None
+        and spec.source not in (TRUSTED_STIFFNESS_SOURCES)
+    ):
+        note = (
+            f"not compensated: the stiffness data are {spec.source} (not fitted to the paper nor "
+            "calibrated); the predicted sag is reported, set options.compensate_deflection: true to "
+            "compensate anyway, or calibrate the robot (cabinplan stiffness calibrate)"
+        )
+    else:
+        note = "not compensated"
+    return {"model": STIFFNESS_MODEL_NAME, "source": spec.source, "compensated": compensated, "note": note}
 
 
 def gate_requirements(
@@ -813,6 +855,7 @@ class Planner:
             "max_rotation_rad": float(rot.max()),
             "at_goal": StaticDeflection(x[-1, :3], x[-1, 3:]).to_dict(),
             "compensated": comp is not None,
+            "stiffness": stiffness_provenance(sc),
             # The predicted deflection along the trajectory, at up to 100 evenly spaced samples.
             "along": {
                 "t_s": profile.t[idx[::every]].round(4).tolist(),

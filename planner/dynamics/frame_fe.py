@@ -194,7 +194,10 @@ def fe_deflection(
     P = {n: np.array([float(px), float(py), q[chain.D1]]) for n, (px, py) in zip("ABCDEF", pts, strict=True)}
     centre = np.array([q[chain.X], q[chain.Y], q[chain.D1]])
     ez, ex = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
-    pin = ((_rot(ez), 0.0),)
+    # A pin: free about z; with a finite pin stiffness, a translational spring along each base axis.
+    c_pin = spec.pin_compliance_m_N
+    axes = (ex, np.array([0.0, 1.0, 0.0]), ez)
+    pin = ((_rot(ez), 0.0),) + (tuple((_trans(a), 1.0 / c_pin) for a in axes) if c_pin > 0 else ())
 
     fm = FrameModel()
     ground = fm.ground(P["A"])
