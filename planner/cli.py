@@ -113,14 +113,15 @@ def fk(
 ) -> None:
     """Forward kinematics: drives (or joints) -> joints, drives and T_base_tool (row-major 4x4)."""
     tools = kinematics_tools(robot)
-    _emit(
-        tools.fk(
-            robot,
-            None if drives is None else _json_arg(drives, "--drives"),
-            None if joints is None else _json_arg(joints, "--joints"),
-            None if guess is None else _json_arg(guess, "--guess"),
-        )
+    doc = tools.fk(
+        robot,
+        None if drives is None else _json_arg(drives, "--drives"),
+        None if joints is None else _json_arg(joints, "--joints"),
+        None if guess is None else _json_arg(guess, "--guess"),
     )
+    _emit(doc)
+    if doc.get("warning"):  # several assembly modes (pprs6): say so where a person reads it too
+        typer.echo(f"cabinplan: warning: {doc['warning']}", err=True)
 
 
 @app.command()
