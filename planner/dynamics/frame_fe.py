@@ -6,8 +6,9 @@ Joints are kinematic relations between node DOFs, eliminated exactly (master-sla
 
 * a rigid connection of node s to node m at offset r: ``u_s = u_m + phi_m x r``, ``phi_s = phi_m``;
 * a joint adds one independent DOF along a unit twist (translation along or rotation about its axis):
-  free for a pin (released rotation about the base z axis at A, B, C, D, E, F), or with a spring of the
-  drive's stiffness for the rail, the sliders, theta3, theta4, d5 and theta6.
+  free for a pin (released rotation about the base z axis at A, B, C, D, E, F; with a finite pin
+  compliance also three translations along the base axes with springs of its inverse), or with a spring
+  of the drive's stiffness for the rail, the sliders, theta3, theta4, d5 and theta6.
 
 The rail carriage hangs on the fixed ground through the rail spring; the slider carriages are rigid on it;
 the stage links pin onto the sliders and each other; the column, arm and slide follow through their drive

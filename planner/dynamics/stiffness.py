@@ -6,8 +6,11 @@ BC (in the stage plane, section width b along the base z axis), the column (fram
 and the slide (4 -> 6, the same members as :mod:`planner.dynamics.lagrange`). Its tip compliance in the
 beam frame (x along the beam) is the cantilever matrix of eq. (54). Every drive is a spring along or about
 its axis (rail, the three sliders, theta3, theta4, d5, theta6); every stage pin (A, B, C, D, E, F) is a
-passive revolute joint about the base z axis that carries no moment about it; the slider carriages, the
-rail carriage, the tool and the payload are rigid.
+passive revolute joint about the base z axis that carries no moment about it, with a translational
+compliance ``pin_compliance_m_N`` along each base axis (its bearing; issue 15); the slider carriages, the
+rail carriage, the tool and the payload are rigid. The data and where they come from (``stiffness.source``:
+paper-fit, calibrated, nominal) are in the description (:mod:`planner.dynamics.paper_fit`,
+:mod:`planner.dynamics.calibration`).
 
 * **Serial composition** (eq. 69-74): an element j with compliance C_j at its tip frame (rotation R_j,
   tip point t_j) adds ``J_j C_j J_j^T`` to the compliance at a reference point P, with
@@ -724,7 +727,8 @@ def stiffness_document(
             deflections are given (at the frame origin, base axes).
 
     Returns:
-        ``{"robot", "frame", "joints", "drives", "T_base_frame", "stiffness", "compliance", "units",
+        ``{"robot", "stiffness_source", "frame", "joints", "drives", "T_base_frame", "stiffness",
+        "compliance", "units",
         "deflection": {"gravity", "wrench"?, "total"}}``; matrices are 6x6 row-major lists, deflections
         ``{"translation_m", "rotation_rad", "translation_norm_m", "rotation_norm_rad"}``.
 
@@ -766,6 +770,7 @@ def stiffness_document(
     grav = model.deflection(q, rigid, T_tf)
     out: dict[str, Any] = {
         "robot": robot.name,
+        "stiffness_source": model.spec.source,
         "frame": frame,
         "joints": robot.joints_dict(q),
         "drives": robot.drives_dict(robot.drives_from_joints(q)),
