@@ -40,7 +40,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from numpy.typing import NDArray
+from pydantic import ValidationError
 from scipy.optimize import least_squares
 
 from planner.dynamics.stiffness import StiffnessModel
@@ -52,9 +54,9 @@ from planner.dynamics.stiffness_params import (
     reference_values,
     stiffness_yaml_block,
 )
-from planner.exceptions import CalibrationIllPosed, InvalidInput
+from planner.exceptions import CalibrationIllPosed, InvalidInput, InvalidRobotDescription
 from planner.robots.cabin8 import Cabin8
-from planner.robots.description import HYBRID8_DRIVES, StiffnessSpec
+from planner.robots.description import HYBRID8_DRIVES, Hybrid8Description, StiffnessSpec
 
 Array = NDArray[np.float64]
 
@@ -270,8 +272,6 @@ def calibrate(
         raise InvalidInput(f"robot {robot.name}: the description has no stiffness section", field="robot")
     if not (sigma_m > 0 and sigma_rad > 0 and math.isfinite(sigma_m) and math.isfinite(sigma_rad)):
         raise InvalidInput("sigma: must be finite and > 0", field="sigma")
-    if "pin" in names and base.pin_compliance_m_N == 0:
-        pass  # the fit starts from the reference pin compliance (a rigid pin has no log)
     q = robot.joints_from_drives(data.drives)
     bad = [i + 1 for i, qi in enumerate(q) if robot.violations(qi)]
     if bad:
@@ -423,11 +423,18 @@ def calibrate_file(
     cal = calibrate(robot, data, parameters or DEFAULT_PARAMETERS, sigma_m, sigma_rad)
     out_text = calibrated_description(base_path, cal)
     try:
+        Hybrid8Description.model_validate(yaml.safe_load(out_text))  # valid before anything is written
+    except (ValidationError, yaml.YAMLError) as exc:
+        raise InvalidRobotDescription(
+            f"calibration: the calibrated description would not be valid ({exc}); check {base_path}",
+            path=str(base_path),
+        ) from exc
+    try:
         output.parent.mkdir(parents=True, exist_ok=True)
         output.write_text(out_text, encoding="utf-8")
     except OSError as exc:
         raise InvalidInput(f"--output: cannot write {output} ({exc.strerror})", field="output") from exc
-    load_description(output)  # the written file is a valid description (raises if not)
+    load_description(output)  # what the planner will read back
     return {"robot": robot.name, "description": str(output), "source": "calibrated", **cal.to_dict()}
 
 

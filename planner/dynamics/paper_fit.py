@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from planner.dynamics.stiffness import StiffnessModel
-from planner.dynamics.stiffness_params import ParameterSet, stiffness_yaml_block
+from planner.dynamics.stiffness_params import ParameterSet, reference_values, stiffness_yaml_block
 from planner.robots.cabin8 import Cabin8, default_description_path
 from planner.robots.description import LinkSections, Section, StiffnessSpec
 
@@ -257,20 +257,20 @@ def fit_table2(
 
 
 def _ref_values(pset: ParameterSet) -> Array:
-    from planner.dynamics.stiffness_params import reference_values
-
     ref = reference_values(pset.base)
     return np.array([ref[g[0]] for g in pset.groups])
 
 
 def replace_stiffness_block(text: str, block: str) -> str:
-    """A description file's text with its top-level ``stiffness:`` section replaced by ``block``."""
-    m = re.search(r"^stiffness:.*?(?=^\S)", text, flags=re.S | re.M)
+    """A description file's text with its top-level ``stiffness:`` section replaced by ``block``.
+
+    The section runs from the ``stiffness:`` line to the next line starting in column 0 (the next key, or
+    an unindented comment) or the end; without one, the block is appended.
+    """
+    m = re.search(r"^stiffness:.*?(?=^\S|\Z)", text, flags=re.S | re.M)
     if m is None:
-        raise ValueError("the description has no top-level stiffness section followed by another key")
-    start = m.start()
-    # Keep the comment lines directly above the key with the block they describe.
-    return text[:start] + block + "\n" + text[m.end() :]
+        return text.rstrip("\n") + "\n\n" + block
+    return text[: m.start()] + block + "\n" + text[m.end() :]
 
 
 def _comment(fit: PaperFit) -> list[str]:

@@ -108,3 +108,14 @@ def test_yaml_block_round_trips(robot: Cabin8, tmp_path) -> None:  # type: ignor
     assert again.stiffness.drives == pytest.approx(spec.drives, rel=1e-3)
     assert again.stiffness.source == spec.source
     assert again.home == robot.desc.home and again.masses == robot.desc.masses
+
+
+def test_stiffness_block_replaced_at_the_end_or_appended() -> None:
+    block = "stiffness:\n  source: nominal\n"
+    assert (
+        paper_fit.replace_stiffness_block("a: 1\nstiffness:\n  E_Pa: 1\n", block) == "a: 1\n" + block + "\n"
+    )
+    assert paper_fit.replace_stiffness_block("a: 1\n", block) == "a: 1\n\n" + block
+    assert (
+        paper_fit.replace_stiffness_block("stiffness:\n  x: 1\nhome: {}\n", block) == block + "\nhome: {}\n"
+    )
