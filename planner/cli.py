@@ -114,14 +114,15 @@ def fk(
 ) -> None:
     """Forward kinematics: drives (or joints) -> joints, drives and T_base_tool (row-major 4x4)."""
     tools = kinematics_tools(robot)
-    _emit(
-        tools.fk(
-            robot,
-            None if drives is None else _json_arg(drives, "--drives"),
-            None if joints is None else _json_arg(joints, "--joints"),
-            None if guess is None else _json_arg(guess, "--guess"),
-        )
+    doc = tools.fk(
+        robot,
+        None if drives is None else _json_arg(drives, "--drives"),
+        None if joints is None else _json_arg(joints, "--joints"),
+        None if guess is None else _json_arg(guess, "--guess"),
     )
+    _emit(doc)
+    if doc.get("warning"):  # several assembly modes (pprs6): say so where a person reads it too
+        typer.echo(f"cabinplan: warning: {doc['warning']}", err=True)
 
 
 @app.command()
@@ -154,10 +155,38 @@ def stiffness(
         str | None, typer.Option(help='JSON payload: {"mass", "com"?, "inertia"? or "box"?, "grasp"?}')
     ] = None,
     frame: Annotated[str, typer.Option(help="tool | payload: where K, C and deflections are given")] = "tool",
+    measurements: Annotated[
+        Path | None, typer.Argument(help="calibrate: the measurements CSV", dir_okay=False)
+    ] = None,
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="calibrate: the calibrated description (YAML)")
+    ] = None,
+    description: Annotated[
+        Path | None, typer.Option(help="calibrate: base description (default: the packaged cabin8)")
+    ] = None,
+    parameters: Annotated[
+        str | None, typer.Option(help="calibrate: comma-separated parameters to fit (default: drives, pin)")
+    ] = None,
+    sigma_m: Annotated[float, typer.Option(help="calibrate: translation noise [m]")] = 1e-5,
+    sigma_rad: Annotated[float, typer.Option(help="calibrate: rotation noise [rad]")] = 1e-5,
 ) -> None:
-    """Cartesian stiffness K, compliance C and static deflection (gravity, a wrench) at a configuration."""
+    """Cartesian stiffness K, compliance C and static deflection (gravity, a wrench) at a configuration.
+
+    ``cabinplan stiffness calibrate MEASUREMENTS.csv -o calibrated.yaml`` instead fits the stiffness data
+    to measured deflections and writes a description the planner can use (scenario ``robot_description``).
+    """
     from planner.dynamics.stiffness import stiffness_document
 
+    if robot == "calibrate":
+        from planner.dynamics.calibration import calibrate_file
+
+        if measurements is None or output is None:
+            _fail("stiffness calibrate: give MEASUREMENTS.csv and -o OUTPUT.yaml", EXIT_INVALID)
+        names = None if parameters is None else [p.strip() for p in parameters.split(",") if p.strip()]
+        _emit(calibrate_file(measurements, output, description, names, sigma_m, sigma_rad))
+        return
+    if measurements is not None:
+        _fail(f"stiffness: unexpected argument {str(measurements)!r} (only 'calibrate' takes a file)", 2)
     if (drives is None) == (joints is None):
         _fail("stiffness: give exactly one of --drives or --joints", EXIT_INVALID)
     _emit(

@@ -133,13 +133,33 @@ class LinkSections(_Frozen):
     slide: Section
 
 
+#: Where a description's stiffness data come from (issue 15). Deflection compensation is on by default
+#: only for the two trustworthy ones (:data:`TRUSTED_STIFFNESS_SOURCES`).
+StiffnessSource = Literal["paper-fit", "calibrated", "nominal"]
+TRUSTED_STIFFNESS_SOURCES: frozenset[str] = frozenset({"paper-fit", "calibrated"})
+
+
 class StiffnessSpec(_Frozen):
-    """Material, link sections and drive stiffnesses of the stiffness model (issue 7 data)."""
+    """Material, link sections, drive and pin stiffnesses of the stiffness model (issues 7 and 15).
+
+    ``source`` says where the numbers come from: ``paper-fit`` (chosen by ``python -m
+    planner.dynamics.paper_fit`` to reproduce the paper's Table 2), ``calibrated`` (fitted to a cell's
+    measurements by ``cabinplan stiffness calibrate``) or ``nominal`` (guesses; the default for a
+    description that does not say). ``pin_compliance_m_N`` is the translational compliance of each stage
+    pin (A-F) along each base axis (bearing play-free radial/axial compliance); 0 is a rigid pin.
+    ``uncertainty`` (calibrated data) holds each fitted parameter's relative standard deviation.
+    """
 
     E_Pa: float = Field(gt=0, description="Young's modulus [Pa]")
     G_Pa: float = Field(gt=0, description="shear modulus [Pa]")
     sections: LinkSections
     drives: dict[str, float] = Field(description="drive stiffness [N/m] or [N m/rad] by drive name")
+    pin_compliance_m_N: float = Field(0.0, ge=0, lt=1e-3, description="stage pin compliance [m/N]")
+    source: StiffnessSource = Field("nominal", description="where the stiffness data come from")
+    note: str = Field("", max_length=4000, description="how the data were obtained (free text)")
+    uncertainty: dict[str, float] | None = Field(
+        None, description="relative standard deviation of each fitted parameter (calibrated data)"
+    )
 
     @model_validator(mode="after")
     def _drives(self) -> StiffnessSpec:

@@ -157,3 +157,14 @@ class DeflectionNotCompensated(PlanRefused):
     """
 
     reason = "compensation_failed"
+
+
+class CalibrationIllPosed(InvalidInput):
+    """Measured deflections cannot determine the stiffness parameters asked for (issue 15).
+
+    Too few measurements or configurations, configurations or loads too similar to separate the parameters
+    (``details['condition']``, ``details['combination']``), or a parameter left undetermined
+    (``details['relative_std']``).
+    """
+
+    reason = "calibration_ill_posed"

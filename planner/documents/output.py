@@ -34,8 +34,18 @@ def provenance(sc: ResolvedScenario) -> dict[str, Any]:
         "robot_description_sha256": sc.robot.description_sha256,
         "cabin_mesh_sha256": sc.cabin.sha256 if sc.cabin is not None else None,
         "cabin_source": sc.cabin_source,
+        "stiffness": _stiffness(sc),
         "code": code_version(),
     }
+
+
+def _stiffness(sc: ResolvedScenario) -> dict[str, Any]:
+    from planner.gate.requirements import stiffness_provenance
+
+    try:
+        return stiffness_provenance(sc)
+    except PlannerError as exc:  # an invalid compensation option: the refusal says why
+        return {"model": None, "source": None, "compensated": False, "note": exc.message}
 
 
 def _jsonable(value: Any) -> Any:

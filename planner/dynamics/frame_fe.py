@@ -6,8 +6,9 @@ Joints are kinematic relations between node DOFs, eliminated exactly (master-sla
 
 * a rigid connection of node s to node m at offset r: ``u_s = u_m + phi_m x r``, ``phi_s = phi_m``;
 * a joint adds one independent DOF along a unit twist (translation along or rotation about its axis):
-  free for a pin (released rotation about the base z axis at A, B, C, D, E, F), or with a spring of the
-  drive's stiffness for the rail, the sliders, theta3, theta4, d5 and theta6.
+  free for a pin (released rotation about the base z axis at A, B, C, D, E, F; with a finite pin
+  compliance also three translations along the base axes with springs of its inverse), or with a spring
+  of the drive's stiffness for the rail, the sliders, theta3, theta4, d5 and theta6.
 
 The rail carriage hangs on the fixed ground through the rail spring; the slider carriages are rigid on it;
 the stage links pin onto the sliders and each other; the column, arm and slide follow through their drive
@@ -192,7 +193,10 @@ def fe_deflection(
     P = {n: np.array([float(px), float(py), q[chain.D1]]) for n, (px, py) in zip("ABCDEF", pts, strict=True)}
     centre = np.array([q[chain.X], q[chain.Y], q[chain.D1]])
     ez, ex = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
-    pin = ((_rot(ez), 0.0),)
+    # A pin: free about z; with a finite pin stiffness, a translational spring along each base axis.
+    c_pin = spec.pin_compliance_m_N
+    axes = (ex, np.array([0.0, 1.0, 0.0]), ez)
+    pin = ((_rot(ez), 0.0),) + (tuple((_trans(a), 1.0 / c_pin) for a in axes) if c_pin > 0 else ())
 
     fm = FrameModel()
     ground = fm.ground(P["A"])

@@ -6,8 +6,11 @@ BC (in the stage plane, section width b along the base z axis), the column (fram
 and the slide (4 -> 6, the same members as :mod:`planner.dynamics.lagrange`). Its tip compliance in the
 beam frame (x along the beam) is the cantilever matrix of eq. (54). Every drive is a spring along or about
 its axis (rail, the three sliders, theta3, theta4, d5, theta6); every stage pin (A, B, C, D, E, F) is a
-passive revolute joint about the base z axis that carries no moment about it; the slider carriages, the
-rail carriage, the tool and the payload are rigid.
+passive revolute joint about the base z axis that carries no moment about it, with a translational
+compliance ``pin_compliance_m_N`` along each base axis (its bearing; issue 15); the slider carriages, the
+rail carriage, the tool and the payload are rigid. The data and where they come from (``stiffness.source``:
+paper-fit, calibrated, nominal) are in the description (:mod:`planner.dynamics.paper_fit`,
+:mod:`planner.dynamics.calibration`).
 
 * **Serial composition** (eq. 69-74): an element j with compliance C_j at its tip frame (rotation R_j,
   tip point t_j) adds ``J_j C_j J_j^T`` to the compliance at a reference point P, with
@@ -319,14 +322,16 @@ class StiffnessModel:
     """The analytical stiffness model of a :class:`Cabin8` (module docstring); every method is batched.
 
     Args:
-        robot: The robot; its description must have a ``stiffness`` section.
+        robot: The robot; its description must have a ``stiffness`` section (unless ``spec`` is given).
+        spec: Stiffness data to use instead of the description's (the fit and the calibration try
+            candidate data on the same geometry).
 
     Raises:
         InvalidRobotDescription: the description has no stiffness data.
     """
 
-    def __init__(self, robot: Cabin8) -> None:
-        spec = robot.desc.stiffness
+    def __init__(self, robot: Cabin8, spec: StiffnessSpec | None = None) -> None:
+        spec = spec if spec is not None else robot.desc.stiffness
         if spec is None:
             raise InvalidRobotDescription(
                 f"robot description {robot.name}: stiffness: missing (needed for the stiffness model)",
@@ -343,6 +348,17 @@ class StiffnessModel:
         R, length = beam_frame(p0, p1, z_ref)
         sec = getattr(self.spec.sections, name)
         return map_compliance(beam_compliance(length, sec, self.spec.E_Pa, self.spec.G_Pa), R, p1, point)
+
+    def _pin_compliance(self, at: Array, point: Array) -> Array:
+        """Translational compliance (N, 6, 6) of a stage pin at ``at`` seen at ``point`` (issue 15).
+
+        The pin's bearing gives along each base axis under a force through it (``pin_compliance_m_N``);
+        it is a serial element of its branch, like the beams.
+        """
+        c = self.spec.pin_compliance_m_N
+        C_local = np.zeros((*at.shape[:-1], 6, 6))
+        C_local[..., [0, 1, 2], [0, 1, 2]] = c
+        return map_compliance(C_local, np.broadcast_to(np.eye(3), (*at.shape[:-1], 3, 3)), at, point)
 
     def _stage_points(self, q: Array) -> dict[str, Array]:
         pts = parallel.stage_points(self.robot.geometry, q[:, chain.X], q[:, chain.Y], q[:, chain.GAMMA])
@@ -370,10 +386,16 @@ class StiffnessModel:
         kx = self.k_drive[1:4]
         slide_x = prismatic_twist(ex)
         E, centre = p["E"], p["O"]
+        pin = self._pin_compliance
         # Level 1, at E: (slider A, pin A, beam A-E) || (slider F, pin F, beam F-E, pin E).
-        C_a = self._beam("link_ab", p["A"], E, ez, E) + spring_compliance(slide_x, kx[0])
+        C_a = self._beam("link_ab", p["A"], E, ez, E) + spring_compliance(slide_x, kx[0]) + pin(p["A"], E)
         K_a = branch_stiffness(C_a, revolute_twist(ez, p["A"], E)[..., None])
-        C_b = self._beam("link_ef", p["F"], E, ez, E) + spring_compliance(slide_x, kx[2])
+        C_b = (
+            self._beam("link_ef", p["F"], E, ez, E)
+            + spring_compliance(slide_x, kx[2])
+            + pin(p["F"], E)
+            + pin(E, E)
+        )
         J_b = np.stack([revolute_twist(ez, p["F"], E), revolute_twist(ez, E, E)], axis=-1)
         K_b = branch_stiffness(C_b, J_b)
         C_E = np.asarray(np.linalg.inv(K_a + K_b), dtype=float)
@@ -382,12 +404,15 @@ class StiffnessModel:
             map_compliance(C_E, np.broadcast_to(np.eye(3), (n, 3, 3)), E, centre)
             + self._beam("link_ab", E, p["B"], ez, centre)
             + self._beam("platform", p["B"], centre, ez, centre)
+            + pin(p["B"], centre)
         )
         K_1 = branch_stiffness(C_1, revolute_twist(ez, p["B"], centre)[..., None])
         C_2 = (
             spring_compliance(slide_x, kx[1])
             + self._beam("link_cd", p["D"], p["C"], ez, centre)
             + self._beam("platform", p["C"], centre, ez, centre)
+            + pin(p["D"], centre)
+            + pin(p["C"], centre)
         )
         J_2 = np.stack([revolute_twist(ez, p["D"], centre), revolute_twist(ez, p["C"], centre)], axis=-1)
         K_2 = branch_stiffness(C_2, J_2)
@@ -700,7 +725,8 @@ def stiffness_document(
             deflections are given (at the frame origin, base axes).
 
     Returns:
-        ``{"robot", "frame", "joints", "drives", "T_base_frame", "stiffness", "compliance", "units",
+        ``{"robot", "stiffness_source", "frame", "joints", "drives", "T_base_frame", "stiffness",
+        "compliance", "units",
         "deflection": {"gravity", "wrench"?, "total"}}``; matrices are 6x6 row-major lists, deflections
         ``{"translation_m", "rotation_rad", "translation_norm_m", "rotation_norm_rad"}``.
 
@@ -742,6 +768,7 @@ def stiffness_document(
     grav = model.deflection(q, rigid, T_tf)
     out: dict[str, Any] = {
         "robot": robot.name,
+        "stiffness_source": model.spec.source,
         "frame": frame,
         "joints": robot.joints_dict(q),
         "drives": robot.drives_dict(robot.drives_from_joints(q)),

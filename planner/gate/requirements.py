@@ -8,10 +8,11 @@ resolved scenario into the :class:`GateRequirements` every route to the gate use
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from planner.core.description import TRUSTED_STIFFNESS_SOURCES
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
 from planner.dynamics.payload import RigidPayload
@@ -79,7 +80,11 @@ def deflection_sample_indices(n: int) -> IntArray:
 
 
 def compensates_deflection(sc: ResolvedScenario) -> bool:
-    """Whether a scenario's pose goal is deflection-compensated (option, default: with a payload).
+    """Whether a scenario's pose goal is deflection-compensated.
+
+    The option decides when given; by default (null) a pose goal with a payload is compensated only when
+    the robot's stiffness data are trustworthy (``stiffness.source`` paper-fit or calibrated, issue 15):
+    compensating with guessed data can make the placement worse than not compensating.
 
     Raises:
         InvalidInput: compensation asked for explicitly on a robot without stiffness data.
@@ -90,9 +95,43 @@ def compensates_deflection(sc: ResolvedScenario) -> bool:
             f"options.compensate_deflection: robot {sc.robot.name!r} has no stiffness data",
             field="options.compensate_deflection",
         )
-    if sc.T_base_payload_goal is None or sc.robot.desc.stiffness is None:
+    spec = sc.robot.desc.stiffness
+    if sc.T_base_payload_goal is None or spec is None:
         return False
-    return sc.payload is not None if option is None else bool(option)
+    if option is None:
+        return sc.payload is not None and spec.source in TRUSTED_STIFFNESS_SOURCES
+    return bool(option)
+
+
+#: The stiffness model's name in plan reports and provenance.
+STIFFNESS_MODEL_NAME = "cabin8 beam/spring/pin stiffness model (paper section 4, planner.dynamics.stiffness)"
+
+
+def stiffness_provenance(sc: ResolvedScenario) -> dict[str, Any]:
+    """Which stiffness model and data a plan used, and whether its goal was compensated (issue 15).
+
+    ``{"model", "source", "compensated", "note"}``; ``source`` is None without stiffness data.
+    """
+    spec = sc.robot.desc.stiffness
+    compensated = compensates_deflection(sc)
+    if spec is None:
+        return {"model": None, "source": None, "compensated": False, "note": "no stiffness data"}
+    if compensated and spec.source not in TRUSTED_STIFFNESS_SOURCES:
+        note = (
+            f"compensated on request with {spec.source} stiffness data (guesses): the command may "
+            "miss the request by more than the predicted sag"
+        )
+    elif compensated:
+        note = f"goal compensated with {spec.source} stiffness data"
+    elif sc.T_base_payload_goal is not None and sc.payload is not None:
+        note = (
+            f"not compensated: the stiffness data are {spec.source} (not fitted to the paper nor "
+            "calibrated); the predicted sag is reported, set options.compensate_deflection: true to "
+            "compensate anyway, or calibrate the robot (cabinplan stiffness calibrate)"
+        )
+    else:
+        note = "not compensated"
+    return {"model": STIFFNESS_MODEL_NAME, "source": spec.source, "compensated": compensated, "note": note}
 
 
 def requirements_for(

@@ -8,7 +8,7 @@ import numpy as np
 
 from planner.core.types import Array
 from planner.dynamics.stiffness import Compensation, StaticDeflection, stiffness_model
-from planner.gate.requirements import deflection_sample_indices
+from planner.gate.requirements import deflection_sample_indices, stiffness_provenance
 from planner.plan.context import PlanContext
 from planner.plan.goals import GoalCandidate
 from planner.timing.profile import DriveProfile
@@ -64,6 +64,7 @@ def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensatio
         "max_rotation_rad": float(rot.max()),
         "at_goal": StaticDeflection(x[-1, :3], x[-1, 3:]).to_dict(),
         "compensated": comp is not None,
+        "stiffness": stiffness_provenance(sc),
         # The predicted deflection along the trajectory, at up to 100 evenly spaced samples.
         "along": {
             "t_s": profile.t[idx[::every]].round(4).tolist(),

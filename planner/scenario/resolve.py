@@ -102,6 +102,7 @@ def resolve_scenario(
     base_dir: Path | None = None,
     mesh_resolver: MeshResolver | None = None,
     mesh_limits: MeshLimits | None = None,
+    robot_description_files: bool = False,
 ) -> ResolvedScenario:
     """Load the robot and meshes of a scenario and turn its start and goal into vectors and transforms.
 
@@ -115,6 +116,8 @@ def resolve_scenario(
         base_dir: Folder that relative mesh paths refer to (normally the scenario file's folder).
         mesh_resolver: Optional hook mapping a mesh name to stored content (HTTP API).
         mesh_limits: Caps applied when loading meshes (default :class:`MeshLimits` ()).
+        robot_description_files: Whether ``robot_description`` may name a file (relative to ``base_dir``);
+            only the CLI allows it (a service must not read its own files on a request's word).
 
     Returns:
         The resolved scenario.
@@ -125,7 +128,7 @@ def resolve_scenario(
             and ``details['field']`` name the field.
         InvalidMesh: a mesh file cannot be used (message prefixed with the field, e.g. ``cabin.mesh: ``).
     """
-    robot = _robot(spec)
+    robot = _robot(spec, base_dir, robot_description_files)
     if spec.options.compensate_deflection and robot.desc.stiffness is None:
         raise InvalidInput(
             f"options.compensate_deflection: robot {robot.name!r} has no stiffness data",
@@ -191,10 +194,34 @@ def resolve_scenario(
 def load_scenario(path: Path, mesh_resolver: MeshResolver | None = None) -> ResolvedScenario:
     """Read, validate and resolve a scenario file; relative mesh paths refer to the file's folder."""
     path = Path(path)
-    return resolve_scenario(load_scenario_file(path), base_dir=path.parent, mesh_resolver=mesh_resolver)
+    return resolve_scenario(
+        load_scenario_file(path),
+        base_dir=path.parent,
+        mesh_resolver=mesh_resolver,
+        robot_description_files=True,
+    )
 
 
-def _robot(spec: Scenario) -> Cabin8:
+def _robot(spec: Scenario, base_dir: Path | None = None, files: bool = False) -> Cabin8:
+    if spec.robot_description is not None:
+        if not files:
+            raise InvalidInput(
+                "robot_description: description files are read by the CLI only (cabinplan plan)",
+                field="robot_description",
+            )
+        path = Path(spec.robot_description)
+        if not path.is_absolute():
+            path = (base_dir if base_dir is not None else Path.cwd()) / path
+        if not path.is_file():
+            raise InvalidInput(f"robot_description: no such file {path}", field="robot_description")
+        described = Cabin8(path, rail_length=spec.rail_length)
+        if described.name != spec.robot:
+            raise InvalidInput(
+                f"robot_description: the file describes {described.name!r}, the scenario's robot is "
+                f"{spec.robot!r}",
+                field="robot_description",
+            )
+        return described
     try:
         robot = load_robot(spec.robot, spec.rail_length)
     except UnknownRobot as exc:

@@ -265,6 +265,13 @@ class Scenario(BaseModel):
         description="Scenario name: letters, digits, '.', '_' and '-'.",
     )
     robot: str = Field("cabin8", min_length=1, max_length=100, description="Registry name of the robot.")
+    robot_description: str | None = Field(
+        None,
+        min_length=1,
+        max_length=1000,
+        description="A cabin8-type description file (e.g. from `cabinplan stiffness calibrate`) to use "
+        "instead of the registry's; a path relative to the scenario file. Read from files only by the CLI.",
+    )
     rail_length: Annotated[Number, Field(gt=0.0, le=50.0)] | None = Field(
         None, description="Rail length in m; replaces the upper limit of drive d1 (default: the model's)."
     )

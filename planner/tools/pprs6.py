@@ -14,6 +14,7 @@ import numpy as np
 
 from planner.core.exceptions import InvalidInput
 from planner.kinematics import pprs6 as kin
+from planner.kinematics.pprs6_modes import assembly_modes
 from planner.kinematics.workspace import Workspace, two_pass_search
 from planner.plan.pose_path import (
     PAPER_PATH,
@@ -41,11 +42,17 @@ def _drives(values: Mapping[str, Any], field: str) -> np.ndarray:
 
 
 def fk_document(drives: Mapping[str, float], guess: Mapping[str, float] | None = None) -> dict[str, Any]:
-    """Forward kinematics: drives -> pose, with the closure residual and the singularity measure.
+    """Forward kinematics: drives -> pose, every assembly mode found, closure residual, singularity measure.
+
+    The forward problem has several solutions for one set of drives (assembly modes, e.g. yaws of
+    opposite sign about the level platform). ``pose`` is the mode nearest ``guess`` when one is given, else
+    the mode connected to the home pose (what Newton reaches from home); ``assembly_modes`` lists every
+    mode found (:func:`~planner.kinematics.pprs6_modes.assembly_modes`: Newton from many starts), each
+    marked ``connected_to_home`` / ``nearest_guess``, and ``warning`` says when there is more than one.
 
     Args:
         drives: ``{"w1","w2","beta","s1","s2","s3"}`` [m, rad].
-        guess: Optional pose to start Newton from (the solution connected to it is returned).
+        guess: Optional pose to start Newton from (the mode nearest it is returned).
 
     Raises:
         InvalidInput: unknown/missing drive names, non-finite values.
@@ -54,15 +61,40 @@ def fk_document(drives: Mapping[str, float], guess: Mapping[str, float] | None =
     robot = _robot()
     u = _drives(drives, "drives")
     x0 = None if guess is None else pose_from_mapping(guess, field="guess")
-    x = robot.fk(u, guess=x0)
+    x = robot.fk(u, guess=x0)  # raises when no start converges
+    modes = assembly_modes(robot.geometry, u, robot.home_pose, x0)
+    poses = modes.poses if len(modes.poses) else x[None]
+    chosen = modes.nearest_guess if x0 is not None else modes.home
+    if chosen is None:  # the modes search missed Newton's own answer: list it too
+        poses = np.vstack([x[None], poses])
+        chosen = 0
+    x = poses[chosen]
     res = kin.closure(robot.geometry, u, x)[0]
-    return {
+    conds = robot.condition_number(poses)
+    out: dict[str, Any] = {
         "robot": robot.name,
         "drives": robot.drives_dict(u),
         "pose": robot.pose_dict(x),
         "closure_residual_m": float(np.max(np.abs(res))),
-        "condition_number": float(robot.condition_number(x)[0]),
+        "condition_number": float(conds[chosen]),
+        "selected": "nearest_guess" if x0 is not None else "connected_to_home",
+        "assembly_modes": [
+            {
+                "pose": robot.pose_dict(p),
+                "connected_to_home": modes.home is not None and i == modes.home,
+                "nearest_guess": modes.nearest_guess is not None and i == modes.nearest_guess,
+                "condition_number": float(conds[i]),
+            }
+            for i, p in enumerate(poses)
+        ],
     }
+    if len(poses) > 1:
+        out["warning"] = (
+            f"{len(poses)} assembly modes reproduce these drives (found from {modes.starts} starts); "
+            f"'pose' is the one {out['selected'].replace('_', ' ')}"
+            + ("" if x0 is not None else "; pass --guess (e.g. the previous pose) to choose another")
+        )
+    return out
 
 
 def ik_document(pose: Mapping[str, float]) -> dict[str, Any]:

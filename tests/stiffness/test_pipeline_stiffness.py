@@ -57,15 +57,18 @@ def test_compensated_plan_lands_the_sagging_payload_on_the_request(plans: dict) 
     T_rigid, T_sagged = _final(sc, res)
     e = pose_error(sc.T_base_payload_goal, T_sagged)
     assert np.linalg.norm(e[:3]) < 1e-5 and np.linalg.norm(e[3:]) < 1e-5
-    # The rigid pose is off the request by the sag it compensates (about 1.7 mm and 2.5 mrad here).
+    # The rigid pose is off the request by the sag it compensates (about 0.2 mm and 0.1 mrad here with
+    # the paper-fit data, 20 times the gate's tolerance).
     off = pose_error(sc.T_base_payload_goal, T_rigid)
-    assert np.linalg.norm(off[:3]) > 1e-3 and np.linalg.norm(off[3:]) > 1e-3
+    assert np.linalg.norm(off[:3]) > 1e-4 and np.linalg.norm(off[3:]) > 5e-5
     rep = res.report
     assert rep["deflection"]["compensated"] is True
     assert rep["goal"]["residual_m"] < 1e-6 and len(rep["goal"]["iterations"]) >= 2  # 10x inside the gate
     np.testing.assert_allclose(rep["goal"]["compensated"]["position"], T_rigid[:3, 3], atol=1e-9)
     assert res.deflection is not None and res.deflection.shape == (len(res.profile.t), 6)
-    assert rep["deflection"]["max_translation_m"] >= rep["deflection"]["at_goal"]["translation_norm_m"] > 1e-3
+    assert rep["deflection"]["max_translation_m"] >= rep["deflection"]["at_goal"]["translation_norm_m"] > 1e-4
+    assert rep["deflection"]["stiffness"]["source"] == "paper-fit"
+    assert rep["deflection"]["stiffness"]["compensated"] is True
 
 
 def test_rigid_plan_misses_by_the_sag_and_the_gate_knows(plans: dict) -> None:
@@ -73,12 +76,12 @@ def test_rigid_plan_misses_by_the_sag_and_the_gate_knows(plans: dict) -> None:
     assert res.gate.passed and "goal" not in res.report
     T_rigid, T_sagged = _final(sc, res)
     np.testing.assert_allclose(T_rigid, sc.T_base_payload_goal, atol=1e-9)
-    assert np.linalg.norm(pose_error(sc.T_base_payload_goal, T_sagged)[:3]) > 1e-3
-    # Under compensating requirements the same profile fails: it ends at the nominal pose, not the command,
-    # and inserts along the nominal line, 1.7 mm off the commanded one.
+    assert np.linalg.norm(pose_error(sc.T_base_payload_goal, T_sagged)[:3]) > 1e-4
+    # Under compensating requirements the same profile fails: it ends at the nominal pose, whose deflected
+    # pose misses the request by the sag (the approach line is within its own tolerance of the command).
     req = dataclasses.replace(requirements_for(sc, planner.payload), compensate_deflection=True)
     gate = validate_profile(res.profile, sc.robot, planner.world, req, planner.dynamics)
-    assert {c.name for c in gate.failures} == {"goal", "approach"}
+    assert "goal" in {c.name for c in gate.failures}
 
 
 def test_gate_recomputes_the_command_when_not_given(plans: dict) -> None:

@@ -108,14 +108,14 @@ def test_compliance_moves_between_frames_as_a_rigid_body(model: StiffnessModel, 
 def test_stage_with_rigid_links_is_the_sliders_through_the_stage_jacobian(
     robot: Cabin8, samples: np.ndarray, tmp_path: Path
 ) -> None:
-    """With links a million times stiffer, the stage's in-plane compliance is J_1 diag(1/k) J_1^T.
+    """With links 1e8 times stiffer and rigid pins, the stage's in-plane compliance is J_1 diag(1/k) J_1^T.
 
     J_1 = d(x, y, gamma)/d(x1, x2, x3) is the paper's parallel-stage Jacobian (eq. 24-25, CasADi AD): the
     pins and the branch assembly must reproduce the kinematics exactly in this limit.
     """
 
     def stiff(raw: dict) -> None:
-        raw["stiffness"].update(E_Pa=206e15, G_Pa=79.4e15)
+        raw["stiffness"].update(E_Pa=206e17, G_Pa=79.4e17, pin_compliance_m_N=0.0)
 
     rigid = Cabin8(_write(tmp_path, stiff))
     C = np.linalg.inv(StiffnessModel(rigid).stage_stiffness(samples))[:, [0, 1, 5]][:, :, [0, 1, 5]]
@@ -163,8 +163,9 @@ def test_fe_route_agrees_like_table2(robot: Cabin8, model: StiffnessModel, sampl
     assert np.all(np.abs(an[:, :3] - fe[:, :3]) <= 0.15 * np.maximum(np.abs(fe[:, :3]), 0.01 * scale))
     rel = np.linalg.norm(an - fe, axis=1) / np.linalg.norm(fe, axis=1)
     assert rel.max() < 1e-8
-    # The deflections are those of a real load case (0.4 to 63 mm here; near stage singularities it is soft).
-    assert 1e-4 < scale.min() and scale.max() < 0.1
+    # The deflections are those of a real load case (with the paper-fit data 0.05 mm and up; near stage
+    # singularities the stage is soft).
+    assert 1e-5 < scale.min() and scale.max() < 0.1
 
 
 def test_fe_route_bounds_the_gravity_lumping(
@@ -218,7 +219,7 @@ def test_compensation_lands_on_the_request(robot: Cabin8, model: StiffnessModel)
 def test_compensation_that_cannot_converge_is_refused(robot: Cabin8, model: StiffnessModel) -> None:
     T_req, q0 = _goal(robot)
     with pytest.raises(DeflectionNotCompensated) as err:
-        compensate_goal(model, T_req, q0, PAYLOAD, GRASP, max_iterations=1)
+        compensate_goal(model, T_req, q0, PAYLOAD, GRASP, tol_m=1e-15, tol_rad=1e-15, max_iterations=1)
     assert err.value.reason == "compensation_failed"
     assert len(err.value.details["iterations"]) == 2
 
