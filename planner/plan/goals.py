@@ -118,7 +118,9 @@ def describe(evidence: dict[str, Any]) -> str:
     a, b = evidence["bodies"]
     other = "the cabin" if b == "cabin" else b
     if evidence["distance_m"] <= 0.0:  # FCL reports penetration as a distance <= 0
-        return f"{a} in contact with {other} {evidence['where']}, {1e3 * evidence['required_m']:.1f} mm required"
+        return (
+            f"{a} in contact with {other} {evidence['where']}, {1e3 * evidence['required_m']:.1f} mm required"
+        )
     return (
         f"{a} {1e3 * evidence['distance_m']:.1f} mm from {other} {evidence['where']}, "
         f"{1e3 * evidence['required_m']:.1f} mm required"
