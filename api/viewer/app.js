@@ -318,7 +318,7 @@ function showRefusal(job, scene) {
   $('#refusal-message').textContent = scene.message || job.message || '';
   const details = scene.details || {};
   $('#refusal-details').innerHTML = Object.entries(details)
-    .map(([k, v]) => `<tr><th>${esc(k)}</th><td>${esc(typeof v === 'object' ? JSON.stringify(v) : v)}</td></tr>`).join('') ||
+    .map(([k, v]) => `<tr><th>${esc(k)}</th><td>${esc(evidenceText(k, v))}</td></tr>`).join('') ||
     '<tr><td class="muted">no further evidence</td></tr>';
   const cfg = scene.configuration;
   const list = $('#refusal-contacts');
@@ -546,3 +546,29 @@ window.addEventListener('hashchange', route);
 loadExamples();
 route();
 requestAnimationFrame(tick);
+
+// One readable line of a refusal's evidence record (the planner's planner.plan.goals.describe).
+function describeEvidence(e) {
+  if (!e || typeof e !== 'object') return String(e);
+  if (e.cause === 'force') {
+    return `${e.drive} needs ${(100 * e.force_ratio).toFixed(0)}% of its force limit ${e.where}` +
+      ` (${(100 * e.allowed_ratio).toFixed(0)}% allowed)`;
+  }
+  if (e.cause === 'clearance' && Array.isArray(e.bodies)) {
+    const other = e.bodies[1] === 'cabin' ? 'the cabin' : e.bodies[1];
+    const what = e.distance_m <= 0 ? `in contact with ${other}` : `${(1e3 * e.distance_m).toFixed(1)} mm from ${other}`;
+    return `${e.bodies[0]} ${what} ${e.where}, ${(1e3 * e.required_m).toFixed(1)} mm required`;
+  }
+  return JSON.stringify(e);
+}
+
+// A refusal detail as text: evidence records described, joint vectors rounded, long lists summarised.
+function evidenceText(key, value) {
+  if (key === 'best') return describeEvidence(value);
+  if (key === 'candidates' && Array.isArray(value)) {
+    const shown = value.slice(0, 4).map(describeEvidence).join('; ');
+    return value.length > 4 ? `${value.length} candidates: ${shown}; …` : `${value.length} candidates: ${shown}`;
+  }
+  if (key === 'q' && Array.isArray(value)) return value.map((x) => Number(x).toFixed(4)).join(', ');
+  return typeof value === 'object' ? JSON.stringify(value) : value;
+}
