@@ -39,6 +39,7 @@ from planner.exceptions import (
     GoalUnreachable,
     InvalidInput,
     NoPathFound,
+    NoPathWithinBudget,
     PlannerError,
     StartInvalid,
     ValidationFailed,
@@ -77,8 +78,9 @@ SAFETY_LEVELS = ((0.995, 0.97, 0.97), (0.98, 0.92, 0.92), (0.95, 0.85, 0.85))
 LIMIT_CHECKS = {"velocity", "acceleration", "effort", "consistency"}
 #: Motion checks of the first, reproducible planner attempt.
 QUICK_MOTION_CHECKS = 1500
-#: Motion-check budget of the full attempt (the time limit applies as well; when it stops the planner
-#: first, the result depends on the machine's speed).
+#: Motion-check budget of the full attempt. The search is bounded by these work budgets, so the same
+#: scenario and seed give the same plan on any machine; the time limit is only the hard stop, and when it
+#: ends the search the plan is refused (``no_path_within_time_limit``), never finished differently.
 FULL_MOTION_CHECKS = 40_000
 #: A connection onto or off a transit ride is first planned with the rail within this of its ends [m].
 CONNECT_RAIL_WINDOW_M = 0.3
@@ -210,6 +212,7 @@ class Planner:
         self._timing_factory = timing or (lambda robot, payload, safety: ToppraStage(robot, payload, safety))
         self._warm_up(scenario.start_q)
         self.t0 = time.perf_counter()
+        self._last_tick = self.t0
         self.report: dict[str, Any] = {"stages_s": {}}
 
     # ----------------------------------------------------------------- helpers
@@ -234,7 +237,55 @@ class Planner:
     def _state_ok(self, q: Array) -> bool:
         return self.world.is_valid(q, self.plan_clearance) and self.forces.ok(q)
 
+    def _search_state_ok(self, q: Array) -> bool:
+        """The planner's extra state check (static forces), ticking the search progress."""
+        self._tick()
+        return self.forces.ok(q)
+
+    def _tick(self) -> None:
+        """Report the search's progress at most twice a second: elapsed share of its time budget."""
+        now = time.perf_counter()
+        if now - self._last_tick >= 0.5:
+            self._last_tick = now
+            budget = self.opts.time_limit_s * (1.0 - TIME_RESERVE)
+            self.progress("search", 0.15 + 0.55 * min(1.0, self._elapsed() / budget))
+
+    def _out_of_time(self) -> bool:
+        """Deadline of the search's steps: raises the time-limit refusal once the time is up.
+
+        A step cut short by the clock would give a result that depends on the machine's speed, so the
+        wall-clock limit stops the plan instead of shortening it.
+        """
+        if self._remaining() <= 0:
+            raise self._no_path()
+        return False
+
+    def _no_path(self) -> NoPathFound:
+        """The refusal of a search without a path, saying whether the clock or the work budget ended it."""
+        elapsed = round(self._elapsed(), 3)
+        if self._remaining() <= 0:
+            return NoPathFound(
+                f"the wall-clock time limit ({self.opts.time_limit_s:g} s) stopped the search after "
+                f"{elapsed:g} s, before its work budget was spent (the machine was slower or busier than "
+                f"it needs): retry, or raise options.time_limit_s",
+                ended_by="time_limit",
+                time_limit_s=self.opts.time_limit_s,
+                elapsed_s=elapsed,
+                planner=self.opts.planner,
+            )
+        return NoPathWithinBudget(
+            f"no collision-free path found within the search's work budget "
+            f"({QUICK_MOTION_CHECKS} + {FULL_MOTION_CHECKS} motion checks, planner {self.opts.planner}); "
+            f"the same seed ends the same way on any machine: try another options.seed or scenario",
+            ended_by="work_budget",
+            motion_check_budget=QUICK_MOTION_CHECKS + FULL_MOTION_CHECKS,
+            time_limit_s=self.opts.time_limit_s,
+            elapsed_s=elapsed,
+            planner=self.opts.planner,
+        )
+
     def _motion_ok(self, q_a: Array, q_b: Array) -> bool:
+        self._tick()
         return motion_clear(
             self.world, q_a, q_b, self.plan_clearance, self.opts.motion_margin_m
         ) and self.forces.segment_ok(q_a, q_b)
@@ -357,7 +408,7 @@ class Planner:
         waypoints, k = self._search(q_start, targets)
         if len(waypoints) > 2 and self.opts.simplify and not self.naive:
             waypoints, stats = cut_corners(
-                self.robot, waypoints, self._motion_ok, deadline=lambda: self._remaining() <= 0
+                self.robot, waypoints, self._motion_ok, deadline=self._out_of_time
             )
             self.report.setdefault("search", {})["corner_cuts"] = {
                 "cuts": stats.cuts,
@@ -373,11 +424,7 @@ class Planner:
         if self.naive:  # the benchmark's baseline: the plain planner, its raw path
             res = self._ompl(q_start, targets, max_checks=FULL_MOTION_CHECKS)
             if res is None:
-                raise NoPathFound(
-                    f"no collision-free path found within the time limit ({self.opts.time_limit_s:g} s)",
-                    time_limit_s=self.opts.time_limit_s,
-                    planner=self.opts.planner,
-                )
+                raise self._no_path()
             return res
         # The straight motion first: free when it is clear.
         for k, q in enumerate(targets):
@@ -397,12 +444,7 @@ class Planner:
         res = self._ompl(q_start, targets, max_checks=FULL_MOTION_CHECKS)
         if res is not None:
             return res
-        raise NoPathFound(
-            f"no collision-free path found within the time limit ({self.opts.time_limit_s:g} s, "
-            f"planner {self.opts.planner})",
-            time_limit_s=self.opts.time_limit_s,
-            planner=self.opts.planner,
-        )
+        raise self._no_path()
 
     def _remaining(self) -> float:
         """Time left for search, keeping a reserve for timing and validation."""
@@ -436,7 +478,7 @@ class Planner:
             simplify=simplify and self.opts.simplify and not self.naive,
             joint_lower=lo,
             joint_upper=hi,
-            state_ok=self.forces.ok,
+            state_ok=self._search_state_ok,
             motion_ok=self.forces.segment_ok,
             max_motion_checks=max_checks,
             planner_range=None if self.naive else PLANNER_RANGE,
@@ -444,6 +486,7 @@ class Planner:
         if res is None:
             self.report.setdefault("search_attempts", []).append({"method": "ompl", "max_checks": max_checks})
             return None
+        self._out_of_time()  # the clock may have cut the path's simplification short
         self.report["search"] = {
             "method": "ompl",
             "planner": res.planner,
@@ -495,7 +538,7 @@ class Planner:
             self.forces.ok,
             self.forces.segment_ok,
             self.opts.seed,
-            deadline=lambda: self._remaining() <= 0,
+            deadline=self._out_of_time,
         )
         self.report.setdefault("search_attempts", []).append(
             {"method": "transit", "found": transit is not None}

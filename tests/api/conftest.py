@@ -56,6 +56,7 @@ def make_settings(tmp_path: Path, **overrides: Any) -> Settings:
         "workers": 2,
         "job_grace_s": 20.0,
         "tenant_max_active_jobs": 4,
+        "rate_limit": "100000 per 1 second",  # the rate-limit test sets its own
         **overrides,
     }
     return Settings(**values)
@@ -111,6 +112,9 @@ class IdleRunner:
 
     def busy(self) -> int:
         return 0
+
+    def warming(self) -> str | None:
+        return None
 
 
 def start_idle_service(settings: Settings) -> Iterator[Service]:
