@@ -71,6 +71,9 @@ PURGE_PERIOD_S = 60.0
 class JobRunner(Protocol):
     """What the service needs of a job executor (pluggable: processes here, a cluster elsewhere)."""
 
+    #: Identity of this instance in the jobs' ``owner`` column.
+    instance_id: str
+
     def start(self) -> None:
         """Start executing queued jobs."""
 

@@ -64,6 +64,7 @@ def ready(ctx: Ctx) -> dict[str, Any]:
     queued, running = queue_counts(ctx.db)
     return {
         "status": "ready",
+        "instance": ctx.runner.instance_id,
         "database": "ok",
         "workers": {"running": ctx.runner.busy(), "max": ctx.settings.workers},
         "queue": {"queued": queued, "running": running},

@@ -91,6 +91,7 @@ class IdleRunner:
     """A job runner that never runs anything: jobs stay queued (quota, cancel-queued, fuzzing tests)."""
 
     def __init__(self) -> None:
+        self.instance_id = "idle"
         self.woken = 0
         self.cancelled: list[str] = []
         self.started = False

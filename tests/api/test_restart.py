@@ -31,8 +31,11 @@ def _free_port() -> int:
 
 
 class Server:
-    def __init__(self, data_dir: Path) -> None:
+    """``python -m api`` in its own session (process group), on a free loopback port."""
+
+    def __init__(self, data_dir: Path, **env: str) -> None:
         self.data_dir = data_dir
+        self.env = env
         self.port = _free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.proc: subprocess.Popen[bytes] | None = None
@@ -45,6 +48,7 @@ class Server:
             "CABINPLAN_PORT": str(self.port),
             "CABINPLAN_ADMIN_KEY": ADMIN_KEY,
             "CABINPLAN_WORKERS": "1",
+            **self.env,
         }
         self.data_dir.mkdir(parents=True, exist_ok=True)
         with self.log.open("ab") as log:
@@ -56,7 +60,7 @@ class Server:
                 stderr=log,
                 start_new_session=True,
             )
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 300  # /ready waits for the forkserver's warm-up
         while time.monotonic() < deadline:
             assert self.proc.poll() is None, self.log.read_text()
             try:
@@ -76,6 +80,10 @@ class Server:
     def stop(self) -> None:
         if self.proc is not None and self.proc.poll() is None:
             self.kill()
+
+    def ready(self) -> dict[str, Any]:
+        doc: dict[str, Any] = httpx.get(f"{self.url}/api/v1/ready", timeout=10).json()
+        return doc
 
 
 @pytest.fixture

@@ -195,7 +195,10 @@ def test_invalid_scenarios_name_the_field(idle: Service) -> None:
         "field"
     ] == ("cabin.mesh")
     malformed = _problem(idle.client.post("/api/v1/plans", content=b"{not json", headers=idle.h()), 400)
-    assert malformed["type"] == "urn:cabinplan:problem:malformed_body" and "line 1, column 2" in malformed["detail"]
+    assert (
+        malformed["type"] == "urn:cabinplan:problem:malformed_body"
+        and "line 1, column 2" in malformed["detail"]
+    )
 
 
 def _cancel_all(svc: Service) -> None:
