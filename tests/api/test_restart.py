@@ -88,7 +88,7 @@ class Server:
 
 @pytest.fixture
 def server(tmp_path: Path) -> Iterator[Server]:
-    srv = Server(tmp_path / "data")
+    srv = Server(tmp_path / "data", CABINPLAN_JOB_LEASE_S="3")
     yield srv
     srv.stop()
 
