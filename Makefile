@@ -46,6 +46,7 @@ bench: $(DEV_STAMP)
 	$(BIN)/python -m bench.planning
 	$(BIN)/python -m bench.stiffness
 	$(BIN)/python -m bench.pprs6
+	$(BIN)/python -m bench.load
 
 lock:  ## re-pin requirements.lock (runtime) and requirements-dev.lock (development) from pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock

@@ -66,10 +66,10 @@ ACCESS_LOG = logging.getLogger("api.access")
 class AccessLogMiddleware:
     """One structured (JSON) access-log line per request, a request id, and the request metrics.
 
-    The line has ``request_id`` (the client's ``X-Request-ID`` when well-formed, else a new one; echoed in
-    the response), ``method``, ``route`` (the route template, e.g. ``/api/v1/plans/{plan_id}``; the
-    path for unknown routes is not logged as a route), ``status``, ``latency_ms``, ``tenant`` (after
-    authentication) and ``client``.
+    The line has ``time`` (UNIX s), ``request_id`` (the client's ``X-Request-ID`` when well-formed, else
+    a new one; echoed in the response), ``method``, ``route`` (the route template, e.g.
+    ``/api/v1/plans/{plan_id}``, or ``(unmatched)``: raw paths are never logged), ``status``,
+    ``latency_ms``, ``tenant`` (after authentication) and ``client``.
     """
 
     def __init__(self, app: ASGIApp, metrics: ServiceMetrics) -> None:
@@ -110,6 +110,7 @@ class AccessLogMiddleware:
             ACCESS_LOG.info(
                 json.dumps(
                     {
+                        "time": round(time.time(), 3),
                         "event": "request",
                         "request_id": request_id,
                         "method": method,

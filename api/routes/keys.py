@@ -10,10 +10,10 @@ from sqlalchemy import select
 
 from api.auth import ADMIN_TENANT, LOCAL_TENANT, AdminPrincipal, create_key
 from api.db import ApiKey, now_s
-from api.problems import Problem
+from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 
-router = APIRouter(tags=["keys"])
+router = APIRouter(tags=["keys"], responses=problem_responses(403))
 
 
 class KeyRequest(BaseModel):

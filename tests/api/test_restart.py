@@ -41,7 +41,8 @@ class Server:
         self.proc: subprocess.Popen[bytes] | None = None
         self.log = data_dir / "server.log"
 
-    def start(self) -> None:
+    def start(self, wait: str = "ready") -> None:
+        """Start the server; return once ``/api/v1/<wait>`` answers 200 (``ready`` or ``health``)."""
         env = {
             **os.environ,
             "CABINPLAN_DATA_DIR": str(self.data_dir),
@@ -64,7 +65,7 @@ class Server:
         while time.monotonic() < deadline:
             assert self.proc.poll() is None, self.log.read_text()
             try:
-                if httpx.get(f"{self.url}/api/v1/ready", timeout=1.0).status_code == 200:
+                if httpx.get(f"{self.url}/api/v1/{wait}", timeout=1.0).status_code == 200:
                     return
             except httpx.HTTPError:
                 pass
