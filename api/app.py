@@ -63,6 +63,14 @@ _REQUEST_ID = re.compile(r"^[A-Za-z0-9._:-]{1,64}$")
 ACCESS_LOG = logging.getLogger("api.access")
 
 
+def _route_template(scope: Scope, templates: dict[int, str]) -> str:
+    """The template of the route that served ``scope`` (``/api/v1/plans/{plan_id}``) or ``(unmatched)``."""
+    route = scope.get("route")
+    if route is None:
+        return "(unmatched)"
+    return templates.get(id(route)) or str(getattr(route, "path", "(unmatched)"))
+
+
 class AccessLogMiddleware:
     """One structured (JSON) access-log line per request, a request id, and the request metrics.
 
@@ -72,9 +80,12 @@ class AccessLogMiddleware:
     ``latency_ms``, ``tenant`` (after authentication) and ``client``.
     """
 
-    def __init__(self, app: ASGIApp, metrics: ServiceMetrics) -> None:
+    def __init__(
+        self, app: ASGIApp, metrics: ServiceMetrics, templates: dict[int, str] | None = None
+    ) -> None:
         self.app = app
         self.metrics = metrics
+        self.templates = templates if templates is not None else {}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         """ASGI entry."""
@@ -101,8 +112,7 @@ class AccessLogMiddleware:
             await self.app(scope, receive, send_with_id)
         finally:
             latency = time.perf_counter() - t0
-            route_obj = scope.get("route")
-            route = getattr(route_obj, "path", None) or "(unmatched)"
+            route = _route_template(scope, self.templates)
             method = str(scope.get("method", ""))
             self.metrics.http_requests.labels(method=method, route=route, status=str(status)).inc()
             self.metrics.http_latency.labels(method=method, route=route).observe(latency)
@@ -245,11 +255,14 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         max_upload_bytes=settings.max_upload_bytes,
         body_timeout_s=settings.body_timeout_s,
     )
-    app.add_middleware(AccessLogMiddleware, metrics=service_metrics)
+    templates: dict[int, str] = {}  # route object -> full path template, for the access log
     for module in (health, robots, cabins, plans, kinematics, pprs6, stiffness, keys):
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
+        templates.update({id(r): API_PREFIX + r.path for r in router.routes})
     app.include_router(metrics.router)
+    templates.update({id(r): str(getattr(r, "path", "")) for r in metrics.router.routes})
+    app.add_middleware(AccessLogMiddleware, metrics=service_metrics, templates=templates)
     install_openapi(app)
     return app
 

@@ -49,6 +49,31 @@ def _problem(r: httpx.Response, status: int, code: str) -> dict[str, Any]:
     return body
 
 
+def _read_response(sock: socket.socket) -> str:
+    """One HTTP response (head and Content-Length body) from a socket, as text."""
+    data = b""
+    while b"\r\n\r\n" not in data:
+        chunk = sock.recv(4096)
+        if not chunk:
+            return data.decode("latin-1")
+        data += chunk
+    head, _, body = data.partition(b"\r\n\r\n")
+    length = next(
+        (
+            int(ln.split(b":", 1)[1])
+            for ln in head.split(b"\r\n")
+            if ln.lower().startswith(b"content-length:")
+        ),
+        0,
+    )
+    while len(body) < length:
+        chunk = sock.recv(4096)
+        if not chunk:
+            break
+        body += chunk
+    return (head + b"\r\n\r\n" + body).decode("latin-1")
+
+
 @pytest.fixture(scope="module")
 def idle(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
     yield from start_idle_service(make_settings(tmp_path_factory.mktemp("ops-idle")))
@@ -105,7 +130,7 @@ def test_warm_up_ready_progress_metrics_access_log_and_body_timeout(tmp_path: Pa
                 'Content-Type: application/json\r\nContent-Length: 400\r\n\r\n{"name":'.encode()
             )
             t0 = time.monotonic()
-            answer = sock.recv(4096).decode("latin-1")
+            answer = _read_response(sock)
             waited = time.monotonic() - t0
         assert answer.startswith("HTTP/1.1 408"), answer
         assert "urn:cabinplan:problem:body_timeout" in answer and 0.8 < waited < 5.0
@@ -113,12 +138,13 @@ def test_warm_up_ready_progress_metrics_access_log_and_body_timeout(tmp_path: Pa
         metrics = httpx.get(f"{srv.url}/metrics", timeout=10)
         assert metrics.status_code == 200 and metrics.headers["content-type"].startswith("text/plain")
         text = metrics.text
-        assert 'cabinplan_jobs_finished_total{status="succeeded",reason=""} 1.0' in text
-        assert f'cabinplan_jobs_finished_total{{status="failed",reason="{d["reason"]}"}} 1.0' in text
+        assert 'cabinplan_jobs_finished_total{reason="",status="succeeded"} 1.0' in text
+        assert f'cabinplan_jobs_finished_total{{reason="{d["reason"]}",status="failed"}} 1.0' in text
         assert 'cabinplan_job_duration_seconds_count{status="succeeded"} 1.0' in text
         assert "cabinplan_jobs_queued 0.0" in text and "cabinplan_instance_jobs_running 0.0" in text
         assert "cabinplan_warming_up 0.0" in text
-        assert float(text.split("cabinplan_warmup_seconds ")[1].split()[0]) > 0.0
+        warmup = [ln for ln in text.splitlines() if ln.startswith("cabinplan_warmup_seconds ")]
+        assert len(warmup) == 1 and float(warmup[0].split()[1]) > 0.0
         assert 'route="/api/v1/plans/{plan_id}"' in text  # route templates, not raw paths
     finally:
         srv.stop()
