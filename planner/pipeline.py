@@ -407,9 +407,7 @@ class Planner:
         """Certified waypoints from the start to one of the targets (and which), corners cut for time."""
         waypoints, k = self._search(q_start, targets)
         if len(waypoints) > 2 and self.opts.simplify and not self.naive:
-            waypoints, stats = cut_corners(
-                self.robot, waypoints, self._motion_ok, deadline=self._out_of_time
-            )
+            waypoints, stats = cut_corners(self.robot, waypoints, self._motion_ok, deadline=self._out_of_time)
             self.report.setdefault("search", {})["corner_cuts"] = {
                 "cuts": stats.cuts,
                 "checks": stats.checks,

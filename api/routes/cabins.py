@@ -42,7 +42,7 @@ def reference_document(name: str) -> dict[str, Any]:
     "/cabins",
     status_code=201,
     summary="Upload a cabin mesh (STL, OBJ, PLY, GLB/glTF)",
-    responses=problem_responses(409),
+    responses={200: {"description": "The same bytes are already stored"}, **problem_responses(409)},
 )
 def upload_cabin(
     ctx: Ctx,

@@ -211,6 +211,7 @@ def _tenant_lock(tenant: str) -> threading.Lock:
     "/plans",
     status_code=202,
     summary="Submit a scenario (JSON or YAML) for planning",
+    responses={200: {"description": "Idempotent replay: the job of an earlier request with this key"}},
     openapi_extra={"requestBody": scenario_request_body(_SCENARIO_DESCRIPTION, _SCENARIO_EXAMPLE)},
 )
 async def submit(

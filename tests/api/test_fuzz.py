@@ -57,8 +57,13 @@ def test_no_server_errors_heavy_operations(case: schemathesis.Case) -> None:
 def _check(case: schemathesis.Case) -> None:
     response = case.call(headers={"X-API-Key": KEY["alpha"]})
     assert response.status_code < 500, f"{case.method} {case.formatted_path}: {response.text[:500]}"
-    documented = set(case.operation.definition.raw["responses"])
-    assert str(response.status_code) in documented, (case.method, case.formatted_path, response.status_code)
+    if case.method.upper() == case.operation.method.upper():  # (not the unsupported-method probes: 405)
+        documented = set(case.operation.definition.raw["responses"])
+        assert str(response.status_code) in documented, (
+            case.method,
+            case.formatted_path,
+            response.status_code,
+        )
     if response.status_code >= 400:
         content_type = response.headers.get("content-type", [""])[0]
         assert content_type.startswith("application/problem+json"), (

@@ -68,6 +68,7 @@ def _kill_group(pgid: int) -> None:
         pass
 
 
+@pytest.mark.slow
 def test_job_processes_die_with_a_sigkilled_server(tmp_path: Path) -> None:
     server = Server(tmp_path / "data", CABINPLAN_WORKERS="2")
     server.start()
@@ -120,6 +121,7 @@ def _owners(schema: str) -> dict[str, tuple[str, str | None, int]]:
     return {r[0]: (r[1], r[2], int(r[3])) for r in rows}
 
 
+@pytest.mark.slow
 def test_two_instances_share_postgres_a_killed_ones_job_finishes_on_the_other(
     tmp_path: Path, pg_schema: str
 ) -> None:
