@@ -79,8 +79,10 @@ def test_runtime_and_development_pins_are_split_and_the_image_installs_only_the_
     dev_tools = _names(project["optional-dependencies"]["dev"]) - set(runtime)
     assert dev_tools <= set(dev) and {"pytest", "mypy", "ruff", "hypothesis", "schemathesis"} <= dev_tools
     assert not {"pytest", "mypy", "ruff", "hypothesis", "schemathesis"} & set(runtime)
-    docker = (ROOT / "Dockerfile").read_text(encoding="utf-8")
-    assert "requirements-dev.lock" not in docker and "[dev]" not in docker
+    docker = " ".join(rest for op, rest in _instructions() if op in ("COPY", "RUN", "ADD"))
+    assert (
+        "requirements-dev.lock" not in docker and "[dev]" not in docker and "-r requirements.lock" in docker
+    )
     make = (ROOT / "Makefile").read_text(encoding="utf-8")
     assert re.search(r"^test: \$\(DEV_STAMP\)", make, re.M) and "-r requirements-dev.lock" in make
     assert re.search(r"^serve: \$\(STAMP\)", make, re.M)
