@@ -9,7 +9,8 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
 
 WORKDIR /app
 
-# The exact, tested dependency set first (a layer that changes only with the lock file).
+# The exact, tested runtime set first (a layer that changes only with the lock file); the development
+# pins (requirements-dev.lock: tests, lint, type-check) are not part of the image.
 COPY requirements.lock ./
 RUN python -m pip install --no-cache-dir -r requirements.lock
 

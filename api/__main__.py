@@ -31,9 +31,19 @@ def local_key(settings: Settings) -> str:
     return key
 
 
+def configure_logging() -> None:
+    """Service logs as text lines; access logs (logger ``api.access``) as one JSON object a line."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    access = logging.getLogger("api.access")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    access.addHandler(handler)
+    access.propagate = False
+
+
 def main() -> None:
     """Start uvicorn; on loopback print the local default key first."""
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    configure_logging()
     settings = Settings()
     app = create_app(settings)
     if is_loopback(settings.host):

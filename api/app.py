@@ -2,12 +2,20 @@
 
 Routers live one per resource in :mod:`api.routes` and are mounted under ``/api/v1``; the OpenAPI
 document is at ``/openapi.json`` and the interactive docs at ``/docs``. The lifespan creates the tables,
-recovers jobs interrupted by a dead process (:func:`api.jobs.recover_jobs`), and starts / stops the runner.
+recovers jobs of instances that died (:func:`api.jobs.recover_jobs`), and starts / stops the runner.
+
+Middleware, outermost first: :class:`AccessLogMiddleware` (request id, one structured log line per
+request, request metrics), then :class:`BodyLimitMiddleware` (body size and body read timeout).
 """
 
 from __future__ import annotations
 
+import asyncio
+import json
 import logging
+import re
+import time
+import uuid
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -22,7 +30,10 @@ from api import problems
 from api.context import AppContext
 from api.db import Database
 from api.jobs import JobRunner, ProcessJobRunner, recover_jobs
-from api.routes import cabins, health, keys, kinematics, plans, pprs6, robots, scene, stiffness
+from api.metrics import QueueCollector, ServiceMetrics
+from api.openapi import install_openapi
+from api.ratelimit import TenantRateLimiter
+from api.routes import cabins, health, keys, kinematics, metrics, plans, pprs6, robots, scene, stiffness
 from api.settings import Settings
 from api.store import MeshStore
 from planner import __version__
@@ -43,16 +54,107 @@ class BodyTooLarge(StarletteHTTPException):
         super().__init__(413, f"request body larger than the limit of {limit} bytes")
 
 
+class BodyTimeout(StarletteHTTPException):
+    """408: the client declared a body and stopped sending it."""
+
+    def __init__(self, timeout_s: float) -> None:
+        super().__init__(408, f"no request body data for {timeout_s:g} s: the body was not sent in time")
+
+
+#: Scope key of the per-request log record (``tenant`` is added by :func:`api.auth.authenticate`).
+LOG_SCOPE_KEY = "cabinplan.log"
+#: Accepted client-supplied request ids (else a fresh one is made).
+_REQUEST_ID = re.compile(r"^[A-Za-z0-9._:-]{1,64}$")
+ACCESS_LOG = logging.getLogger("api.access")
+
+
+def _route_template(scope: Scope, templates: dict[int, str]) -> str:
+    """The template of the route that served ``scope`` (``/api/v1/plans/{plan_id}``) or ``(unmatched)``."""
+    route = scope.get("route")
+    if route is None:
+        return "(unmatched)"
+    return templates.get(id(route)) or str(getattr(route, "path", "(unmatched)"))
+
+
+class AccessLogMiddleware:
+    """One structured (JSON) access-log line per request, a request id, and the request metrics.
+
+    The line has ``time`` (UNIX s), ``request_id`` (the client's ``X-Request-ID`` when well-formed, else
+    a new one; echoed in the response), ``method``, ``route`` (the route template, e.g.
+    ``/api/v1/plans/{plan_id}``, or ``(unmatched)``: raw paths are never logged), ``status``,
+    ``latency_ms``, ``tenant`` (after authentication) and ``client``.
+    """
+
+    def __init__(
+        self, app: ASGIApp, metrics: ServiceMetrics, templates: dict[int, str] | None = None
+    ) -> None:
+        self.app = app
+        self.metrics = metrics
+        self.templates = templates if templates is not None else {}
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """ASGI entry."""
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        t0 = time.perf_counter()
+        given = dict(scope.get("headers", [])).get(b"x-request-id", b"").decode("latin-1")
+        request_id = given if _REQUEST_ID.match(given) else uuid.uuid4().hex
+        record: dict[str, Any] = {}
+        scope[LOG_SCOPE_KEY] = record
+        status = 500
+
+        async def send_with_id(message: Message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = int(message["status"])
+                headers = list(message.get("headers", []))
+                headers.append((b"x-request-id", request_id.encode("latin-1")))
+                message = {**message, "headers": headers}
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_with_id)
+        finally:
+            latency = time.perf_counter() - t0
+            route = _route_template(scope, self.templates)
+            method = str(scope.get("method", ""))
+            self.metrics.http_requests.labels(method=method, route=route, status=str(status)).inc()
+            self.metrics.http_latency.labels(method=method, route=route).observe(latency)
+            client = scope.get("client")
+            ACCESS_LOG.info(
+                json.dumps(
+                    {
+                        "time": round(time.time(), 3),
+                        "event": "request",
+                        "request_id": request_id,
+                        "method": method,
+                        "route": route,
+                        "status": status,
+                        "latency_ms": round(latency * 1000.0, 3),
+                        "tenant": record.get("tenant"),
+                        "client": client[0] if client else None,
+                    },
+                    separators=(",", ":"),
+                )
+            )
+
+
 class BodyLimitMiddleware:
     """Counts the bytes of every request body as it streams in (not only Content-Length) -> 413.
 
-    Mesh uploads (``POST /api/v1/cabins``) have their own, larger limit.
+    Mesh uploads (``POST /api/v1/cabins``) have their own, larger limit. While a body is still expected,
+    each chunk must arrive within ``body_timeout_s`` (408 ``body_timeout`` otherwise), so a client that
+    declares a body and stalls does not hold a connection and a worker thread for ever.
     """
 
-    def __init__(self, app: ASGIApp, max_body_bytes: int, max_upload_bytes: int) -> None:
+    def __init__(
+        self, app: ASGIApp, max_body_bytes: int, max_upload_bytes: int, body_timeout_s: float = 10.0
+    ) -> None:
         self.app = app
         self.max_body_bytes = max_body_bytes
         self.max_upload_bytes = max_upload_bytes
+        self.body_timeout_s = body_timeout_s
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         """ASGI entry: reject by Content-Length at once, else count the streamed bytes."""
@@ -73,14 +175,23 @@ class BodyLimitMiddleware:
                     ).response()(scope, receive, send)
                     return
         seen = 0
+        body_done = False
 
         async def limited_receive() -> Message:
-            nonlocal seen
-            message = await receive()
+            nonlocal seen, body_done
+            if body_done:  # only the disconnect is left to wait for: no timeout
+                return await receive()
+            try:
+                message = await asyncio.wait_for(receive(), self.body_timeout_s)
+            except TimeoutError:
+                raise BodyTimeout(self.body_timeout_s) from None
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > limit:
                     raise BodyTooLarge(limit)
+                body_done = not message.get("more_body", False)
+            else:
+                body_done = True
             return message
 
         await self.app(scope, limited_receive, send)
@@ -104,8 +215,21 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         settings.mesh_dir,
         MeshLimits(max_bytes=settings.max_upload_bytes, max_faces=settings.max_mesh_faces),
     )
-    job_runner: JobRunner = runner or ProcessJobRunner(db, settings)
-    ctx = AppContext(settings=settings, db=db, store=store, runner=job_runner)
+    service_metrics = ServiceMetrics()
+    job_runner: JobRunner = runner or ProcessJobRunner(db, settings, service_metrics)
+    ctx = AppContext(
+        settings=settings,
+        db=db,
+        store=store,
+        runner=job_runner,
+        metrics=service_metrics,
+        limiter=TenantRateLimiter(settings.rate_limit),
+    )
+    service_metrics.registry.register(
+        QueueCollector(
+            lambda: health.queue_counts(db), job_runner.busy, lambda: job_runner.warming() is not None
+        )
+    )
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
@@ -134,13 +258,29 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         BodyLimitMiddleware,
         max_body_bytes=settings.max_body_bytes,
         max_upload_bytes=settings.max_upload_bytes,
+        body_timeout_s=settings.body_timeout_s,
     )
+    templates: dict[int, str] = {}  # route object -> full path template, for the access log
     for module in (health, robots, cabins, plans, scene, kinematics, pprs6, stiffness, keys):
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
+        templates.update({id(r): API_PREFIX + r.path for r in router.routes})
+    app.include_router(metrics.router)
+    templates.update({id(r): str(getattr(r, "path", "")) for r in metrics.router.routes})
+    app.add_middleware(AccessLogMiddleware, metrics=service_metrics, templates=templates)
+    install_openapi(app)
     # The operator page: static files of the package (three.js and uPlot vendored, no CDN; api/viewer).
     app.mount(VIEWER_PATH, StaticFiles(directory=VIEWER_DIR, html=True), name="viewer")
     return app
 
 
-__all__ = ["API_PREFIX", "VIEWER_DIR", "VIEWER_PATH", "BodyLimitMiddleware", "BodyTooLarge", "create_app"]
+__all__ = [
+    "API_PREFIX",
+    "VIEWER_DIR",
+    "VIEWER_PATH",
+    "AccessLogMiddleware",
+    "BodyLimitMiddleware",
+    "BodyTimeout",
+    "BodyTooLarge",
+    "create_app",
+]

@@ -4,7 +4,9 @@ Clients send ``X-API-Key: <key>``. Keys are random 256-bit tokens (``cpk_...``);
 only their SHA-256, which is sufficient for high-entropy secrets (no salt or slow hash is needed: a
 table leak does not reveal keys that cannot be brute-forced). The admin key comes from
 ``CABINPLAN_ADMIN_KEY`` and is compared in constant time. Missing or unknown keys give 401, a tenant key
-on an admin route gives 403, and another tenant's objects are simply not found (404).
+on an admin route gives 403, and another tenant's objects are simply not found (404). Every
+authenticated request counts against its tenant's rate limit (:mod:`api.ratelimit`): 429 ``rate_limited``
+with ``Retry-After`` beyond it.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from sqlalchemy import select
 from api.context import AppContext, get_context
 from api.db import ApiKey, now_s
 from api.problems import Problem
+from api.ratelimit import retry_after_header
 
 API_KEY_HEADER = "X-API-Key"
 ADMIN_TENANT = "admin"
@@ -101,11 +104,31 @@ def authenticate(
     request: Request,
     key: Annotated[str | None, Security(_header)],
 ) -> Principal:
-    """The caller's principal from the ``X-API-Key`` header.
+    """The caller's principal from the ``X-API-Key`` header, counted against its tenant's rate limit.
 
     Raises:
-        Problem: 401 when the header is missing, or the key is unknown or revoked.
+        Problem: 401 when the header is missing, or the key is unknown or revoked; 429 when the tenant
+            is over its rate limit.
     """
+    principal = _principal(request, key)
+    record = request.scope.get("cabinplan.log")
+    if isinstance(record, dict):
+        record["tenant"] = principal.tenant
+    ctx = get_context(request)
+    wait_s = ctx.limiter.hit(principal.tenant)
+    if wait_s is not None:
+        ctx.metrics.rate_limited.inc()
+        raise Problem(
+            429,
+            "rate_limited",
+            f"tenant {principal.tenant!r} is over its rate limit of {ctx.settings.rate_limit}; retry later",
+            headers={"Retry-After": retry_after_header(wait_s)},
+            limit=ctx.settings.rate_limit,
+        )
+    return principal
+
+
+def _principal(request: Request, key: str | None) -> Principal:
     if not key:
         raise _unauthorized(f"missing API key (send the {API_KEY_HEADER} header)")
     ctx = get_context(request)

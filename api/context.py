@@ -1,4 +1,4 @@
-"""The application context: settings, database, mesh store and job runner of one app instance."""
+"""The application context: settings, database, mesh store, job runner, metrics, rate limiter of one app."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 from fastapi import Request
 
 from api.db import Database
+from api.metrics import ServiceMetrics
+from api.ratelimit import TenantRateLimiter
 from api.settings import Settings
 
 if TYPE_CHECKING:
@@ -23,6 +25,8 @@ class AppContext:
     db: Database
     store: MeshStore
     runner: JobRunner
+    metrics: ServiceMetrics
+    limiter: TenantRateLimiter
 
 
 def get_context(request: Request) -> AppContext:

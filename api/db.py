@@ -15,6 +15,7 @@ from typing import Any
 
 from sqlalchemy import (
     JSON,
+    Boolean,
     Engine,
     Float,
     Index,
@@ -25,6 +26,7 @@ from sqlalchemy import (
     UniqueConstraint,
     create_engine,
     event,
+    inspect,
     text,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sessionmaker
@@ -86,6 +88,7 @@ class Job(Base):
         UniqueConstraint("tenant", "idempotency_key", name="uq_job_tenant_idempotency_key"),
         Index("ix_job_tenant_status_created", "tenant", "status", "created_at"),
         Index("ix_job_status_created", "status", "created_at"),
+        Index("ix_job_status_finished", "status", "finished_at"),
     )
 
     id: Mapped[str] = mapped_column(String(32), primary_key=True)
@@ -101,12 +104,18 @@ class Job(Base):
     provenance: Mapped[dict[str, Any]] = mapped_column(JSON)
     time_limit_s: Mapped[float] = mapped_column(Float)
     attempts: Mapped[int] = mapped_column(Integer, default=0)
+    #: Service instance running the job and until when its lease holds (UNIX s); see api.jobs.
+    owner: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    lease_expires_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    cancel_requested: Mapped[bool | None] = mapped_column(Boolean, nullable=True, default=False)
     created_at: Mapped[float] = mapped_column(Float)
     started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     reason: Mapped[str | None] = mapped_column(String(64), nullable=True)
     message: Mapped[str | None] = mapped_column(Text, nullable=True)
     result_json: Mapped[str | None] = mapped_column(Text, nullable=True, deferred=True)
+    #: The result document packed by :func:`api.compact.pack_document` (new rows; ``result_json`` is None).
+    result_packed: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True, deferred=True)
     profile_csv: Mapped[str | None] = mapped_column(Text, nullable=True, deferred=True)
     plot_png: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True, deferred=True)
 
@@ -143,11 +152,26 @@ class Database:
         self.sessions = sessionmaker(bind=self.engine, expire_on_commit=False)
 
     def create_all(self) -> None:
-        """Create the schema (PostgreSQL) and every missing table."""
+        """Create the schema (PostgreSQL), every missing table, and missing nullable columns.
+
+        Columns added by later versions (all nullable) are added to existing tables with ``ALTER TABLE
+        ... ADD COLUMN``, so a database written by an older version keeps working.
+        """
         if self.schema is not None:
             with self.engine.begin() as conn:
                 conn.execute(text(f'CREATE SCHEMA IF NOT EXISTS "{self.schema}"'))
         Base.metadata.create_all(self.engine)
+        with self.engine.begin() as conn:
+            insp = inspect(conn)
+            for table in Base.metadata.sorted_tables:
+                have = {c["name"] for c in insp.get_columns(table.name, schema=self.schema)}
+                for column in table.columns:
+                    if column.name not in have and column.nullable:
+                        kind = column.type.compile(dialect=conn.dialect)
+                        prefix = f'"{self.schema}".' if self.schema is not None else ""
+                        conn.execute(
+                            text(f'ALTER TABLE {prefix}"{table.name}" ADD COLUMN "{column.name}" {kind}')
+                        )
 
     def drop_schema(self) -> None:
         """Drop the PostgreSQL schema and everything in it (tests); a no-op without a schema."""

@@ -15,13 +15,21 @@ state between jobs). A dispatcher thread, never the event loop:
 * kills a running job on cancellation (status ``cancelled``); a process that dies without an outcome
   makes its job fail with reason ``worker_crashed``.
 
-On start-up (:func:`recover_jobs`) a job left ``running`` by a dead process is re-queued once (the
-attempt counter) and failed with reason ``interrupted`` if it was already retried; queued jobs simply
-run. On a clean shutdown running jobs are killed and re-queued without counting the attempt.
+Several instances may share one database (PostgreSQL). Each runner has an instance id; a claimed job
+carries its ``owner`` and a lease (``lease_expires_at``) that the owner renews every ``job_lease_s / 3``
+(the heartbeat). Every instance re-queues the jobs whose lease lapsed (:func:`expire_leases`, also at
+start-up): their instance died. A job re-queued :data:`MAX_ATTEMPTS` times fails with reason
+``interrupted``. Every write of a job's progress or outcome is conditional on ``owner``, so an instance
+that lost its lease (paused, cut off from the database) never overwrites the new owner's work, and
+kills its own copy at the next heartbeat. A cancellation sets ``cancel_requested``; the owner sees it
+at its next heartbeat, whichever instance received the request. On a clean shutdown running jobs are
+killed and re-queued without counting the attempt.
 
-One service instance per database: recovery treats every ``running`` row as left by a dead process, and
-a cancellation reaches only this instance's processes (jobs carry no owner lease yet), so two instances
-must not share a database.
+Job processes die with the service: they arm a parent-death signal and the forkserver watches the
+server (:mod:`api.lifeline`), so a SIGKILLed server leaves no process behind. Before it claims the
+first job the runner starts the forkserver and waits for its warm-up (imports, numba kernels compiled
+or loaded from their cache, one reference plan): ``/ready`` answers 503 with stage ``compiling kernels``
+until then, and no job's time limit is spent on it.
 """
 
 from __future__ import annotations
@@ -31,15 +39,18 @@ import multiprocessing
 import os
 import threading
 import time
+import uuid
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from multiprocessing.context import ForkServerContext
 from multiprocessing.process import BaseProcess
 from typing import Any, Protocol, cast
 
-from sqlalchemy import CursorResult, select, update
+from sqlalchemy import CursorResult, delete, or_, select, update
 
-from api.db import Database, Job, now_s
+from api.db import TERMINAL_STATES, Database, Job, now_s
+from api.lifeline import SERVER_PID_ENV
+from api.metrics import ServiceMetrics
 from api.settings import Settings
 
 _LOG = logging.getLogger(__name__)
@@ -47,9 +58,21 @@ _LOG = logging.getLogger(__name__)
 #: A job that ran this many times and was interrupted again is failed with reason ``interrupted``.
 MAX_ATTEMPTS = 2
 
+#: Stage reported (``/ready``, queued jobs) while the forkserver warms up.
+WARMUP_STAGE = "compiling kernels"
+
+#: Longest wait for the forkserver's warm-up [s] (a fresh machine compiles the numba kernels: ~2 min).
+WARMUP_TIMEOUT_S = 900.0
+
+#: Period of the retention purge [s].
+PURGE_PERIOD_S = 60.0
+
 
 class JobRunner(Protocol):
     """What the service needs of a job executor (pluggable: processes here, a cluster elsewhere)."""
+
+    #: Identity of this instance in the jobs' ``owner`` column.
+    instance_id: str
 
     def start(self) -> None:
         """Start executing queued jobs."""
@@ -61,7 +84,7 @@ class JobRunner(Protocol):
         """A job was queued: look for work now."""
 
     def cancel(self, job_id: str) -> None:
-        """Kill the job if it is running (it becomes ``cancelled``)."""
+        """Kill the job if it is running here (it becomes ``cancelled``)."""
 
     def alive(self) -> bool:
         """True while the runner can execute jobs."""
@@ -69,37 +92,80 @@ class JobRunner(Protocol):
     def busy(self) -> int:
         """Jobs running now."""
 
+    def warming(self) -> str | None:
+        """The warm-up stage while the runner is not yet ready to run jobs, else ``None``."""
 
-def recover_jobs(db: Database) -> dict[str, int]:
-    """Start-up recovery of jobs left ``running`` by a process that died; returns the counts.
 
-    Jobs with fewer than :data:`MAX_ATTEMPTS` attempts go back to ``queued``; the others fail with reason
-    ``interrupted``. Nothing is left ``running``.
+def expire_leases(db: Database, now: float | None = None) -> dict[str, int]:
+    """Re-queue (or fail) the running jobs whose lease lapsed: their instance died. Returns the counts.
+
+    A lapsed job whose cancellation was requested becomes ``cancelled``; one with fewer than
+    :data:`MAX_ATTEMPTS` attempts goes back to ``queued``; the others fail with reason ``interrupted``.
+    Rows without a lease (written by an older version) count as lapsed.
     """
+    t = now_s() if now is None else now
+    lapsed = (Job.status == "running", or_(Job.lease_expires_at.is_(None), Job.lease_expires_at < t))
+    free = {"owner": None, "lease_expires_at": None}
     with db.session() as s:
+        cancelled = rows_matched(
+            s.execute(
+                update(Job)
+                .where(*lapsed, Job.cancel_requested.is_(True))
+                .values(
+                    status="cancelled",
+                    reason="cancelled",
+                    message="cancelled by the client while running (its instance stopped)",
+                    finished_at=t,
+                    **free,
+                )
+            )
+        )
         requeued = rows_matched(
             s.execute(
                 update(Job)
-                .where(Job.status == "running", Job.attempts < MAX_ATTEMPTS)
-                .values(status="queued", stage=None, progress=0.0, started_at=None)
+                .where(*lapsed, Job.attempts < MAX_ATTEMPTS)
+                .values(status="queued", stage=None, progress=0.0, started_at=None, **free)
             )
         )
         failed = rows_matched(
             s.execute(
                 update(Job)
-                .where(Job.status == "running")
+                .where(*lapsed)
                 .values(
                     status="failed",
                     reason="interrupted",
                     message=f"the service stopped while the job was running, {MAX_ATTEMPTS} times",
-                    finished_at=now_s(),
+                    finished_at=t,
+                    **free,
                 )
             )
         )
-    counts = {"requeued": requeued, "failed": failed}
-    if counts["requeued"] or counts["failed"]:
-        _LOG.warning("recovered interrupted jobs: %s", counts)
+    counts = {"requeued": requeued, "failed": failed, "cancelled": cancelled}
+    if requeued or failed or cancelled:
+        _LOG.warning("jobs of a stopped instance recovered: %s", counts)
     return counts
+
+
+def recover_jobs(db: Database) -> dict[str, int]:
+    """Start-up recovery: :func:`expire_leases` now (jobs of live instances keep running)."""
+    counts = expire_leases(db)
+    return {"requeued": counts["requeued"], "failed": counts["failed"]}
+
+
+def purge_expired(db: Database, retention_s: float, now: float | None = None) -> int:
+    """Delete finished jobs that finished more than ``retention_s`` ago; returns how many."""
+    cutoff = (now_s() if now is None else now) - retention_s
+    with db.session() as s:
+        n = rows_matched(
+            s.execute(
+                delete(Job).where(
+                    Job.status.in_(TERMINAL_STATES), Job.finished_at.is_not(None), Job.finished_at < cutoff
+                )
+            )
+        )
+    if n:
+        _LOG.info("retention: deleted %d finished job(s) older than %.0f days", n, retention_s / 86400)
+    return n
 
 
 def rows_matched(result: Any) -> int:
@@ -113,6 +179,7 @@ class _Running:
     process: BaseProcess
     conn: Connection
     deadline: float
+    started: float
     outcome: dict[str, Any] | None = None
     eof: bool = False
 
@@ -131,19 +198,23 @@ SINGLE_THREAD_ENV = {
 
 
 def _mp_context(preload: bool) -> ForkServerContext:
-    """The forkserver context; with ``preload`` the forkserver imports and warms up the planner once.
+    """The forkserver context; it watches this server, and with ``preload`` warms up the planner once.
 
-    The forkserver inherits this process's environment when it starts (at the first job), so the
-    single-thread settings are put in place first.
+    The forkserver inherits this process's environment when it starts, so the single-thread settings
+    and the server's pid (:data:`api.lifeline.SERVER_PID_ENV`) are put in place first.
     """
     with _context_lock:
         for name, value in SINGLE_THREAD_ENV.items():
             os.environ.setdefault(name, value)
+        os.environ[SERVER_PID_ENV] = str(os.getpid())
         ctx = multiprocessing.get_context("forkserver")
         assert isinstance(ctx, ForkServerContext)
-        if preload:
-            ctx.set_forkserver_preload(["api.warmup"])
+        ctx.set_forkserver_preload(["api.forkserver", *(["api.warmup"] if preload else [])])
         return ctx
+
+
+def _noop() -> None:
+    """Target of the warm-up probe process."""
 
 
 #: Tries of a job's terminal-state write (a busy SQLite file, a dropped PostgreSQL connection).
@@ -155,26 +226,35 @@ class ProcessJobRunner:
 
     Args:
         db: The job database.
-        settings: Worker count, grace and data directory.
+        settings: Worker count, grace, lease, retention and data directory.
+        metrics: Where job outcomes and durations are counted (default: a private registry).
         poll_s: Dispatcher wake-up period [s].
     """
 
-    def __init__(self, db: Database, settings: Settings, poll_s: float = 0.05) -> None:
+    def __init__(
+        self, db: Database, settings: Settings, metrics: ServiceMetrics | None = None, poll_s: float = 0.05
+    ) -> None:
         self.db = db
         self.settings = settings
+        self.metrics = metrics or ServiceMetrics()
         self.poll_s = poll_s
+        self.instance_id = uuid.uuid4().hex
         self.empty_dir = settings.data_dir / "empty"
+        self.heartbeat_s = max(0.05, min(settings.job_lease_s / 3.0, 2.0))
         self._running: dict[str, _Running] = {}
         self._cancel: set[str] = set()
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._stopping = threading.Event()
+        self._warm = threading.Event()
         self._thread: threading.Thread | None = None
+        self._last_sync = 0.0
+        self._last_purge = 0.0
         self._ctx = _mp_context(settings.forkserver_preload)
 
     # ----------------------------------------------------------------------- protocol
     def start(self) -> None:
-        """Start the dispatcher thread."""
+        """Start the dispatcher thread (it warms the forkserver up first)."""
         self.empty_dir.mkdir(parents=True, exist_ok=True)
         self._stopping.clear()
         self._thread = threading.Thread(target=self._loop, name="cabinplan-jobs", daemon=True)
@@ -194,9 +274,15 @@ class ProcessJobRunner:
             with self.db.session() as s:
                 s.execute(
                     update(Job)
-                    .where(Job.id == r.job_id, Job.status == "running")
+                    .where(Job.id == r.job_id, Job.status == "running", Job.owner == self.instance_id)
                     .values(
-                        status="queued", stage=None, progress=0.0, started_at=None, attempts=Job.attempts - 1
+                        status="queued",
+                        stage=None,
+                        progress=0.0,
+                        started_at=None,
+                        attempts=Job.attempts - 1,
+                        owner=None,
+                        lease_expires_at=None,
                     )
                 )
 
@@ -205,7 +291,7 @@ class ProcessJobRunner:
         self._wake.set()
 
     def cancel(self, job_id: str) -> None:
-        """Ask the dispatcher to kill the job if it runs."""
+        """Ask the dispatcher to kill the job if it runs here (others see ``cancel_requested``)."""
         with self._lock:
             self._cancel.add(job_id)
         self._wake.set()
@@ -219,8 +305,31 @@ class ProcessJobRunner:
         with self._lock:
             return len(self._running)
 
+    def warming(self) -> str | None:
+        """:data:`WARMUP_STAGE` until the forkserver is warm, then ``None``."""
+        return None if self._warm.is_set() else WARMUP_STAGE
+
     # ----------------------------------------------------------------------- dispatcher
+    def _warm_up(self) -> None:
+        """Start the forkserver and wait until it has imported and warmed up the planner."""
+        t0 = time.perf_counter()
+        try:
+            probe = self._ctx.Process(target=_noop, name="cabinplan-warmup", daemon=True)
+            probe.start()
+            probe.join(timeout=WARMUP_TIMEOUT_S)
+            if probe.is_alive():
+                probe.kill()
+                probe.join(timeout=5.0)
+        except Exception:  # jobs then start cold: slower, never wrong
+            _LOG.exception("forkserver warm-up failed")
+        took = time.perf_counter() - t0
+        self.metrics.warmup_seconds.set(took)
+        _LOG.info("job forkserver warm (%.1f s)", took)
+        self._warm.set()
+
     def _loop(self) -> None:
+        if not self._warm.is_set():
+            self._warm_up()
         while not self._stopping.is_set():
             try:
                 self._step()
@@ -230,6 +339,14 @@ class ProcessJobRunner:
 
     def _step(self) -> None:
         self._apply_cancels()
+        now = time.monotonic()
+        if now - self._last_sync >= self.heartbeat_s:
+            self._last_sync = now
+            self._sync()
+            expire_leases(self.db)
+        if now - self._last_purge >= PURGE_PERIOD_S:
+            self._last_purge = now
+            purge_expired(self.db, self.settings.retention_days * 86400.0)
         self._fill()
         with self._lock:
             running = list(self._running.values())
@@ -258,6 +375,47 @@ class ProcessJobRunner:
                         message=f"the job ran past its hard wall-clock limit of {limit:.3g} s and was killed",
                     )
 
+    def _sync(self) -> None:
+        """Heartbeat: renew the leases of this instance's jobs; act on remote cancels and lost leases."""
+        with self._lock:
+            mine = dict(self._running)
+        if not mine:
+            return
+        with self.db.session() as s:
+            s.execute(
+                update(Job)
+                .where(Job.id.in_(list(mine)), Job.status == "running", Job.owner == self.instance_id)
+                .values(lease_expires_at=now_s() + self.settings.job_lease_s)
+            )
+            rows = s.execute(
+                select(Job.id, Job.status, Job.owner, Job.cancel_requested).where(Job.id.in_(list(mine)))
+            ).all()
+        seen = set()
+        for job_id, status, owner, cancel in rows:
+            seen.add(job_id)
+            r = mine[job_id]
+            if status != "running" or owner != self.instance_id:
+                _LOG.warning(
+                    "job %s: lease lost (now %s, owner %s); killing the local copy", job_id, status, owner
+                )
+                self._drop(r)
+            elif cancel:
+                self._kill(r)
+                self._end(r, "cancelled", reason="cancelled", message="cancelled by the client while running")
+        for job_id in set(mine) - seen:  # deleted under us (retention, or a finished plan deleted)
+            self._drop(mine[job_id])
+
+    def _drop(self, r: _Running) -> None:
+        """Kill a job's process without writing anything (the job is no longer this instance's)."""
+        with self._lock:
+            self._running.pop(r.job_id, None)
+        self._kill(r)
+        r.conn.close()
+        try:
+            r.process.close()
+        except ValueError:
+            pass
+
     def _hard_limit_s(self, job_id: str) -> float:
         with self.db.session() as s:
             limit = s.scalar(select(Job.time_limit_s).where(Job.id == job_id))
@@ -271,7 +429,13 @@ class ProcessJobRunner:
             pending = [j for j in cancels if j not in self._running]
         if pending:
             with self.db.session() as s:
-                launching = set(s.scalars(select(Job.id).where(Job.id.in_(pending), Job.status == "running")))
+                launching = set(
+                    s.scalars(
+                        select(Job.id).where(
+                            Job.id.in_(pending), Job.status == "running", Job.owner == self.instance_id
+                        )
+                    )
+                )
             with self._lock:
                 self._cancel |= launching
         for r in targets:
@@ -299,7 +463,13 @@ class ProcessJobRunner:
                         update(Job)
                         .where(Job.id == job_id, Job.status == "queued")
                         .values(
-                            status="running", started_at=now_s(), attempts=Job.attempts + 1, stage="starting"
+                            status="running",
+                            started_at=now_s(),
+                            attempts=Job.attempts + 1,
+                            stage="starting",
+                            owner=self.instance_id,
+                            lease_expires_at=now_s() + self.settings.job_lease_s,
+                            cancel_requested=False,
                         )
                     )
                 )
@@ -313,6 +483,7 @@ class ProcessJobRunner:
                         "empty_dir": str(self.empty_dir),
                         "time_limit_s": row.time_limit_s,
                         "nice": self.settings.worker_nice,
+                        "server_pid": os.getpid(),
                     }
         return None
 
@@ -332,7 +503,7 @@ class ProcessJobRunner:
             with self.db.session() as s:
                 s.execute(
                     update(Job)
-                    .where(Job.id == job["id"], Job.status == "running")
+                    .where(Job.id == job["id"], Job.status == "running", Job.owner == self.instance_id)
                     .values(
                         status="failed",
                         reason="worker_start_failed",
@@ -342,9 +513,10 @@ class ProcessJobRunner:
                 )
             return
         child.close()
-        deadline = time.monotonic() + float(job["time_limit_s"]) + self.settings.job_grace_s
+        started = time.monotonic()
+        deadline = started + float(job["time_limit_s"]) + self.settings.job_grace_s
         with self._lock:
-            self._running[job["id"]] = _Running(job["id"], proc, parent, deadline)
+            self._running[job["id"]] = _Running(job["id"], proc, parent, deadline, started)
         _LOG.info("job %s started (pid %s)", job["id"], proc.pid)
 
     def _drain(self, r: _Running) -> None:
@@ -360,7 +532,7 @@ class ProcessJobRunner:
                 with self.db.session() as s:
                     s.execute(
                         update(Job)
-                        .where(Job.id == r.job_id, Job.status == "running")
+                        .where(Job.id == r.job_id, Job.status == "running", Job.owner == self.instance_id)
                         .values(stage=str(msg[1])[:32], progress=float(msg[2]))
                     )
             elif msg[0] == "done":
@@ -385,40 +557,48 @@ class ProcessJobRunner:
             str(out["status"]),
             reason=out.get("reason"),
             message=out.get("message"),
-            result_json=out.get("document"),
-            profile_csv=out.get("csv"),
+            result_packed=out.get("packed"),
             plot_png=out.get("png"),
             **values,
         )
 
     def _kill(self, r: _Running) -> None:
-        if r.process.is_alive():
-            r.process.kill()
-        r.process.join(timeout=5.0)
+        try:
+            if r.process.is_alive():
+                r.process.kill()
+            r.process.join(timeout=5.0)
+        except ValueError:  # already closed
+            pass
 
     def _end(self, r: _Running, status: str, **values: Any) -> None:
-        """Write the terminal state (only over ``running``: a cancellation is never overwritten).
+        """Write the terminal state (only over this instance's ``running``: never over a cancellation).
 
         The slot is released first, so that whoever reads the terminal state also sees the slot free.
         """
         with self._lock:
             self._running.pop(r.job_id, None)
+        written = 0
         try:
             for attempt in range(END_WRITE_ATTEMPTS):
                 try:
                     with self.db.session() as s:
-                        s.execute(
-                            update(Job)
-                            .where(Job.id == r.job_id, Job.status == "running")
-                            .values(
-                                status=status,
-                                finished_at=now_s(),
-                                progress=1.0 if status == "succeeded" else Job.progress,
-                                **values,
+                        written = rows_matched(
+                            s.execute(
+                                update(Job)
+                                .where(
+                                    Job.id == r.job_id, Job.status == "running", Job.owner == self.instance_id
+                                )
+                                .values(
+                                    status=status,
+                                    finished_at=now_s(),
+                                    progress=1.0 if status == "succeeded" else Job.progress,
+                                    lease_expires_at=None,
+                                    **values,
+                                )
                             )
                         )
                     break
-                except Exception:  # a busy or dropped database: retry, then leave it to start-up recovery
+                except Exception:  # a busy or dropped database: retry, then leave it to the lease expiry
                     if attempt == END_WRITE_ATTEMPTS - 1:
                         _LOG.exception("job %s: terminal state %s not written", r.job_id, status)
                     else:
@@ -430,8 +610,21 @@ class ProcessJobRunner:
                 r.process.close()
             except ValueError:
                 pass
+        if written:
+            reason = values.get("reason")
+            self.metrics.job_outcomes.labels(status=status, reason=str(reason or "")).inc()
+            self.metrics.job_duration.labels(status=status).observe(time.monotonic() - r.started)
         _LOG.info("job %s %s (%s)", r.job_id, status, values.get("reason"))
         self._wake.set()
 
 
-__all__ = ["MAX_ATTEMPTS", "JobRunner", "ProcessJobRunner", "recover_jobs", "rows_matched"]
+__all__ = [
+    "MAX_ATTEMPTS",
+    "WARMUP_STAGE",
+    "JobRunner",
+    "ProcessJobRunner",
+    "expire_leases",
+    "purge_expired",
+    "recover_jobs",
+    "rows_matched",
+]

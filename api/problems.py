@@ -2,7 +2,10 @@
 
 A body has ``type`` (a URN naming the problem, ``urn:cabinplan:problem:<code>``), ``title``, ``status``,
 ``detail`` and, for 422, ``errors: [{field, reason}]`` with dotted field paths
-(``options.time_limit_s``). Planner errors add ``reason`` (the planner's machine-readable code) and
+(``options.time_limit_s``). One type per kind of error: a body that cannot be parsed (bad JSON or
+YAML, not UTF-8) is 400 ``malformed_body`` whatever the route; any body over its limit is 413
+``payload_too_large``; a stalled body is 408 ``body_timeout``; schema violations are 422
+``invalid_input``. Planner errors add ``reason`` (the planner's machine-readable code) and
 ``details`` (its evidence). Unexpected exceptions become a 500 problem with the exception's type only:
 never a stack trace.
 """
@@ -103,6 +106,80 @@ def pydantic_errors(errors: Sequence[Mapping[str, Any]], drop_prefix: int = 0) -
     ]
 
 
+#: Kind of problem of each status the service answers with when nothing more specific applies.
+STATUS_CODES: dict[int, str] = {
+    400: "malformed_body",
+    401: "unauthorized",
+    403: "forbidden",
+    404: "not_found",
+    405: "method_not_allowed",
+    408: "body_timeout",
+    409: "conflict",
+    413: "payload_too_large",
+    415: "unsupported_media_type",
+    422: "invalid_input",
+    429: "rate_limited",
+    500: "internal_error",
+    503: "not_ready",
+}
+
+#: OpenAPI schema of a problem document (``components.schemas.Problem``).
+PROBLEM_SCHEMA: dict[str, Any] = {
+    "title": "Problem",
+    "type": "object",
+    "description": "RFC 9457 problem details.",
+    "required": ["type", "title", "status", "detail"],
+    "properties": {
+        "type": {"type": "string", "description": "urn:cabinplan:problem:<code>, one per kind of error."},
+        "title": {"type": "string"},
+        "status": {"type": "integer"},
+        "detail": {"type": "string"},
+        "errors": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "properties": {"field": {"type": "string"}, "reason": {"type": "string"}},
+                "required": ["field", "reason"],
+            },
+        },
+        "reason": {"type": "string", "description": "The planner's machine-readable reason."},
+        "details": {"type": "object", "description": "The planner's evidence."},
+    },
+    "additionalProperties": True,
+}
+
+_DESCRIPTIONS = {
+    400: "Malformed body (not JSON/YAML, not UTF-8)",
+    401: "Missing, unknown or revoked API key",
+    403: "The key may not use this route",
+    404: "No such resource (or another tenant's)",
+    408: "The request body was not sent in time",
+    409: "Conflict with the resource's state",
+    413: "Request body too large",
+    415: "Unsupported Content-Type",
+    422: "Invalid input (errors name the fields)",
+    429: "Rate limit or quota exceeded (see Retry-After)",
+    500: "Internal error",
+    503: "Not ready",
+}
+
+
+def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` entries of problem statuses (``application/problem+json``)."""
+    return {
+        status: {
+            "description": _DESCRIPTIONS.get(status, _title(status)),
+            "content": {PROBLEM_JSON: {"schema": {"$ref": "#/components/schemas/Problem"}}},
+        }
+        for status in statuses
+    }
+
+
+def malformed_body(detail: str) -> Problem:
+    """400 ``malformed_body``: the request body cannot be parsed."""
+    return Problem(400, "malformed_body", detail, errors=[{"field": "body", "reason": detail}])
+
+
 def from_planner_error(exc: PlannerError, status: int = 422) -> Problem:
     """A planner exception as a problem (422 by default) with ``reason``, ``details`` and ``errors``.
 
@@ -173,6 +250,11 @@ def install(app: FastAPI) -> None:
     async def on_request_validation(_request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, RequestValidationError)
         raw = list(exc.errors())
+        if any(e.get("type") == "json_invalid" for e in raw):
+            first_bad = next(e for e in raw if e.get("type") == "json_invalid")
+            loc = list(first_bad.get("loc", ()))
+            where = f" at byte {loc[-1]}" if loc and isinstance(loc[-1], int) else ""
+            return malformed_body(f"request body: not valid JSON{where}").response()
         errors = []
         for e in raw:
             loc = list(e.get("loc", ()))
@@ -189,12 +271,12 @@ def install(app: FastAPI) -> None:
 
     async def on_http(_request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, StarletteHTTPException)
-        code = {404: "not_found", 405: "method_not_allowed", 401: "unauthorized", 403: "forbidden"}.get(
-            exc.status_code, "http_error"
-        )
+        code = STATUS_CODES.get(exc.status_code, "http_error")
         detail = exc.detail if isinstance(exc.detail, str) else _title(exc.status_code)
         if exc.status_code == 404 and detail == "Not Found":
             detail = "no such resource"
+        if exc.status_code == 400:
+            return malformed_body(f"request body: {detail}").response()
         return Problem(exc.status_code, code, detail, headers=exc.headers or {}).response()
 
     async def on_unexpected(_request: Request, exc: Exception) -> JSONResponse:
@@ -210,6 +292,10 @@ def install(app: FastAPI) -> None:
 
 __all__ = [
     "PROBLEM_JSON",
+    "PROBLEM_SCHEMA",
+    "STATUS_CODES",
+    "malformed_body",
+    "problem_responses",
     "Problem",
     "SafeJSONResponse",
     "from_planner_error",

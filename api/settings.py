@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import Field, SecretStr
+from limits import parse
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -53,9 +54,36 @@ class Settings(BaseSettings):
     retry_after_s: int = Field(5, ge=1, description="Retry-After of a 429 (quota) answer.")
     admin_key: SecretStr | None = Field(None, description="API key of the administrator (manages keys).")
     page_size_max: int = Field(100, ge=1, le=1000, description="Largest page of GET /plans and /cabins.")
+    job_lease_s: float = Field(
+        15.0,
+        ge=0.5,
+        le=600.0,
+        description="Lease of a running job, renewed by its instance every third of it; a job whose lease "
+        "lapses (its instance died) is re-queued by any instance.",
+    )
+    retention_days: float = Field(
+        30.0, gt=0.0, le=36500.0, description="Finished plans are deleted this long after they finish."
+    )
+    rate_limit: str = Field(
+        "120 per 10 seconds",
+        description="Authenticated requests allowed per tenant and instance (moving window, the `limits` "
+        "notation, e.g. '120 per 10 seconds'); beyond it 429 with Retry-After.",
+    )
+    body_timeout_s: float = Field(
+        10.0, gt=0.0, le=600.0, description="Longest wait for the next chunk of a request body (408 beyond)."
+    )
     forkserver_preload: bool = Field(
         True, description="Import the planner once in the forkserver so that each job forks warm."
     )
+
+    @field_validator("rate_limit")
+    @classmethod
+    def _parse_rate_limit(cls, value: str) -> str:
+        try:
+            parse(value)
+        except ValueError as exc:
+            raise ValueError(f"not a rate limit such as '120 per 10 seconds': {exc}") from None
+        return value
 
     def resolved_database_url(self) -> str:
         """The database URL, defaulting to the SQLite file in the data directory."""

@@ -3,7 +3,9 @@
 The parent (:mod:`api.jobs`) sends nothing after start: the job description (scenario as submitted and
 the tenant's mesh files it names) is the process argument. The child sends ``("progress", stage,
 fraction)`` messages while planning and one ``("done", outcome)`` at the end; the parent writes
-everything to the database. Plot and CSV are made here, never in the server's event loop.
+everything to the database. The plot and the packed result document (:mod:`api.compact`) are made
+here, never in the server's event loop. The process arms its parent-death signal first, so it ends
+with the service (:mod:`api.lifeline`).
 
 Importing this module imports the planner, so the forkserver can preload it once and every job forks
 warm.
@@ -18,6 +20,8 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from api.compact import pack_document
+from api.lifeline import die_with_parent
 from api.store import scenario_mesh_resolver
 from planner.core.exceptions import PlannerError
 from planner.documents.output import refusal_document, result_document
@@ -68,7 +72,12 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
 
 
 def run_job(job: dict[str, Any], conn: Connection) -> None:
-    """Process entry point: plan ``job`` and send progress and the outcome through ``conn``."""
+    """Process entry point: plan ``job`` and send progress and the outcome through ``conn``.
+
+    The outcome carries the result document packed (``packed``), not its text, and no CSV (made on
+    request from the document).
+    """
+    die_with_parent(job.get("server_pid"))
 
     def progress(stage: str, fraction: float) -> None:
         conn.send(("progress", str(stage), float(fraction)))
@@ -86,6 +95,9 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
             "message": f"internal error: {type(exc).__name__}: {exc}",
             "document": None,
         }
+    document = outcome.pop("document", None)
+    outcome.pop("csv", None)
+    outcome["packed"] = pack_document(document) if document is not None else None
     conn.send(("done", outcome))
     conn.close()
 

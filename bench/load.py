@@ -3,8 +3,10 @@
 Starts the real server (``python -m api``, temp data dir, SQLite), then ``--clients`` threads each submit
 one reference scenario (round robin over the suite's succeeding scenarios) and poll it to the end, while a
 prober calls ``/health`` every 50 ms. Prints throughput, p50/p95/max latency of ``/health`` and of
-``GET /plans/{id}`` under load, and how many results pass the validation gate: the gate report stored
-with each plan, and an independent re-run of the gate through ``POST /plans:validate``.
+``GET /plans/{id}`` under load, ``POST /plans`` latency under load next to the same submissions made
+one at a time on the idle server first (each cancelled at once), and how many results pass the
+validation gate: the gate report stored with each plan, and an independent re-run of the gate through
+``POST /plans:validate``.
 
     python -m bench.load [--clients 20] [--workers 2]
 """
@@ -88,13 +90,14 @@ def main() -> None:
         "CABINPLAN_PORT": str(port),
         "CABINPLAN_WORKERS": str(args.workers),
         "CABINPLAN_TENANT_MAX_ACTIVE_JOBS": str(args.clients + 1),
+        "CABINPLAN_RATE_LIMIT": "100000 per 1 second",  # the clients poll faster than a tenant may
     }
     log = (data / "server.log").open("wb")
     proc = subprocess.Popen(
         [sys.executable, "-m", "api"], cwd=ROOT, env=env, stdout=log, stderr=log, start_new_session=True
     )
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 300  # /ready waits for the job forkserver's warm-up
         while True:
             try:
                 if httpx.get(f"{url}/api/v1/ready", timeout=1).status_code == 200:
@@ -106,6 +109,15 @@ def main() -> None:
             time.sleep(0.1)
         headers = {"X-API-Key": (data / "local-api-key").read_text().strip()}
         scenarios = reference_scenarios()
+        idle_post_s: list[float] = []
+        with httpx.Client(base_url=url, timeout=60, headers=headers) as c:
+            for k in range(2 * len(scenarios)):
+                t = time.perf_counter()
+                r = c.post("/api/v1/plans", json=scenarios[k % len(scenarios)])
+                idle_post_s.append(time.perf_counter() - t)
+                r.raise_for_status()
+                c.delete(f"/api/v1/plans/{r.json()['id']}")
+        post_s: list[float] = []
         status_s: list[float] = []
         results: list[dict[str, Any]] = []
         lock = threading.Lock()
@@ -123,7 +135,10 @@ def main() -> None:
         def client(k: int) -> None:
             sc = scenarios[k % len(scenarios)]
             with httpx.Client(base_url=url, timeout=60, headers=headers) as c:
+                t = time.perf_counter()
                 r = c.post("/api/v1/plans", json=sc, headers={"Idempotency-Key": f"load-{k}"})
+                with lock:
+                    post_s.append(time.perf_counter() - t)
                 r.raise_for_status()
                 job_id = r.json()["id"]
                 while True:
@@ -181,6 +196,9 @@ def main() -> None:
         more = " ..." if len(slow) > 8 else ""
         print(f"  /health calls above 50 ms: {len(slow)} of {len(health_s)} ({late}{more})")
         print(f"GET /plans/{{id}} polls of the 20 clients:      {_pct(status_s)}")
+        print(f"POST /plans idle (one at a time):               {_pct(idle_post_s)}")
+        print(f"POST /plans under load ({args.clients} clients at once):     {_pct(post_s)}")
+        print(f"  median under load / idle: {np.median(post_s) / np.median(idle_post_s):.1f}x")
         print(
             f"gate: {stored_pass}/{len(ok)} stored reports passed, "
             f"{regate}/{len(ok)} passed POST /plans:validate"

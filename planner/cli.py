@@ -26,6 +26,7 @@ from planner.core.exceptions import (
 )
 from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8
+from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
 
 app = typer.Typer(
@@ -133,7 +134,7 @@ def ik(
         str, typer.Option(help='JSON: {"position": [x, y, z], "orientation": {"w","x","y","z"}}')
     ],
     near: Annotated[str | None, typer.Option(help="JSON drives: return the solution nearest these")] = None,
-    seed: Annotated[int, typer.Option(help="seed of the random restarts")] = 0,
+    seed: Annotated[int, typer.Option(help="seed of the random restarts", min=0, max=MAX_SEED)] = 0,
 ) -> None:
     """Inverse kinematics of a tool pose (base frame): one admissible solution, or exit 3 if unreachable."""
     tools = kinematics_tools(robot)

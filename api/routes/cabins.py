@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, File, Form, Query, Response, UploadFile
 
 from api.auth import CurrentPrincipal
-from api.problems import Problem
+from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 from api.store import MeshInUse, mesh_document
 from meshes import reference_cabins, reference_manifest
@@ -38,7 +38,12 @@ def reference_document(name: str) -> dict[str, Any]:
     }
 
 
-@router.post("/cabins", status_code=201, summary="Upload a cabin mesh (STL, OBJ, PLY, GLB/glTF)")
+@router.post(
+    "/cabins",
+    status_code=201,
+    summary="Upload a cabin mesh (STL, OBJ, PLY, GLB/glTF)",
+    responses={200: {"description": "The same bytes are already stored"}, **problem_responses(409)},
+)
 def upload_cabin(
     ctx: Ctx,
     principal: CurrentPrincipal,
@@ -93,7 +98,12 @@ def get_cabin(cabin_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str,
     return mesh_document(row)
 
 
-@router.delete("/cabins/{cabin_id}", status_code=204, summary="Delete an uploaded cabin")
+@router.delete(
+    "/cabins/{cabin_id}",
+    status_code=204,
+    summary="Delete an uploaded cabin",
+    responses=problem_responses(409),
+)
 def delete_cabin(cabin_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """Forget the tenant's cabin (204); reference cabins and those of active plans stay (409)."""
     if cabin_id in reference_cabins():

@@ -8,12 +8,12 @@ from fastapi import APIRouter, Response
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy import select
 
-from api.auth import AdminPrincipal, create_key
+from api.auth import ADMIN_TENANT, LOCAL_TENANT, AdminPrincipal, create_key
 from api.db import ApiKey, now_s
-from api.problems import Problem
+from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 
-router = APIRouter(tags=["keys"])
+router = APIRouter(tags=["keys"], responses=problem_responses(403))
 
 
 class KeyRequest(BaseModel):
@@ -39,12 +39,16 @@ def _doc(row: ApiKey) -> dict[str, Any]:
 
 @router.post("/keys", status_code=201, summary="Create an API key for a tenant (admin)")
 def create(body: KeyRequest, ctx: Ctx, _admin: AdminPrincipal) -> dict[str, Any]:
-    """The new key's record with its secret in ``key`` (shown this once; only its hash is stored)."""
-    if body.tenant == "admin":
+    """The new key's record with its secret in ``key`` (shown this once; only its hash is stored).
+
+    The tenants ``admin`` and ``local`` (the loopback-only default key of ``make serve``) are reserved:
+    422 naming ``tenant``.
+    """
+    if body.tenant in (ADMIN_TENANT, LOCAL_TENANT):
         raise Problem(
             422,
             "invalid_input",
-            "tenant: 'admin' is reserved",
+            f"tenant: {body.tenant!r} is reserved",
             errors=[{"field": "tenant", "reason": "reserved"}],
         )
     row, secret = create_key(ctx, body.tenant, body.name)

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
 from planner.core.schemas import Finite, Pose
+from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
 
 router = APIRouter(tags=["kinematics"])
@@ -66,7 +67,7 @@ class IKRequest(BaseModel):
         ),
     ]
     near: Annotated[DriveMap | None, Field(description="Prefer the solution nearest these drives.")] = None
-    seed: Annotated[int, Field(ge=0, le=2**31 - 1, description="Seed of the random restarts.")] = 0
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED, description="Seed of the random restarts.")] = 0
 
 
 @router.post("/kinematics/fk", summary="Forward kinematics")

@@ -1,9 +1,14 @@
-"""Planning jobs: submit a scenario (202 + job id), poll, fetch profile / plot, cancel, list; the gate.
+"""Planning jobs: submit a scenario (202 + id), poll, fetch profile / plot, cancel, delete, list; the gate.
 
-``POST /plans`` validates and resolves the scenario (same schema as the CLI; ``cabin.mesh`` is a
+``POST /plans`` takes the scenario as JSON or YAML (``Content-Type: application/yaml``: the scenario
+files of the CLI as they are), validates and resolves it (same schema as the CLI; ``cabin.mesh`` is a
 reference cabin name or the id of one of the tenant's uploaded cabins), checks the planning time limit
 ceiling and the tenant's quota, and commits the job (``queued``) *before* answering 202 with its id and
 ``Location``. An ``Idempotency-Key`` header makes a retry return the same job instead of planning twice.
+
+Results are stored packed (:mod:`api.compact`, about 7x smaller than the JSON text); the JSON document
+(``GET /plans/{id}``) and the CSV (``GET /plans/{id}/profile.csv``) are made from it on request.
+``DELETE /plans/{id}`` cancels a queued or running plan and deletes a finished one.
 """
 
 from __future__ import annotations
@@ -13,75 +18,88 @@ import json
 import threading
 import time
 import uuid
+from collections import OrderedDict
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Body, Header, Query, Response
-from sqlalchemy import func, select, update
+from fastapi import APIRouter, Body, Header, Query, Request, Response
+from sqlalchemy import delete, func, select, update
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import undefer
+from starlette.concurrency import run_in_threadpool
 
 from api.auth import CurrentPrincipal
+from api.bodies import parse_body
+from api.compact import unpack_document, unpack_text
 from api.context import AppContext
 from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
 from api.jobs import rows_matched
-from api.problems import Problem
+from api.openapi import scenario_request_body
+from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
 from meshes import reference_cabin_path, reference_cabins
-from planner.scenario.resolve import ResolvedScenario, resolve_scenario
-from planner.scenario.schema import Scenario, scenario_from_dict
+from planner.robots import load_robot
+from planner.robots.cabin8 import Cabin8
+from planner.scenario import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
+from planner.timing.profile import DriveProfile
 
 router = APIRouter(tags=["plans"])
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
-_SCENARIO_BODY = Body(
-    description="A scenario (the CLI's schema, see the README): robot, cabin (reference name or uploaded "
-    "cabin id), payload, start, goal, options.",
-    examples=[
-        {
-            "name": "transfer",
-            "robot": "cabin8",
-            "start": {
-                "drives": {
-                    "d1": 1.0,
-                    "x1": -0.46,
-                    "x2": 0.46,
-                    "x3": -0.09,
-                    "theta3": 1.2,
-                    "theta4": -0.8,
-                    "d5": -0.25,
-                    "theta6": 0,
-                }
-            },
-            "goal": {
-                "drives": {
-                    "d1": 2.0,
-                    "x1": -0.46,
-                    "x2": 0.46,
-                    "x3": -0.09,
-                    "theta3": 1.2,
-                    "theta4": -0.8,
-                    "d5": -0.25,
-                    "theta6": 0,
-                }
-            },
-        }
-    ],
+_SCENARIO_DESCRIPTION = (
+    "A scenario (the CLI's schema, see the README), as JSON or YAML: robot, cabin (reference name or "
+    "uploaded cabin id), payload, start, goal, options."
 )
+
+#: Example of a scenario body (a free rail move).
+_SCENARIO_EXAMPLE: dict[str, Any] = {
+    "name": "transfer",
+    "robot": "cabin8",
+    "start": {
+        "drives": {
+            "d1": 1.0,
+            "x1": -0.46,
+            "x2": 0.46,
+            "x3": -0.09,
+            "theta3": 1.2,
+            "theta4": -0.8,
+            "d5": -0.25,
+            "theta6": 0,
+        }
+    },
+    "goal": {
+        "drives": {
+            "d1": 2.0,
+            "x1": -0.46,
+            "x2": 0.46,
+            "x3": -0.09,
+            "theta3": 1.2,
+            "theta4": -0.8,
+            "d5": -0.25,
+            "theta6": 0,
+        }
+    },
+}
 
 
 def _canonical_sha256(data: Any) -> str:
-    return hashlib.sha256(json.dumps(data, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
-def job_document(row: Job) -> dict[str, Any]:
-    """The public job document (without the result: :func:`get_plan` adds it)."""
+def job_document(row: Job, warming: str | None = None) -> dict[str, Any]:
+    """The public job document (without the result: :func:`get_plan` adds it).
+
+    Args:
+        row: The job.
+        warming: The runner's warm-up stage, shown as the stage of a queued job while it lasts.
+    """
     base = f"/api/v1/plans/{row.id}"
+    stage = warming if row.status == "queued" and warming is not None else row.stage
     doc: dict[str, Any] = {
         "id": row.id,
         "status": row.status,
-        "stage": row.stage,
+        "stage": stage,
         "progress": row.progress,
         "scenario": {"name": row.scenario_name, "sha256": row.provenance.get("scenario_sha256")},
         "time_limit_s": row.time_limit_s,
@@ -188,12 +206,18 @@ def _tenant_lock(tenant: str) -> threading.Lock:
         return _TENANT_LOCKS.setdefault(tenant, threading.Lock())
 
 
-@router.post("/plans", status_code=202, summary="Submit a scenario for planning")
-def submit(
+@router.post(
+    "/plans",
+    status_code=202,
+    summary="Submit a scenario (JSON or YAML) for planning",
+    responses={200: {"description": "Idempotent replay: the job of an earlier request with this key"}},
+    openapi_extra={"requestBody": scenario_request_body(_SCENARIO_DESCRIPTION, _SCENARIO_EXAMPLE)},
+)
+async def submit(
+    request: Request,
     ctx: Ctx,
     principal: CurrentPrincipal,
     response: Response,
-    body: Annotated[dict[str, Any], _SCENARIO_BODY],
     idempotency_key: Annotated[
         str | None,
         Header(alias="Idempotency-Key", max_length=200, description="Same key + same body = same job."),
@@ -201,10 +225,18 @@ def submit(
 ) -> dict[str, Any]:
     """Queue a planning job: 202 with the job document and ``Location``.
 
-    Invalid scenarios give 422 naming the field; a ``time_limit_s`` above the ceiling gives 422 naming
-    ``options.time_limit_s``; a tenant with too many queued + running jobs gets 429 with ``Retry-After``.
+    The body is a scenario as ``application/json`` or ``application/yaml``. A body that cannot be parsed
+    gives 400; invalid scenarios give 422 naming the field; a ``time_limit_s`` above the ceiling gives 422
+    naming ``options.time_limit_s``; a tenant with too many queued + running jobs gets 429 with
+    ``Retry-After``.
     """
-    tenant = principal.tenant
+    body = parse_body(await request.body(), request.headers.get("content-type"))
+    return await run_in_threadpool(_submit, ctx, principal.tenant, response, body, idempotency_key)
+
+
+def _submit(
+    ctx: AppContext, tenant: str, response: Response, body: Any, idempotency_key: str | None
+) -> dict[str, Any]:
     request_sha256 = _canonical_sha256(body)
     if idempotency_key is not None:
         replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
@@ -214,7 +246,7 @@ def submit(
     from planner.documents.output import provenance
 
     # Count and insert under the tenant's lock, so concurrent submissions cannot pass the quota together
-    # (one service instance per database, see api.jobs).
+    # (per instance: with several instances a tenant may briefly exceed its quota by one job each).
     with _tenant_lock(tenant):
         with ctx.db.session() as s:
             active = s.scalar(
@@ -280,7 +312,41 @@ def list_plans(
             select(Job).where(*where).order_by(Job.created_at.desc(), Job.id).limit(limit).offset(offset)
         ).all()
         total = s.scalar(select(func.count()).select_from(Job).where(*where)) or 0
-    return {"items": [job_document(r) for r in rows], "total": int(total), "limit": limit, "offset": offset}
+    warming = ctx.runner.warming()
+    items = [job_document(r, warming) for r in rows]
+    return {"items": items, "total": int(total), "limit": limit, "offset": offset}
+
+
+#: Decoded result texts of the last few plans read (finished results never change).
+_RESULTS: OrderedDict[str, str] = OrderedDict()
+_RESULTS_MAX = 8
+_RESULTS_LOCK = threading.Lock()
+
+
+def _result_text(ctx: AppContext, row: Job) -> str | None:
+    """The result document's JSON text (unpacked from storage, or a legacy text row), or ``None``."""
+    if row.status in ACTIVE_STATES:
+        return None
+    with _RESULTS_LOCK:
+        if row.id in _RESULTS:
+            _RESULTS.move_to_end(row.id)
+            return _RESULTS[row.id]
+    with ctx.db.session() as s:
+        packed, legacy = s.execute(
+            select(Job.result_packed, Job.result_json).where(Job.id == row.id)
+        ).one_or_none() or (None, None)
+    text = unpack_text(packed) if packed is not None else legacy
+    if text is not None:
+        with _RESULTS_LOCK:
+            _RESULTS[row.id] = text
+            while len(_RESULTS) > _RESULTS_MAX:
+                _RESULTS.popitem(last=False)
+    return text
+
+
+def _forget_result(job_id: str) -> None:
+    with _RESULTS_LOCK:
+        _RESULTS.pop(job_id, None)
 
 
 @router.get(
@@ -292,36 +358,53 @@ def list_plans(
 def get_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """The job document; once finished, ``result`` is the drive profile or the refusal document.
 
-    The stored result (megabytes for a long profile) is spliced into the answer as stored, without being
-    parsed and serialised again, so that polling stays cheap for the server.
+    The stored result is unpacked into its JSON text once and spliced into the answer (a few recent
+    results are kept decoded), so that polling stays cheap for the server.
     """
-    row = _tenant_job(ctx, principal.tenant, plan_id, undefer(Job.result_json))
-    head = json.dumps(job_document(row), allow_nan=False, separators=(",", ":"))
-    body = f'{head[:-1]},"result":{row.result_json or "null"}}}'
+    row = _tenant_job(ctx, principal.tenant, plan_id)
+    head = json.dumps(job_document(row, ctx.runner.warming()), allow_nan=False, separators=(",", ":"))
+    body = f'{head[:-1]},"result":{_result_text(ctx, row) or "null"}}}'
     return Response(body, media_type="application/json")
 
 
-def _finished_file(ctx: AppContext, tenant: str, plan_id: str, column: Any, what: str) -> Any:
-    row = _tenant_job(ctx, tenant, plan_id, undefer(column))
+def _succeeded(ctx: AppContext, tenant: str, plan_id: str, what: str) -> Job:
+    row = _tenant_job(ctx, tenant, plan_id)
     if row.status in ACTIVE_STATES:
         raise Problem(
             409, "not_finished", f"plan {plan_id} is {row.status}; the {what} exists once it succeeds"
         )
-    value = getattr(row, column.key)
-    if row.status != "succeeded" or value is None:
+    if row.status != "succeeded":
         raise Problem(404, "not_found", f"plan {plan_id} {row.status}: it has no {what}")
-    return value
+    return row
+
+
+def profile_csv(ctx: AppContext, row: Job) -> str | None:
+    """The drive profile of a succeeded plan as CSV, made from its stored document (or a legacy CSV)."""
+    with ctx.db.session() as s:
+        packed, legacy = s.execute(
+            select(Job.result_packed, Job.profile_csv).where(Job.id == row.id)
+        ).one_or_none() or (None, None)
+    if packed is None:
+        return legacy
+    doc = unpack_document(packed)
+    robot = load_robot(str(doc["robot"]))
+    if not isinstance(robot, Cabin8):  # planning jobs are cabin8 plans
+        return None
+    return DriveProfile.from_dict(doc, robot).to_csv()
 
 
 @router.get(
     "/plans/{plan_id}/profile.csv",
     summary="The drive profile as CSV",
     response_class=Response,
-    responses={200: {"content": {"text/csv": {}}}},
+    responses={200: {"content": {"text/csv": {}}}, **problem_responses(409)},
 )
 def get_profile_csv(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """One row per sample: ``t_s``, then position, velocity, acceleration, effort of each drive."""
-    csv = _finished_file(ctx, principal.tenant, plan_id, Job.profile_csv, "profile")
+    row = _succeeded(ctx, principal.tenant, plan_id, "profile")
+    csv = profile_csv(ctx, row)
+    if csv is None:
+        raise Problem(404, "not_found", f"plan {plan_id}: it has no profile")
     return Response(csv, media_type="text/csv; charset=utf-8")
 
 
@@ -329,25 +412,39 @@ def get_profile_csv(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Resp
     "/plans/{plan_id}/plot.png",
     summary="Plot of the profile against the limits and of the clearance",
     response_class=Response,
-    responses={200: {"content": {"image/png": {}}}},
+    responses={200: {"content": {"image/png": {}}}, **problem_responses(409)},
 )
 def get_plot_png(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """The plot made by the worker when the job finished."""
-    png = _finished_file(ctx, principal.tenant, plan_id, Job.plot_png, "plot")
+    row = _succeeded(ctx, principal.tenant, plan_id, "plot")
+    with ctx.db.session() as s:
+        png = s.scalar(select(Job.plot_png).where(Job.id == row.id))
+    if png is None:
+        raise Problem(404, "not_found", f"plan {plan_id}: it has no plot")
     return Response(png, media_type="image/png")
 
 
-@router.delete("/plans/{plan_id}", summary="Cancel a plan")
-def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal, response: Response) -> dict[str, Any]:
-    """Queued -> cancelled; running -> its worker is killed, cancelled. Finished plans give 409.
+@router.delete(
+    "/plans/{plan_id}",
+    summary="Cancel a queued or running plan; delete a finished one",
+    responses={
+        202: {"description": "Cancellation requested, the kill still pending"},
+        204: {"description": "Deleted"},
+        **problem_responses(409),
+    },
+)
+def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal, response: Response) -> Response:
+    """Queued -> cancelled; running -> its worker is killed (on whichever instance runs it), cancelled.
 
-    200 with the cancelled job; 202 when the kill of a running job is still pending after 10 s.
+    200 with the cancelled job; 202 when the kill of a running job is still pending after 10 s. A
+    finished plan (succeeded, failed or cancelled) is deleted with its result and plot: 204.
     """
     row = _tenant_job(ctx, principal.tenant, plan_id)
-    if row.status == "cancelled":
-        return job_document(row)
     if row.status in TERMINAL_STATES:
-        raise Problem(409, "already_finished", f"plan {plan_id} already {row.status}")
+        with ctx.db.session() as s:
+            s.execute(delete(Job).where(Job.id == plan_id, Job.status.in_(TERMINAL_STATES)))
+        _forget_result(plan_id)
+        return Response(status_code=204)
     with ctx.db.session() as s:
         cancelled = rows_matched(
             s.execute(
@@ -361,6 +458,10 @@ def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal, response: R
                 )
             )
         )
+        if not cancelled:  # running: its owner (this instance or another) kills it at its next heartbeat
+            s.execute(
+                update(Job).where(Job.id == plan_id, Job.status == "running").values(cancel_requested=True)
+            )
     if not cancelled:
         ctx.runner.cancel(plan_id)
         deadline = time.monotonic() + 10.0
@@ -370,11 +471,13 @@ def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal, response: R
                 break
             time.sleep(0.05)
     row = _tenant_job(ctx, principal.tenant, plan_id)
+    status = 200
     if row.status in ACTIVE_STATES:  # the kill is still pending (e.g. the process is being started)
-        response.status_code = 202
+        status = 202
     elif row.status != "cancelled":
         raise Problem(409, "already_finished", f"plan {plan_id} {row.status} before it could be cancelled")
-    return job_document(row)
+    body = json.dumps(job_document(row), allow_nan=False, separators=(",", ":"))
+    return Response(body, status_code=status, media_type="application/json")
 
 
 @router.post("/plans:validate", summary="Run the validation gate on a caller's drive profile")

@@ -132,9 +132,22 @@ class ApproachInfeasible(PlanRefused):
 
 
 class NoPathFound(PlanRefused):
-    """The global planner found no certified path within the time limit."""
+    """The wall-clock time limit stopped the search before it found a path or spent its work budget.
+
+    The outcome depends on the machine's speed and load (``details['ended_by'] == 'time_limit'``).
+    """
 
     reason = "no_path_within_time_limit"
+
+
+class NoPathWithinBudget(NoPathFound):
+    """The search spent its work budget (motion checks) without a certified path.
+
+    Reproducible: the same scenario and seed end the same way on any machine
+    (``details['ended_by'] == 'work_budget'``).
+    """
+
+    reason = "no_path_within_budget"
 
 
 class RetimingFailed(PlanRefused):

@@ -34,6 +34,9 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import threading
+from collections import OrderedDict
+from collections.abc import Hashable
 from pathlib import Path
 from typing import get_args
 
@@ -91,6 +94,10 @@ def load_mesh(
     if not data:
         fail(label, "empty", "the file is empty (0 bytes)", byte_size=0)
     sha256 = hashlib.sha256(data).hexdigest()
+    key = (sha256, fmt, units, label, T_base_mesh.tobytes(), limits)
+    cached = _cache_get(key)
+    if cached is not None:  # the same bytes parsed and validated before: the result is immutable
+        return cached
 
     kind = sniff(label, fmt, data, limits)
     if kind == "obj":
@@ -107,7 +114,7 @@ def load_mesh(
         )
 
     mesh_vertices = mesh_vertices * UNIT_SCALE_M[units]
-    return validate_and_build(
+    loaded = validate_and_build(
         label,
         sha256,
         units,
@@ -120,6 +127,41 @@ def load_mesh(
         n_parts=len(parts),
         n_ignored=n_ignored,
     )
+    _cache_put(key, loaded)
+    return loaded
+
+
+#: Parsed meshes by content hash (and format, units, name, pose, limits): a service resolving many
+#: scenarios in the same cabin parses its file once. Meshes are immutable (read-only arrays), so one
+#: object is shared. Bounded by entries and by the faces they hold.
+MESH_CACHE_ENTRIES = 8
+MESH_CACHE_MAX_FACES = 2_000_000
+_MESH_CACHE: OrderedDict[Hashable, LoadedMesh] = OrderedDict()
+_MESH_CACHE_LOCK = threading.Lock()
+
+
+def _cache_get(key: Hashable) -> LoadedMesh | None:
+    with _MESH_CACHE_LOCK:
+        found = _MESH_CACHE.get(key)
+        if found is not None:
+            _MESH_CACHE.move_to_end(key)
+        return found
+
+
+def _cache_put(key: Hashable, mesh: LoadedMesh) -> None:
+    with _MESH_CACHE_LOCK:
+        _MESH_CACHE[key] = mesh
+        _MESH_CACHE.move_to_end(key)
+        while len(_MESH_CACHE) > MESH_CACHE_ENTRIES or (
+            len(_MESH_CACHE) > 1 and sum(len(m.faces) for m in _MESH_CACHE.values()) > MESH_CACHE_MAX_FACES
+        ):
+            _MESH_CACHE.popitem(last=False)
+
+
+def clear_mesh_cache() -> None:
+    """Forget every parsed mesh (tests, benchmarks)."""
+    with _MESH_CACHE_LOCK:
+        _MESH_CACHE.clear()
 
 
 def _default_name(source: MeshSource) -> str:

@@ -76,7 +76,7 @@ def ompl_attempt(
         simplify=simplify and ctx.simplify,
         joint_lower=lo,
         joint_upper=hi,
-        state_ok=ctx.forces.ok,
+        state_ok=ctx.search_state_ok,
         motion_ok=ctx.forces.segment_ok,
         max_motion_checks=max_checks,
         planner_range=ctx.preset.planner_range,
@@ -84,6 +84,7 @@ def ompl_attempt(
     if res is None:
         ctx.report.setdefault("search_attempts", []).append({"method": "ompl", "max_checks": max_checks})
         return None
+    ctx.out_of_time()  # the clock may have cut the path's simplification short
     ctx.report["search"] = {
         "method": "ompl",
         "planner": res.planner,
@@ -140,7 +141,7 @@ def via_transit(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple
         ctx.forces.ok,
         ctx.forces.segment_ok,
         ctx.opts.seed,
-        deadline=lambda: ctx.remaining() <= 0,
+        deadline=ctx.out_of_time,
     )
     ctx.report.setdefault("search_attempts", []).append({"method": "transit", "found": transit is not None})
     if transit is None:

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from planner.collision.world import CollisionWorld
+from planner.core.exceptions import NoPathFound, NoPathWithinBudget
 from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
@@ -143,6 +144,7 @@ class PlanContext:
     progress: Progress
     t0: float = 0.0
     report: dict[str, Any] = field(default_factory=lambda: {"stages_s": {}})
+    last_tick: float = 0.0
 
     @classmethod
     def build(
@@ -168,7 +170,7 @@ class PlanContext:
             progress=progress or (lambda stage, fraction: None),
         )
         ctx.warm_up(sc.start_q)
-        ctx.t0 = time.perf_counter()
+        ctx.t0 = ctx.last_tick = time.perf_counter()
         return ctx
 
     @property
@@ -203,6 +205,56 @@ class PlanContext:
         """Time left for search [s], keeping :data:`TIME_RESERVE` of the limit for timing and validation."""
         return self.opts.time_limit_s * (1.0 - TIME_RESERVE) - self.elapsed()
 
+    def tick(self) -> None:
+        """Report the search's progress at most twice a second: the elapsed share of its time budget."""
+        now = time.perf_counter()
+        if now - self.last_tick >= 0.5:
+            self.last_tick = now
+            budget = self.opts.time_limit_s * (1.0 - TIME_RESERVE)
+            self.progress("search", 0.15 + 0.55 * min(1.0, self.elapsed() / budget))
+
+    def out_of_time(self) -> bool:
+        """The deadline of the search's steps: raises the time-limit refusal once the time is up.
+
+        A step cut short by the clock would give a result that depends on the machine's speed and load, so
+        the wall-clock limit stops the plan instead of shortening it; the search itself is bounded by its
+        work budgets (motion checks), so the same scenario and seed give the same plan on any machine.
+
+        Raises:
+            NoPathFound: the time is up (``details['ended_by'] == 'time_limit'``).
+        """
+        if self.remaining() <= 0:
+            raise self.no_path()
+        return False
+
+    def no_path(self) -> NoPathFound:
+        """The refusal of a search without a path, saying whether the clock or the work budget ended it."""
+        from planner.plan.connect import FULL_MOTION_CHECKS, QUICK_MOTION_CHECKS
+
+        elapsed = round(self.elapsed(), 3)
+        planner = self.opts.planner
+        if self.remaining() <= 0:
+            return NoPathFound(
+                f"the wall-clock time limit ({self.opts.time_limit_s:g} s) stopped the search after "
+                f"{elapsed:g} s, before its work budget was spent (the machine was slower or busier than "
+                f"it needs): retry, or raise options.time_limit_s",
+                ended_by="time_limit",
+                time_limit_s=self.opts.time_limit_s,
+                elapsed_s=elapsed,
+                planner=planner,
+            )
+        budget = QUICK_MOTION_CHECKS + FULL_MOTION_CHECKS
+        return NoPathWithinBudget(
+            f"no collision-free path found within the search's work budget ({budget} motion checks, "
+            f"planner {planner}); the same seed ends the same way on any machine: try another options.seed "
+            "or scenario",
+            ended_by="work_budget",
+            motion_check_budget=budget,
+            time_limit_s=self.opts.time_limit_s,
+            elapsed_s=elapsed,
+            planner=planner,
+        )
+
     def stage_done(self, name: str, t_start: float) -> None:
         """Record a stage's run time (from ``t_start``, a ``time.perf_counter`` reading) in the report."""
         self.report["stages_s"][name] = round(time.perf_counter() - t_start, 6)
@@ -212,8 +264,14 @@ class PlanContext:
         """A planner state: clear by the planner's clearance and holdable within the force limits."""
         return self.world.is_valid(q, self.clearances.planner_m) and self.forces.ok(q)
 
+    def search_state_ok(self, q: Array) -> bool:
+        """The sampling planner's extra state check (static forces), ticking the search's progress."""
+        self.tick()
+        return self.forces.ok(q)
+
     def motion_ok(self, q_a: Array, q_b: Array) -> bool:
         """A planner motion: certified clear by the planner's clearance, holdable along its length."""
+        self.tick()
         c = self.clearances
         return motion_clear(self.world, q_a, q_b, c.planner_m, c.motion_margin_m) and self.forces.segment_ok(
             q_a, q_b

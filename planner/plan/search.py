@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.core.exceptions import NoPathFound
 from planner.core.types import Array
 from planner.plan.connect import FULL_MOTION_CHECKS, QUICK_MOTION_CHECKS, ompl_attempt, via_transit
 from planner.plan.context import PlanContext
@@ -25,9 +24,7 @@ def search(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Arra
     """Certified waypoints from the start to one of the targets (and which), corners cut for time."""
     waypoints, k = _cascade(ctx, q_start, targets)
     if len(waypoints) > 2 and ctx.simplify:
-        waypoints, stats = cut_corners(
-            ctx.robot, waypoints, ctx.motion_ok, deadline=lambda: ctx.remaining() <= 0
-        )
+        waypoints, stats = cut_corners(ctx.robot, waypoints, ctx.motion_ok, deadline=ctx.out_of_time)
         ctx.report.setdefault("search", {})["corner_cuts"] = {
             "cuts": stats.cuts,
             "checks": stats.checks,
@@ -58,9 +55,4 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
     res = ompl_attempt(ctx, q_start, targets, max_checks=FULL_MOTION_CHECKS)
     if res is not None:
         return res
-    raise NoPathFound(
-        f"no collision-free path found within the time limit ({ctx.opts.time_limit_s:g} s, "
-        f"planner {ctx.opts.planner})",
-        time_limit_s=ctx.opts.time_limit_s,
-        planner=ctx.opts.planner,
-    )
+    raise ctx.no_path()

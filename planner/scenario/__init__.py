@@ -6,10 +6,11 @@
 
 from planner.scenario.files import MAX_SCENARIO_BYTES, SCENARIO_EXTENSIONS, load_scenario_file
 from planner.scenario.resolve import MeshResolver, ResolvedScenario, load_scenario, resolve_scenario
-from planner.scenario.schema import PlanOptions, Scenario, scenario_from_dict, scenario_hash
+from planner.scenario.schema import MAX_SEED, PlanOptions, Scenario, scenario_from_dict, scenario_hash
 
 __all__ = [
     "MAX_SCENARIO_BYTES",
+    "MAX_SEED",
     "SCENARIO_EXTENSIONS",
     "MeshResolver",
     "PlanOptions",

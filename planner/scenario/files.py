@@ -29,7 +29,7 @@ MAX_SCENARIO_BYTES = 1 << 20
 SCENARIO_EXTENSIONS: tuple[str, ...] = (".yaml", ".yml", ".json")
 
 
-class _ScenarioYamlLoader(yaml.SafeLoader):
+class ScenarioYamlLoader(yaml.SafeLoader):
     """``yaml.SafeLoader`` that refuses duplicate keys and reads YAML 1.2 floats such as ``1e-3``."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Hashable, Any]:
@@ -50,14 +50,14 @@ class _ScenarioYamlLoader(yaml.SafeLoader):
 
 
 # PyYAML implements YAML 1.1, where 1e-3 (no dot) is a string; accept it as the number users mean.
-_ScenarioYamlLoader.add_implicit_resolver(
+ScenarioYamlLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
     list("-+0123456789"),
 )
 
 
-def _unique_json_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+def unique_json_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
@@ -96,9 +96,9 @@ def load_scenario_file(path: Path) -> Scenario:
     data: object
     try:
         if ext == ".json":
-            data = json.loads(text, object_pairs_hook=_unique_json_object)
+            data = json.loads(text, object_pairs_hook=unique_json_object)
         else:
-            data = yaml.load(text, Loader=_ScenarioYamlLoader)  # a SafeLoader subclass
+            data = yaml.load(text, Loader=ScenarioYamlLoader)  # a SafeLoader subclass
     except json.JSONDecodeError as exc:
         raise _file_error(path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
     except yaml.MarkedYAMLError as exc:

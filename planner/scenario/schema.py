@@ -47,6 +47,14 @@ log = logging.getLogger(__name__)
 #: Scenario numbers are strict (see :data:`planner.core.schemas.StrictFinite`).
 Number = StrictFinite
 PositiveNumber = Annotated[Number, Field(gt=0.0)]
+#: Bounds of absurd values, so that they are invalid input naming their field rather than reaching the
+#: planner (a 1e308 kg payload would overflow the force checks and come back as a refusal): beyond any
+#: payload or cabin of these robots, by orders of magnitude.
+MAX_PAYLOAD_MASS_KG = 10_000.0
+MAX_BOX_SIDE_M = 50.0
+#: Largest seed, the same everywhere a seed is accepted (OMPL's and numpy's RNG take 32-bit seeds).
+MAX_SEED = 2**31 - 1
+BoxSide = Annotated[Number, Field(gt=0.0, le=MAX_BOX_SIDE_M)]
 Vector3 = tuple[Number, Number, Number]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
 
@@ -83,8 +91,10 @@ class PayloadSpec(BaseModel):
 
     model_config = _MODEL_CONFIG
 
-    box: tuple[PositiveNumber, PositiveNumber, PositiveNumber] | None = Field(
-        None, description="Box size [x, y, z] in m, centred on the payload frame. Exclusive with mesh."
+    box: tuple[BoxSide, BoxSide, BoxSide] | None = Field(
+        None,
+        description="Box size [x, y, z] in m (each at most 50), centred on the payload frame. Exclusive "
+        "with mesh.",
     )
     mesh: str | None = Field(
         None,
@@ -94,7 +104,9 @@ class PayloadSpec(BaseModel):
         "collision checks use its oriented bounding box. Exclusive with box.",
     )
     units: Literal["m", "mm"] = Field("m", description="Length unit of the mesh file (box sizes are in m).")
-    mass: Number = Field(0.0, ge=0.0, description="Payload mass in kg.")
+    mass: Number = Field(
+        0.0, ge=0.0, le=MAX_PAYLOAD_MASS_KG, description="Payload mass in kg (at most 10 000)."
+    )
     com: Vector3 | None = Field(
         None, description="Centre of mass in the payload frame, in m (default: the payload frame origin)."
     )
@@ -214,7 +226,9 @@ class PlanOptions(BaseModel):
         "non-adjacent robot bodies. Input key 'clearance' is accepted as an alias.",
     )
     time_limit_s: Number = Field(30.0, gt=0.0, le=600.0, description="Planning time budget in s.")
-    seed: int = Field(0, ge=0, strict=True, description="Random seed; the same seed gives the same plan.")
+    seed: int = Field(
+        0, ge=0, le=MAX_SEED, strict=True, description="Random seed; the same seed gives the same plan."
+    )
     sample_period_s: Number = Field(
         0.004,
         ge=0.0005,

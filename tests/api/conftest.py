@@ -56,6 +56,7 @@ def make_settings(tmp_path: Path, **overrides: Any) -> Settings:
         "workers": 2,
         "job_grace_s": 20.0,
         "tenant_max_active_jobs": 4,
+        "rate_limit": "100000 per 1 second",  # the rate-limit test sets its own
         **overrides,
     }
     return Settings(**values)
@@ -90,6 +91,7 @@ class IdleRunner:
     """A job runner that never runs anything: jobs stay queued (quota, cancel-queued, fuzzing tests)."""
 
     def __init__(self) -> None:
+        self.instance_id = "idle"
         self.woken = 0
         self.cancelled: list[str] = []
         self.started = False
@@ -111,6 +113,9 @@ class IdleRunner:
 
     def busy(self) -> int:
         return 0
+
+    def warming(self) -> str | None:
+        return None
 
 
 def start_idle_service(settings: Settings) -> Iterator[Service]:

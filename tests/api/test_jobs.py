@@ -127,6 +127,7 @@ def test_cancel_of_a_job_still_being_launched_is_kept_until_it_runs(tmp_path) ->
     db = Database(settings.resolved_database_url())
     db.create_all()
     ids = {status: uuid.uuid4().hex for status in ("running", "failed")}
+    runner = ProcessJobRunner(db, settings)  # not started: no job is registered as running yet
     with db.session() as s:
         for status, job_id in ids.items():
             s.add(
@@ -134,6 +135,7 @@ def test_cancel_of_a_job_still_being_launched_is_kept_until_it_runs(tmp_path) ->
                     id=job_id,
                     tenant="t",
                     status=status,
+                    owner=runner.instance_id,
                     scenario={},
                     scenario_name="x",
                     request_sha256="0" * 64,
@@ -143,7 +145,6 @@ def test_cancel_of_a_job_still_being_launched_is_kept_until_it_runs(tmp_path) ->
                     created_at=now_s(),
                 )
             )
-    runner = ProcessJobRunner(db, settings)  # not started: no job is registered as running yet
     for job_id in ids.values():
         runner.cancel(job_id)
     runner._apply_cancels()
@@ -163,12 +164,14 @@ def test_a_failed_terminal_write_is_retried_and_the_process_reaped(tmp_path, mon
 
     db = Database(f"sqlite:///{tmp_path / 'jobs.db'}")
     db.create_all()
+    runner = ProcessJobRunner(db, make_settings(tmp_path, forkserver_preload=False))
     with db.session() as s:
         s.add(
             Job(
                 id="j1",
                 tenant="t",
                 status="running",
+                owner=runner.instance_id,
                 scenario={},
                 scenario_name="x",
                 request_sha256="0" * 64,
@@ -178,11 +181,10 @@ def test_a_failed_terminal_write_is_retried_and_the_process_reaped(tmp_path, mon
                 created_at=now_s(),
             )
         )
-    runner = ProcessJobRunner(db, make_settings(tmp_path, forkserver_preload=False))
     process = mp.get_context("fork").Process(target=int)
     process.start()
     parent, _child = mp.Pipe()
-    job = _Running("j1", process, parent, deadline=time.monotonic() + 10)
+    job = _Running("j1", process, parent, deadline=time.monotonic() + 10, started=time.monotonic())
     real, fails = db.session, [2]
 
     @contextmanager

@@ -31,20 +31,25 @@ def _free_port() -> int:
 
 
 class Server:
-    def __init__(self, data_dir: Path) -> None:
+    """``python -m api`` in its own session (process group), on a free loopback port."""
+
+    def __init__(self, data_dir: Path, **env: str) -> None:
         self.data_dir = data_dir
+        self.env = env
         self.port = _free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.proc: subprocess.Popen[bytes] | None = None
         self.log = data_dir / "server.log"
 
-    def start(self) -> None:
+    def start(self, wait: str = "ready") -> None:
+        """Start the server; return once ``/api/v1/<wait>`` answers 200 (``ready`` or ``health``)."""
         env = {
             **os.environ,
             "CABINPLAN_DATA_DIR": str(self.data_dir),
             "CABINPLAN_PORT": str(self.port),
             "CABINPLAN_ADMIN_KEY": ADMIN_KEY,
             "CABINPLAN_WORKERS": "1",
+            **self.env,
         }
         self.data_dir.mkdir(parents=True, exist_ok=True)
         with self.log.open("ab") as log:
@@ -56,11 +61,11 @@ class Server:
                 stderr=log,
                 start_new_session=True,
             )
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 300  # /ready waits for the forkserver's warm-up
         while time.monotonic() < deadline:
             assert self.proc.poll() is None, self.log.read_text()
             try:
-                if httpx.get(f"{self.url}/api/v1/ready", timeout=1.0).status_code == 200:
+                if httpx.get(f"{self.url}/api/v1/{wait}", timeout=1.0).status_code == 200:
                     return
             except httpx.HTTPError:
                 pass
@@ -77,10 +82,14 @@ class Server:
         if self.proc is not None and self.proc.poll() is None:
             self.kill()
 
+    def ready(self) -> dict[str, Any]:
+        doc: dict[str, Any] = httpx.get(f"{self.url}/api/v1/ready", timeout=10).json()
+        return doc
+
 
 @pytest.fixture
 def server(tmp_path: Path) -> Iterator[Server]:
-    srv = Server(tmp_path / "data")
+    srv = Server(tmp_path / "data", CABINPLAN_JOB_LEASE_S="3")
     yield srv
     srv.stop()
 

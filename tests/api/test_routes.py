@@ -194,7 +194,11 @@ def test_invalid_scenarios_name_the_field(idle: Service) -> None:
     assert _problem(idle.client.post("/api/v1/plans", json=path, headers=idle.h()), 422)["errors"][0][
         "field"
     ] == ("cabin.mesh")
-    _problem(idle.client.post("/api/v1/plans", content=b"{not json", headers=idle.h()), 422)
+    malformed = _problem(idle.client.post("/api/v1/plans", content=b"{not json", headers=idle.h()), 400)
+    assert (
+        malformed["type"] == "urn:cabinplan:problem:malformed_body"
+        and "line 1, column 2" in malformed["detail"]
+    )
 
 
 def _cancel_all(svc: Service) -> None:
