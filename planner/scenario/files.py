@@ -32,7 +32,7 @@ SCENARIO_EXTENSIONS: tuple[str, ...] = (".yaml", ".yml", ".json")
 class ScenarioYamlLoader(yaml.SafeLoader):
     """``yaml.SafeLoader`` that refuses duplicate keys and reads YAML 1.2 floats such as ``1e-3``."""
 
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Hashable, Any]:
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Hashable, Any]:  # noqa: D102
         seen: set[Any] = set()
         for key_node, _ in node.value:
             if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
@@ -58,6 +58,7 @@ ScenarioYamlLoader.add_implicit_resolver(
 
 
 def unique_json_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``json`` object hook that refuses a key given twice (the last would silently win)."""
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
