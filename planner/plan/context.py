@@ -229,7 +229,7 @@ class PlanContext:
 
     def no_path(self) -> NoPathFound:
         """The refusal of a search without a path, saying whether the clock or the work budget ended it."""
-        from planner.plan.connect import FULL_MOTION_CHECKS, QUICK_MOTION_CHECKS
+        from planner.plan import connect
 
         elapsed = round(self.elapsed(), 3)
         planner = self.opts.planner
@@ -243,7 +243,7 @@ class PlanContext:
                 elapsed_s=elapsed,
                 planner=planner,
             )
-        budget = QUICK_MOTION_CHECKS + FULL_MOTION_CHECKS
+        budget = connect.QUICK_MOTION_CHECKS + connect.FULL_MOTION_CHECKS
         return NoPathWithinBudget(
             f"no collision-free path found within the search's work budget ({budget} motion checks, "
             f"planner {planner}); the same seed ends the same way on any machine: try another options.seed "

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from planner.core.types import Array
-from planner.plan.connect import FULL_MOTION_CHECKS, QUICK_MOTION_CHECKS, ompl_attempt, via_transit
+from planner.plan import connect
+from planner.plan.connect import ompl_attempt, via_transit
 from planner.plan.context import PlanContext
 from planner.plan.shortcut import cut_corners
 
@@ -49,10 +50,10 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
         if via is not None:
             return via
     if preset.quick_attempt:
-        res = ompl_attempt(ctx, q_start, targets, max_checks=QUICK_MOTION_CHECKS)
+        res = ompl_attempt(ctx, q_start, targets, max_checks=connect.QUICK_MOTION_CHECKS)
         if res is not None:
             return res
-    res = ompl_attempt(ctx, q_start, targets, max_checks=FULL_MOTION_CHECKS)
+    res = ompl_attempt(ctx, q_start, targets, max_checks=connect.FULL_MOTION_CHECKS)
     if res is not None:
         return res
     raise ctx.no_path()

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-import planner.plan.pipeline as pipeline
+import planner.plan.connect as connect
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
 from planner.plan.pipeline import Planner
 from planner.scenario import load_scenario_file, resolve_scenario, scenario_from_dict
@@ -59,8 +59,8 @@ def test_the_clock_ends_a_search_as_a_time_limit_refusal() -> None:
 
 def test_the_work_budget_ends_a_search_the_same_way_on_every_run(monkeypatch: pytest.MonkeyPatch) -> None:
     # Small budgets, so that the work budget (not the generous clock) ends the hopeless search in seconds.
-    monkeypatch.setattr(pipeline, "QUICK_MOTION_CHECKS", 60)
-    monkeypatch.setattr(pipeline, "FULL_MOTION_CHECKS", 150)
+    monkeypatch.setattr(connect, "QUICK_MOTION_CHECKS", 60)
+    monkeypatch.setattr(connect, "FULL_MOTION_CHECKS", 150)
     outcomes = []
     for _ in range(2):
         sc = _bulky_hatch(seed=3, time_limit_s=120.0)
