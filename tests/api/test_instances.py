@@ -151,7 +151,7 @@ def test_two_instances_share_postgres_a_killed_ones_job_finishes_on_the_other(
         # few seconds (the hatch pass without its transit posture).
         held = submit(a, stuck(11, 60.0))
         assert _poll(a.url, h, held, {"running"}, 60)["status"] == "running"
-        real = submit(a, scenario("hatch-pass", simplify=False, seed=11))
+        real = submit(a, scenario("hatch-pass", simplify=False, seed=11, time_limit_s=60))
         assert _poll(a.url, h, real, {"running"}, 60)["status"] == "running"
         owners = _owners(pg_schema)
         assert owners[held][1] != owners[real][1] and {owners[held][1], owners[real][1]} == set(by_instance)

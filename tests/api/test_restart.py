@@ -112,7 +112,7 @@ def test_sigkill_mid_run_then_restart_loses_nothing(server: Server) -> None:
     h = {"X-API-Key": key}
     # The hatch pass without the transit posture (plain OMPL): a few seconds, long enough to be caught
     # running however fast the other scenarios plan.
-    slow = scenario("hatch-pass", simplify=False, seed=11)
+    slow = scenario("hatch-pass", simplify=False, seed=11, time_limit_s=60)  # room for a loaded machine
     running = httpx.post(f"{server.url}/api/v1/plans", json=slow, headers=h, timeout=30)
     queued = httpx.post(f"{server.url}/api/v1/plans", json=free_transfer(), headers=h, timeout=30)
     assert running.status_code == queued.status_code == 202
