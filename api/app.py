@@ -20,9 +20,10 @@ from api import problems
 from api.context import AppContext
 from api.db import Database
 from api.jobs import JobRunner, ProcessJobRunner, recover_jobs
-from api.routes import cabins, health, keys, kinematics, plans, pprs6, robots, stiffness
+from api.routes import cabins, health, keys, kinematics, plans, pprs6, robots, stiffness, sweeps
 from api.settings import Settings
 from api.store import MeshStore
+from api.sweeps import SweepFeeder
 from planner import __version__
 from planner.collision.mesh_loader import MeshLimits
 
@@ -101,15 +102,18 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
     )
     job_runner: JobRunner = runner or ProcessJobRunner(db, settings)
     ctx = AppContext(settings=settings, db=db, store=store, runner=job_runner)
+    feeder = SweepFeeder(db, settings, job_runner)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         db.create_all()
         recover_jobs(db)
         job_runner.start()
+        feeder.start()
         try:
             yield
         finally:
+            feeder.stop()
             job_runner.stop()
             db.dispose()
 
@@ -130,7 +134,7 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         max_body_bytes=settings.max_body_bytes,
         max_upload_bytes=settings.max_upload_bytes,
     )
-    for module in (health, robots, cabins, plans, kinematics, pprs6, stiffness, keys):
+    for module in (health, robots, cabins, plans, sweeps, kinematics, pprs6, stiffness, keys):
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
     return app

@@ -114,6 +114,36 @@ def make_row(plan: SweepPlan, outcome: dict[str, Any], wall_time_s: float, attem
     return {name: row.get(name) for name in COLUMN_NAMES}
 
 
+def outcome_from_document(
+    status: str, reason: str | None, message: str | None, document: str | None
+) -> dict[str, Any]:
+    """A plan outcome (as :func:`planner.sweep.task.plan_outcome` gives) from a stored result document.
+
+    The HTTP service keeps each plan's profile or refusal document (:mod:`planner.output`); the table
+    columns are read from it: ``report.duration_ratio``, ``min_clearance_m``, the gate's peak effort
+    ratio and ``report.planning_time_s`` of a profile, ``details`` (the evidence) of a refusal.
+    """
+    from planner.sweep.task import MAX_EVIDENCE_CHARS
+
+    out: dict[str, Any] = {"status": status, "reason": reason, "message": message, "document": document}
+    doc = json.loads(document) if document else None
+    if not isinstance(doc, dict):
+        return out
+    if status == "succeeded":
+        report = doc.get("report") or {}
+        out.update(
+            duration_s=doc.get("duration_s"),
+            lower_bound_ratio=report.get("duration_ratio"),
+            min_clearance_m=doc.get("min_clearance_m"),
+            peak_force_ratio=((report.get("gate") or {}).get("peak_ratios") or {}).get("effort"),
+            planning_time_s=report.get("planning_time_s"),
+        )
+    elif doc.get("details") is not None:
+        evidence = json.dumps(doc["details"], separators=(",", ":"))
+        out["evidence"] = evidence if len(evidence) <= MAX_EVIDENCE_CHARS else evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
+    return out
+
+
 def _atomic_write(path: Path, text: str | bytes) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     with open(tmp, "wb") as fh:
@@ -238,6 +268,7 @@ __all__ = [
     "Journal",
     "csv_text",
     "make_row",
+    "outcome_from_document",
     "parquet_bytes",
     "plan_columns",
     "read_parquet",
