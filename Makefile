@@ -39,6 +39,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.planning
 	$(BIN)/python -m bench.stiffness
 	$(BIN)/python -m bench.pprs6
+	$(BIN)/python -m bench.sweep
 
 lock:  ## re-pin requirements.lock from a fresh resolve of pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock

@@ -124,7 +124,9 @@ class SweepFeeder:
 
         queued = 0
         with self.db.session() as s:
-            sweeps = s.scalars(select(Sweep).where(Sweep.status == "running").order_by(Sweep.created_at)).all()
+            sweeps = s.scalars(
+                select(Sweep).where(Sweep.status == "running").order_by(Sweep.created_at)
+            ).all()
         for sweep in sweeps:
             with tenant_lock(sweep.tenant):  # the lock POST /plans counts the quota under
                 queued += self._feed_one(sweep)

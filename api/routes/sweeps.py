@@ -74,7 +74,9 @@ def _sweep_document(ctx: AppContext, row: Sweep) -> dict[str, Any]:
     base = f"/api/v1/sweeps/{row.id}"
     with ctx.db.session() as s:
         states = s.execute(
-            select(Job.status, Job.reason).join(SweepJob, SweepJob.job_id == Job.id).where(SweepJob.sweep_id == row.id)
+            select(Job.status, Job.reason)
+            .join(SweepJob, SweepJob.job_id == Job.id)
+            .where(SweepJob.sweep_id == row.id)
         ).all()
     counts = Counter(status for status, _ in states)
     reasons = Counter(reason for status, reason in states if status in ("failed", "cancelled"))
@@ -131,7 +133,7 @@ def submit_sweep(
             "bays.manifest: the service reads no files; bays come from the reference cabins' manifest",
             field="bays.manifest",
         )
-    plans = expand_sweep(spec, None, absolute_meshes=False)
+    plans = expand_sweep(spec, None, absolute_meshes=False, max_plans=ctx.settings.sweep_max_plans)
     ceiling = ctx.settings.time_limit_ceiling_s
     for plan in plans:
         if plan.scenario.options.time_limit_s > ceiling:
@@ -144,7 +146,9 @@ def submit_sweep(
     meshes = _mesh_map(ctx, tenant, plans[0].scenario)  # the axes vary neither the cabin nor a mesh payload
     empty = ctx.settings.data_dir / "empty"
     empty.mkdir(parents=True, exist_ok=True)
-    resolved = resolve_scenario(plans[0].scenario, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes))
+    resolved = resolve_scenario(
+        plans[0].scenario, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes)
+    )
     stored = [
         {
             "index": p.index,

@@ -295,6 +295,7 @@ def expand_sweep(
     spec_dir: Path | None = None,
     *,
     absolute_meshes: bool = True,
+    max_plans: int = MAX_PLANS,
 ) -> list[SweepPlan]:
     """Every plan of the sweep, each a validated scenario (duplicates dropped, first kept).
 
@@ -304,6 +305,7 @@ def expand_sweep(
             file's folder); the current directory if ``None``.
         absolute_meshes: Make relative mesh file paths absolute, so that each plan's scenario file can
             be re-run from anywhere (the HTTP API, whose mesh names are ids, turns this off).
+        max_plans: Most plans accepted (the service sets its own, smaller cap).
 
     Returns:
         The plans in expansion order.
@@ -320,15 +322,19 @@ def expand_sweep(
     combos: list[tuple[str, list[_Choice]]]
     if spec.plans is not None:
         table = _bays(spec, base, spec_dir) if any(p.bay is not None for p in spec.plans) else None
+        if len(spec.plans) > max_plans:
+            raise InvalidInput(
+                f"plans: {len(spec.plans)} plans, more than {max_plans}; split the sweep", field="plans"
+            )
         combos = [(f"plans[{k}]", _point_choices(spec, base, p, k, table)) for k, p in enumerate(spec.plans)]
     else:
         lists = _axis_choices(spec, base, spec_dir)
         total = 1
         for choices in lists:
             total *= len(choices)
-        if total > MAX_PLANS:
+        if total > max_plans:
             raise InvalidInput(
-                f"axes: the cross product has {total} plans, more than {MAX_PLANS}; split the sweep",
+                f"axes: the cross product has {total} plans, more than {max_plans}; split the sweep",
                 field="axes",
                 plans=total,
             )

@@ -140,7 +140,9 @@ def outcome_from_document(
         )
     elif doc.get("details") is not None:
         evidence = json.dumps(doc["details"], separators=(",", ":"))
-        out["evidence"] = evidence if len(evidence) <= MAX_EVIDENCE_CHARS else evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
+        out["evidence"] = (
+            evidence if len(evidence) <= MAX_EVIDENCE_CHARS else evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
+        )
     return out
 
 

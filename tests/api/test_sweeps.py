@@ -25,7 +25,11 @@ def svc(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
 
 def sweep_body() -> dict[str, Any]:
     """4 plans: the 100 kg aisle transfer (feasible) and 400 kg (refused at the start), 2 seeds each."""
-    return {"name": "transfer-masses", "base": scenario("aisle-transfer"), "axes": {"payload_mass_kg": [100, 400], "seed": [1, 2]}}
+    return {
+        "name": "transfer-masses",
+        "base": scenario("aisle-transfer"),
+        "axes": {"payload_mass_kg": [100, 400], "seed": [1, 2]},
+    }
 
 
 def active_jobs(svc: Service) -> int:
@@ -53,7 +57,9 @@ def test_a_sweep_runs_as_jobs_under_the_quota_and_gives_its_results(svc: Service
     assert doc["progress"]["done"] == 4 and doc["progress"]["waiting"] == 0
     assert doc["summary"] == {"succeeded": 2, "reasons": {"start_outside_limits": 2}}
 
-    table = list(csv.DictReader(io.StringIO(svc.client.get(doc["links"]["results_csv"], headers=svc.h()).text)))
+    table = list(
+        csv.DictReader(io.StringIO(svc.client.get(doc["links"]["results_csv"], headers=svc.h()).text))
+    )
     assert [int(r["plan"]) for r in table] == [0, 1, 2, 3]
     for row in table:
         if float(row["payload_mass_kg"]) == 400:
@@ -66,7 +72,9 @@ def test_a_sweep_runs_as_jobs_under_the_quota_and_gives_its_results(svc: Service
             assert plan["result"]["duration_s"] == pytest.approx(float(row["duration_s"]))
     raw = svc.client.get(doc["links"]["results_parquet"], headers=svc.h()).content
     rows = pq.read_table(pa.BufferReader(raw)).to_pylist()
-    assert [(r["scenario_sha256"], r["status"]) for r in rows] == [(r["scenario_sha256"], r["status"]) for r in table]
+    assert [(r["scenario_sha256"], r["status"]) for r in rows] == [
+        (r["scenario_sha256"], r["status"]) for r in table
+    ]
 
     assert svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h("beta")).status_code == 404
 

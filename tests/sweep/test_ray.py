@@ -19,7 +19,9 @@ from planner.sweep.spec import sweep_from_dict
 from tests.sweep.conftest import bay_sweep, invoke, write_spec
 from tests.sweep.test_run import check_stuck_rows, stuck_sweep
 
-ray = pytest.importorskip("ray", reason="ray is not installed (the [ray] extra: pip install 'cabinplan[ray]')")
+ray = pytest.importorskip(
+    "ray", reason="ray is not installed (the [ray] extra: pip install 'cabinplan[ray]')"
+)
 
 
 @pytest.fixture(scope="module")
