@@ -78,6 +78,8 @@ class Job:
     submitted_at: float = 0.0
     started_at: float | None = None
     handle: Any = None
+    #: Process id of the worker planning it, once known (Ray: reported at the task's start).
+    pid: int | None = None
 
 
 def _failed(reason: str, message: str) -> dict[str, Any]:
@@ -294,23 +296,35 @@ def _ray() -> Any:
     return ray
 
 
-def _ray_plan(task: dict[str, Any], meshes: dict[str, Any] | None) -> Any:
-    """The Ray task body: its process id once the planner is imported (the start), then the outcome.
+#: Set in a Ray worker once it has planned its warm-up task.
+_WORKER_WARM = False
 
-    The hard limit counts from that first item, so the imports of a fresh worker (one started after a
-    kill) are not charged to the plan.
+
+def _ray_plan(task: dict[str, Any], meshes: dict[str, Any] | None, warm: dict[str, Any] | None) -> Any:
+    """The Ray task body: its process id once the worker is warm (the start), then the outcome.
+
+    A fresh worker (the first task on it, or one started after a kill) first imports the planner and
+    plans the warm-up task; the hard limit counts from the first item, so that cost is not charged to
+    the plan.
     """
-    import planner.pipeline  # noqa: F401  (cached after a worker's first task)
+    global _WORKER_WARM
+    if not _WORKER_WARM:
+        from planner.sweep.task import warm_up
 
+        warm_up(warm, meshes)
+        _WORKER_WARM = True
     yield {"started": os.getpid()}
     yield plan_outcome(task, meshes)
 
 
 def _ray_warm(task: dict[str, Any] | None, meshes: dict[str, Any] | None) -> float:
     """Warm one Ray worker (import the planner, plan the warm-up plan once)."""
+    global _WORKER_WARM
     from planner.sweep.task import warm_up
 
-    return warm_up(task, meshes)
+    seconds = warm_up(task, meshes)
+    _WORKER_WARM = True
+    return seconds
 
 
 class RayExecutor:
@@ -322,7 +336,8 @@ class RayExecutor:
         workers: CPUs of the local Ray (ignored on a cluster).
         max_in_flight: Most tasks submitted at a time; default the cluster's CPU count.
         meshes: Mesh name -> file bytes, put into the object store once and handed to every task.
-        warm_task: Planned once in each worker before the sweep starts.
+        warm_task: Planned once in each worker before the sweep starts, and by any worker started later
+            before its first plan.
     """
 
     def __init__(
@@ -352,15 +367,18 @@ class RayExecutor:
         cpus = int(ray.cluster_resources().get("CPU", workers))
         self.workers = max(1, cpus)
         self.max_in_flight = int(max_in_flight) if max_in_flight else self.workers
+        #: Scenario hash -> worker process id of the plans running now (on their worker's node).
+        self.started: dict[str, int] = {}
         self._plan = ray.remote(num_cpus=1, max_retries=0, num_returns="streaming")(_ray_plan)
         self._meshes = ray.put(meshes or {})
+        self._warm_task = warm_task
         if warm_task is not None:
             warm = ray.remote(num_cpus=1, max_retries=0)(_ray_warm)
             ray.get([warm.remote(warm_task, self._meshes) for _ in range(self.workers)])
 
     def submit(self, job: Job) -> None:
         """Submit the plan task (its start is known once it reports it)."""
-        job.handle = self._plan.remote(job.task, self._meshes)
+        job.handle = self._plan.remote(job.task, self._meshes, self._warm_task)
         job.started_at = None
 
     def _next(self, job: Job) -> tuple[str, Any]:
@@ -398,7 +416,10 @@ class RayExecutor:
             kind, value = self._next(job)
             if kind == "started":
                 job.started_at = time.monotonic()
+                job.pid = int(value)
+                self.started[job.plan.sha256] = job.pid
                 continue
+            self.started.pop(job.plan.sha256, None)
             if kind == "crashed":
                 value = _failed(CRASHED, f"the plan's Ray worker died without an outcome ({value})")
             out.append((job, value))
@@ -409,6 +430,7 @@ class RayExecutor:
                 continue
             if now > job.started_at + job.hard_limit_s:
                 ray.cancel(job.handle, force=True)
+                self.started.pop(job.plan.sha256, None)
                 out.append((job, killed_outcome(job)))
         return out
 

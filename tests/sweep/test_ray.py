@@ -14,7 +14,7 @@ import pytest
 
 from planner.sweep.expand import expand_sweep
 from planner.sweep.results import MACHINE_COLUMNS, read_parquet
-from planner.sweep.run import RayExecutor, run_sweep
+from planner.sweep.run import RayExecutor, run_sweep, warm_task
 from planner.sweep.spec import sweep_from_dict
 from tests.sweep.conftest import bay_sweep, invoke, write_spec
 from tests.sweep.test_run import check_stuck_rows, stuck_sweep
@@ -68,9 +68,9 @@ def test_ray_gives_the_rows_the_embedded_run_gives(local_ray, embedded_run, tmp_
 
 
 def test_ray_kills_a_plan_at_its_limit_and_a_killed_worker_loses_no_row(local_ray, tmp_path: Path):
-    sweep = sweep_from_dict(stuck_sweep("ray-stuck", 8.0))
+    sweep = sweep_from_dict(stuck_sweep("ray-stuck", 10.0))
     plans = expand_sweep(sweep)
-    executor = RayExecutor(max_in_flight=2)
+    executor = RayExecutor(max_in_flight=2, warm_task=warm_task(plans))
     outcome: dict[str, Any] = {}
 
     def run() -> None:
@@ -79,20 +79,21 @@ def test_ray_kills_a_plan_at_its_limit_and_a_killed_worker_loses_no_row(local_ra
     thread = threading.Thread(target=run)
     thread.start()
     killed = None
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 60
     while killed is None and time.monotonic() < deadline and thread.is_alive():
-        pids = _plan_workers()
-        if pids:
-            killed = pids[0]
-            os.kill(killed, signal.SIGKILL)  # a worker dies mid-task
+        pid = executor.started.get(plans[0].sha256)  # the long plan, once its worker has started it
+        if pid is not None:
+            assert pid in _plan_workers()  # a real Ray worker process, executing a sweep plan
+            os.kill(pid, signal.SIGKILL)  # the worker dies mid-task
+            killed = pid
         time.sleep(0.02)
-    thread.join(timeout=60)
+    thread.join(timeout=120)
     executor.close()
-    assert killed is not None, "no plan worker was seen running"
+    assert killed is not None, "the long plan was never seen running"
     assert not thread.is_alive()
     counts = outcome["counts"]
     assert counts.retried == 1
     rows = read_parquet(tmp_path / "results.parquet")
     assert len({r["scenario_sha256"] for r in rows}) == 3
-    assert sorted(r["attempts"] for r in rows) == [1, 1, 2]
-    check_stuck_rows(rows, 8.0)
+    assert [r["attempts"] for r in sorted(rows, key=lambda r: r["plan"])] == [2, 1, 1]
+    check_stuck_rows(rows, 10.0)

@@ -62,7 +62,9 @@ def test_each_plan_is_an_ordinary_scenario_that_re_runs_alone(embedded_run, tmp_
 
 
 def test_a_sweep_killed_midway_resumes_without_replanning_or_duplicating(tmp_path: Path):
-    spec = write_spec(tmp_path, bay_sweep("resume"))
+    sweep = bay_sweep("resume")
+    sweep["axes"]["seed"] = [1]  # 6 plans
+    spec = write_spec(tmp_path, sweep)
     out = tmp_path / "out"
     journal = out / JOURNAL
     proc = subprocess.Popen(
@@ -74,7 +76,7 @@ def test_a_sweep_killed_midway_resumes_without_replanning_or_duplicating(tmp_pat
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and proc.poll() is None:
-            if journal.exists() and journal.read_text().count("\n") >= 4:
+            if journal.exists() and journal.read_text().count("\n") >= 2:
                 break
             time.sleep(0.05)
         assert proc.poll() is None, "the sweep ended before it could be killed"
@@ -82,16 +84,16 @@ def test_a_sweep_killed_midway_resumes_without_replanning_or_duplicating(tmp_pat
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
     before = {r["scenario_sha256"]: r for r in map(json.loads, journal.read_text().splitlines())}
-    assert 4 <= len(before) < 12
+    assert 2 <= len(before) < 6
     assert not (out / "results.parquet").exists()  # killed: the tables were never written
 
     result = invoke("sweep", spec, "-o", out, "--workers", "2")
     assert result.exit_code == 0, result.stderr
     assert f"{len(before)} already done" in result.stderr
     lines = journal.read_text().splitlines()
-    assert len(lines) == 12 and len({json.loads(x)["scenario_sha256"] for x in lines}) == 12
+    assert len(lines) == 6 and len({json.loads(x)["scenario_sha256"] for x in lines}) == 6
     rows = read_parquet(out / "results.parquet")
-    assert len(rows) == 12
+    assert len(rows) == 6
     for row in rows:  # the plans done before the kill were not planned again (same wall-clock time)
         if row["scenario_sha256"] in before:
             assert row["wall_time_s"] == before[row["scenario_sha256"]]["wall_time_s"]
@@ -124,7 +126,7 @@ def check_stuck_rows(rows: list[dict], limit_s: float) -> None:
 
 
 def test_a_plan_past_its_limit_is_killed_and_recorded_while_the_others_finish(tmp_path: Path):
-    sweep = sweep_from_dict(stuck_sweep("stuck", 8.0))
+    sweep = sweep_from_dict(stuck_sweep("stuck", 10.0))
     plans = expand_sweep(sweep)
     executor = EmbeddedExecutor(2)
     try:
@@ -133,6 +135,6 @@ def test_a_plan_past_its_limit_is_killed_and_recorded_while_the_others_finish(tm
     finally:
         executor.close()
     assert (counts.succeeded, counts.failed) == (1, 2)
-    check_stuck_rows(read_parquet(tmp_path / "results.parquet"), 8.0)
+    check_stuck_rows(read_parquet(tmp_path / "results.parquet"), 10.0)
     for pid in pids:  # every process the executor started is gone
         assert not Path(f"/proc/{pid}").exists() or "zombie" in Path(f"/proc/{pid}/status").read_text()
