@@ -341,7 +341,7 @@ def sweep(
     """
     from planner.sweep.expand import expand_sweep
     from planner.sweep.plots import write_plots
-    from planner.sweep.results import Journal
+    from planner.sweep.results import Journal, write_tables
     from planner.sweep.run import EmbeddedExecutor, RayExecutor, run_sweep, sweep_meshes, warm_task
     from planner.sweep.spec import load_sweep_file
 
@@ -357,8 +357,14 @@ def sweep(
                 executor = RayExecutor(ray_address, workers, max_in_flight, sweep_meshes(todo), warm)
             else:
                 executor = EmbeddedExecutor(workers, warm, plans_per_process)
-        with _SweepProgress(sys.stderr.isatty(), len(plans)) as progress:
-            counts = run_sweep(plans, output, executor, sw.limits, progress=progress) if todo else None
+            with _SweepProgress(sys.stderr.isatty(), len(plans)) as progress:
+                run_sweep(plans, output, executor, sw.limits, progress=progress)
+        else:  # every plan has a row (e.g. killed after the last one): the tables are written anyway
+            for plan in plans:
+                journal.write_scenario(plan)
+            write_tables(output, journal.table(plans))
+    except KeyboardInterrupt:
+        _fail(f"sweep {sw.name}: interrupted; the rows so far are in {output}, rerun to resume", 130)
     finally:
         if executor is not None:
             executor.close()
@@ -371,7 +377,7 @@ def sweep(
         if r["status"] != "succeeded":
             reasons[str(r["reason"])] = reasons.get(str(r["reason"]), 0) + 1
     why = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items()))
-    skipped = counts.skipped if counts is not None else len(plans)
+    skipped = len(plans) - len(todo)
     typer.echo(
         f"cabinplan: sweep {sw.name}: {len(rows)} of {len(plans)} plans, {ok} succeeded, "
         f"{len(rows) - ok} failed{f' ({why})' if why else ''}, {skipped} already done -> {output}",

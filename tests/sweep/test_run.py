@@ -99,6 +99,11 @@ def test_a_sweep_killed_midway_resumes_without_replanning_or_duplicating(tmp_pat
             assert row["wall_time_s"] == before[row["scenario_sha256"]]["wall_time_s"]
     assert {r["status"] for r in rows} == {"succeeded", "failed"}
 
+    (out / "results.parquet").unlink()  # a third run plans nothing and writes the tables again
+    again = invoke("sweep", spec, "-o", out, "--no-plots")
+    assert again.exit_code == 0 and "6 already done" in again.stderr, again.stderr
+    assert read_parquet(out / "results.parquet") == rows
+
 
 def stuck_sweep(name: str, wall_time_limit_s: float) -> dict:
     """A plan that would search for 20 s (killed at the wall-clock limit), a refusal and a feasible plan."""
