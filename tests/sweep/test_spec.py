@@ -146,3 +146,15 @@ def test_a_combination_that_is_not_a_valid_scenario_names_the_plan():
     }
     with pytest.raises(InvalidInput, match=r"the base scenario has no payload"):
         expand_sweep(sweep_from_dict(free))
+
+
+def test_the_cli_refuses_an_invalid_description_with_one_line_and_exit_2(tmp_path: Path):
+    from tests.sweep.conftest import invoke
+
+    spec = write_spec(tmp_path, {**bay_sweep(), "axes": {"seed": [-1]}})
+    result = invoke("sweep", spec, "-o", tmp_path / "out")
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr
+    assert lines[0].startswith("cabinplan: invalid_input: axes.seed[0]:")
+    assert not (tmp_path / "out").exists()  # nothing planned, nothing written
