@@ -54,6 +54,7 @@ bench: $(DEV_STAMP)
 	$(BIN)/python -m bench.pprs6
 	$(BIN)/python -m bench.startup
 	$(BIN)/python -m bench.load
+	$(BIN)/python -m bench.sweep
 
 lock:  ## re-pin requirements.lock (runtime) and requirements-dev.lock (development) from pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock

@@ -33,9 +33,22 @@ from api.jobs import JobRunner, ProcessJobRunner, recover_jobs
 from api.metrics import QueueCollector, ServiceMetrics
 from api.openapi import install_openapi
 from api.ratelimit import TenantRateLimiter
-from api.routes import cabins, health, keys, kinematics, metrics, plans, pprs6, robots, scene, stiffness
+from api.routes import (
+    cabins,
+    health,
+    keys,
+    kinematics,
+    metrics,
+    plans,
+    pprs6,
+    robots,
+    scene,
+    stiffness,
+    sweeps,
+)
 from api.settings import Settings
 from api.store import MeshStore
+from api.sweeps import SweepFeeder
 from planner import __version__
 from planner.meshio import MeshLimits
 
@@ -230,15 +243,18 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
             lambda: health.queue_counts(db), job_runner.busy, lambda: job_runner.warming() is not None
         )
     )
+    feeder = SweepFeeder(db, settings, job_runner)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         db.create_all()
         recover_jobs(db)
         job_runner.start()
+        feeder.start()
         try:
             yield
         finally:
+            feeder.stop()
             job_runner.stop()
             db.dispose()
 
@@ -261,7 +277,7 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         body_timeout_s=settings.body_timeout_s,
     )
     templates: dict[int, str] = {}  # route object -> full path template, for the access log
-    for module in (health, robots, cabins, plans, scene, kinematics, pprs6, stiffness, keys):
+    for module in (health, robots, cabins, plans, sweeps, scene, kinematics, pprs6, stiffness, keys):
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
         templates.update({id(r): API_PREFIX + r.path for r in router.routes})

@@ -51,6 +51,9 @@ class Settings(BaseSettings):
         120.0, gt=0.0, le=600.0, description="Largest options.time_limit_s a scenario may ask for."
     )
     tenant_max_active_jobs: int = Field(4, ge=1, description="Queued + running jobs allowed per tenant.")
+    sweep_max_plans: int = Field(
+        1000, ge=1, le=100_000, description="Most plans one POST /sweeps may expand to."
+    )
     retry_after_s: int = Field(5, ge=1, description="Retry-After of a 429 (quota) answer.")
     admin_key: SecretStr | None = Field(None, description="API key of the administrator (manages keys).")
     page_size_max: int = Field(100, ge=1, le=1000, description="Largest page of GET /plans and /cabins.")

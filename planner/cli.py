@@ -298,6 +298,124 @@ def plan(
     )
 
 
+class _SweepProgress:
+    """Sweep progress on stderr when it is a terminal (rich: done / failed / running, ETA)."""
+
+    def __init__(self, enabled: bool, total: int) -> None:
+        self.bar: Any = None
+        if enabled:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self.bar = Progress(
+                TextColumn("sweep"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn(
+                    "ok {task.fields[ok]}  failed {task.fields[failed]}  running {task.fields[running]}"
+                ),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+            )
+            self.task = self.bar.add_task("sweep", total=total, ok=0, failed=0, running=0)
+
+    def __enter__(self) -> _SweepProgress:
+        if self.bar is not None:
+            self.bar.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+    def __call__(self, counts: Any) -> None:
+        if self.bar is not None:
+            self.bar.update(
+                self.task,
+                completed=counts.done,
+                ok=counts.succeeded,
+                failed=counts.failed,
+                running=counts.running,
+            )
+
+
+@app.command()
+@handle_errors
+def sweep(
+    spec: Annotated[Path, typer.Argument(help="sweep description (.yaml, .yml or .json)", dir_okay=False)],
+    output: Annotated[Path, typer.Option("-o", "--output", help="output folder (results, plots, profiles)")],
+    workers: Annotated[
+        int, typer.Option("--workers", min=1, max=256, help="plans at a time (local processes or Ray CPUs)")
+    ] = max(1, os.cpu_count() or 1),
+    ray: Annotated[
+        bool, typer.Option("--ray", envvar="CABINPLAN_SWEEP_RAY", help="run plans as Ray tasks")
+    ] = False,
+    ray_address: Annotated[
+        str | None,
+        typer.Option("--ray-address", help="Ray cluster address (default RAY_ADDRESS, else a local Ray)"),
+    ] = None,
+    max_in_flight: Annotated[
+        int | None, typer.Option("--max-in-flight", min=1, help="Ray: most tasks submitted at a time")
+    ] = None,
+    plans_per_process: Annotated[
+        int,
+        typer.Option(
+            "--plans-per-process",
+            min=1,
+            help="embedded: plans one process runs before it exits (1: isolated)",
+        ),
+    ] = 1,
+    plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the summary plots")] = True,
+) -> None:
+    """Run a feasibility sweep: every plan of SPEC, results.csv / results.parquet, plots and profiles.
+
+    Resumable: plans that already have a row in OUTPUT (keyed by scenario hash) are skipped.
+    """
+    from planner.sweep.expand import expand_sweep
+    from planner.sweep.plots import write_plots
+    from planner.sweep.results import Journal, write_tables
+    from planner.sweep.run import EmbeddedExecutor, RayExecutor, run_sweep, sweep_meshes, warm_task
+    from planner.sweep.spec import load_sweep_file
+
+    sw = load_sweep_file(spec)
+    plans = expand_sweep(sw, spec.parent)
+    journal = Journal(output)
+    todo = [p for p in plans if not journal.done(p.sha256)]
+    executor: Any = None
+    try:
+        if todo:
+            warm = warm_task(todo)
+            if ray:
+                executor = RayExecutor(ray_address, workers, max_in_flight, sweep_meshes(todo), warm)
+            else:
+                executor = EmbeddedExecutor(workers, warm, plans_per_process)
+            with _SweepProgress(sys.stderr.isatty(), len(plans)) as progress:
+                run_sweep(plans, output, executor, sw.limits, progress=progress)
+        else:  # every plan has a row (e.g. killed after the last one): the tables are written anyway
+            for plan in plans:
+                journal.write_scenario(plan)
+            write_tables(output, journal.table(plans))
+    except KeyboardInterrupt:
+        _fail(f"sweep {sw.name}: interrupted; the rows so far are in {output}, rerun to resume", 130)
+    finally:
+        if executor is not None:
+            executor.close()
+    rows = Journal(output).table(plans)
+    if plots:
+        write_plots(output, rows)
+    ok = sum(1 for r in rows if r["status"] == "succeeded")
+    reasons: dict[str, int] = {}
+    for r in rows:
+        if r["status"] != "succeeded":
+            reasons[str(r["reason"])] = reasons.get(str(r["reason"]), 0) + 1
+    why = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items()))
+    skipped = len(plans) - len(todo)
+    typer.echo(
+        f"cabinplan: sweep {sw.name}: {len(rows)} of {len(plans)} plans, {ok} succeeded, "
+        f"{len(rows) - ok} failed{f' ({why})' if why else ''}, {skipped} already done -> {output}",
+        err=True,
+    )
+
+
 @app.command()
 @handle_errors
 def check(

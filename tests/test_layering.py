@@ -26,6 +26,7 @@ FLOORS = (
     "plan",
     "documents",
     "tools",
+    "sweep",
     "cli",
 )
 #: Engines and edge libraries, and the only rooms that may import them.

@@ -93,7 +93,7 @@ def load_scenario_file(path: Path) -> Scenario:
             field="scenario",
             file=str(path),
         )
-    text = _read_text(path)
+    text = read_text(path)
     data: object
     try:
         if ext == ".json":
@@ -120,7 +120,7 @@ def _file_error(path: Path, why: str) -> InvalidInput:
     return InvalidInput(f"scenario: {path.name}: {why}", field="scenario", file=str(path))
 
 
-def _read_text(path: Path) -> str:
+def read_text(path: Path) -> str:
     """The file's text (UTF-8), refusing missing, non-regular and oversized files before reading."""
     try:
         info = path.stat()

@@ -338,14 +338,14 @@ def scenario_from_dict(data: object, source: str = "scenario") -> Scenario:
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
-        errors = [_describe(e) for e in exc.errors(include_url=False, include_input=False)]
+        errors = [describe_error(e) for e in exc.errors(include_url=False, include_input=False)]
         first = errors[0]
         raise InvalidInput(
             f"{first['field']}: {first['message']}", field=first["field"], source=source, errors=errors
         ) from None
 
 
-def _describe(error: ErrorDetails) -> dict[str, str]:
+def describe_error(error: ErrorDetails) -> dict[str, str]:
     """``{field, message}`` of one pydantic error: dotted path (``payload.box[1]``) and a plain reason."""
     path = ""
     for part in error["loc"]:

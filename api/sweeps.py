@@ -1,0 +1,189 @@
+"""Sweeps in the service: their tables and the feeder that turns a sweep's plans into ordinary jobs.
+
+A sweep (:class:`Sweep`) stores its expanded plans; each plan becomes a planning job (:class:`api.db.Job`)
+only when the tenant has room under its quota (``tenant_max_active_jobs`` counts the tenant's queued and
+running jobs, the sweep's and its single plans alike), so the jobs of a sweep go through the same queue,
+quota and tenant rules as ``POST /plans``. :class:`SweepFeeder` (a thread started with the app) does
+that, and marks a sweep ``finished`` when every job of it has ended. :class:`SweepJob` links a plan of a
+sweep to its job once the job exists.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import uuid
+from typing import Any
+
+from sqlalchemy import JSON, Float, ForeignKey, Integer, String, func, select, update
+from sqlalchemy.orm import Mapped, mapped_column
+
+from api.db import ACTIVE_STATES, TERMINAL_STATES, Base, Database, Job, now_s
+from api.jobs import JobRunner
+from api.settings import Settings
+
+_LOG = logging.getLogger(__name__)
+
+#: Sweep states: ``running`` while plans wait for a job or a job has not ended, then ``finished``.
+SWEEP_STATES: tuple[str, ...] = ("running", "finished")
+
+
+class Sweep(Base):
+    """A feasibility sweep: its description, expanded plans and state."""
+
+    __tablename__ = "sweeps"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    tenant: Mapped[str] = mapped_column(String(64), index=True)
+    name: Mapped[str] = mapped_column(String(100))
+    status: Mapped[str] = mapped_column(String(16), index=True)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    #: ``{"plans": [{"index", "sha256", "scenario", "labels"}], "meshes": {...}, "provenance": {...}}``.
+    plans: Mapped[dict[str, Any]] = mapped_column(JSON)
+    total: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[float] = mapped_column(Float)
+    finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class SweepJob(Base):
+    """Plan ``index`` of a sweep and the job that plans it."""
+
+    __tablename__ = "sweep_jobs"
+
+    sweep_id: Mapped[str] = mapped_column(String(32), ForeignKey("sweeps.id"), primary_key=True)
+    index: Mapped[int] = mapped_column(Integer, primary_key=True)
+    job_id: Mapped[str] = mapped_column(String(32), index=True)
+
+
+def new_sweep(
+    tenant: str, name: str, spec: dict[str, Any], plans: list[dict[str, Any]], extra: dict[str, Any]
+) -> Sweep:
+    """A new ``running`` sweep row (not yet added to a session)."""
+    return Sweep(
+        id=uuid.uuid4().hex,
+        tenant=tenant,
+        name=name,
+        status="running",
+        spec=spec,
+        plans={"plans": plans, **extra},
+        total=len(plans),
+        created_at=now_s(),
+    )
+
+
+class SweepFeeder:
+    """Submits the plans of running sweeps as jobs while their tenant has room under its quota.
+
+    Args:
+        db: The service database.
+        settings: Quota (``tenant_max_active_jobs``).
+        runner: Woken when jobs were queued.
+        poll_s: Period of the feeder's pass over running sweeps [s].
+    """
+
+    def __init__(self, db: Database, settings: Settings, runner: JobRunner, poll_s: float = 0.2) -> None:
+        self.db = db
+        self.settings = settings
+        self.runner = runner
+        self.poll_s = poll_s
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        """Start the feeder thread."""
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._loop, name="cabinplan-sweeps", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the feeder thread (queued jobs stay queued; the rest is fed after a restart)."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+
+    def wake(self) -> None:
+        """A sweep was created or a job ended: feed now."""
+        self._wake.set()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.feed()
+            except Exception:  # keep feeding: a database hiccup must not stop every sweep
+                _LOG.exception("sweep feeder pass failed")
+                time.sleep(0.5)
+            self._wake.wait(self.poll_s)
+            self._wake.clear()
+
+    def feed(self) -> int:
+        """One pass: queue what the quotas allow, finish the sweeps whose jobs all ended; jobs queued."""
+        from api.routes.plans import _tenant_lock as tenant_lock
+
+        queued = 0
+        with self.db.session() as s:
+            sweeps = s.scalars(
+                select(Sweep).where(Sweep.status == "running").order_by(Sweep.created_at)
+            ).all()
+        for sweep in sweeps:
+            with tenant_lock(sweep.tenant):  # the lock POST /plans counts the quota under
+                queued += self._feed_one(sweep)
+            self._finish_if_done(sweep)
+        if queued:
+            self.runner.wake()
+        return queued
+
+    def _feed_one(self, sweep: Sweep) -> int:
+        with self.db.session() as s:
+            active = s.scalar(
+                select(func.count())
+                .select_from(Job)
+                .where(Job.tenant == sweep.tenant, Job.status.in_(ACTIVE_STATES))
+            )
+            linked = s.scalar(select(func.count()).select_from(SweepJob).where(SweepJob.sweep_id == sweep.id))
+            room = self.settings.tenant_max_active_jobs - int(active or 0)
+            start = int(linked or 0)
+            todo = sweep.plans["plans"][start : start + max(0, room)]
+            for plan in todo:
+                job_id = uuid.uuid4().hex
+                scenario = plan["scenario"]
+                s.add(
+                    Job(
+                        id=job_id,
+                        tenant=sweep.tenant,
+                        status="queued",
+                        progress=0.0,
+                        scenario=scenario,
+                        scenario_name=scenario["name"],
+                        request_sha256=plan["sha256"],
+                        idempotency_key=None,
+                        meshes=dict(sweep.plans.get("meshes", {})),
+                        provenance={**sweep.plans.get("provenance", {}), "scenario_sha256": plan["sha256"]},
+                        time_limit_s=float(scenario["options"]["time_limit_s"]),
+                        attempts=0,
+                        created_at=now_s(),
+                    )
+                )
+                s.flush()  # the job row before its link (foreign keys in order)
+                s.add(SweepJob(sweep_id=sweep.id, index=int(plan["index"]), job_id=job_id))
+        return len(todo)
+
+    def _finish_if_done(self, sweep: Sweep) -> None:
+        with self.db.session() as s:
+            ended = s.scalar(
+                select(func.count())
+                .select_from(SweepJob)
+                .join(Job, Job.id == SweepJob.job_id)
+                .where(SweepJob.sweep_id == sweep.id, Job.status.in_(TERMINAL_STATES))
+            )
+            if int(ended or 0) >= sweep.total:
+                s.execute(
+                    update(Sweep)
+                    .where(Sweep.id == sweep.id, Sweep.status == "running")
+                    .values(status="finished", finished_at=now_s())
+                )
+
+
+__all__ = ["SWEEP_STATES", "Sweep", "SweepFeeder", "SweepJob", "new_sweep"]

@@ -1,0 +1,38 @@
+"""Preloaded by the sweep's forkserver: imports the planner and plans one warm-up plan, once.
+
+Every plan process forks from the forkserver and inherits what this loaded (compiled kernels, the
+cabin's clearance grid), so it starts planning at once. The warm-up task is a JSON file named by the
+environment variable ``CABINPLAN_SWEEP_WARMUP`` (set by :class:`planner.sweep.run.EmbeddedExecutor`
+before the forkserver starts); without it only the imports are done. Importing this module has that side
+effect on purpose; nothing else imports it.
+"""
+
+from __future__ import annotations
+
+import gc
+import json
+import logging
+import os
+
+from planner.sweep.task import warm_up
+
+_LOG = logging.getLogger(__name__)
+
+
+def _warm() -> None:
+    path = os.environ.get("CABINPLAN_SWEEP_WARMUP")
+    task = None
+    if path:
+        try:
+            with open(path, encoding="utf-8") as fh:
+                task = json.load(fh)
+        except (OSError, ValueError):
+            _LOG.warning("sweep warm-up task %s unreadable; warming up imports only", path)
+    warm_up(task)
+    # Forked children share the forkserver's heap copy-on-write; a garbage collection in a child would
+    # touch (and so copy) every object. Frozen objects are left out of collections.
+    gc.collect()
+    gc.freeze()
+
+
+_warm()

@@ -1,0 +1,589 @@
+"""Running a sweep: the executors (embedded process pool, Ray) and the driver that records the rows.
+
+Both executors run :func:`planner.sweep.task.plan_outcome`, one plan per task, with a hard wall-clock
+limit per plan (``time_limit_s + limits.grace_s``, or ``limits.wall_time_limit_s`` when smaller) counted
+from the moment the plan starts:
+
+* :class:`EmbeddedExecutor` (default): every plan runs in a fresh process on this machine, forked from a
+  forkserver that imported and warmed up the planner once (the isolation of the HTTP service's jobs,
+  :mod:`api.jobs`). A plan past its limit has its process killed (outcome ``time_limit_exceeded``); the
+  other plans go on.
+* :class:`RayExecutor`: each plan is a Ray task (a streaming generator that first reports its start, then
+  its outcome) on a local Ray started on demand (bound to 127.0.0.1) or on the cluster at ``address`` /
+  ``RAY_ADDRESS``. At most ``max_in_flight`` tasks are submitted at a time; ``ray.wait`` with a timeout
+  streams outcomes as they finish; a started task past its limit is killed with
+  ``ray.cancel(force=True)``.
+
+A task whose process died without an outcome (a killed Ray worker, a lost node, a crashed pool worker) is
+submitted again, up to :data:`MAX_ATTEMPTS` times, then recorded as ``worker_crashed``; the journal keeps
+one row per scenario hash, so no row is lost or duplicated.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import multiprocessing
+import os
+import tempfile
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from multiprocessing.process import BaseProcess
+from pathlib import Path
+from typing import Any, Protocol
+
+from planner.core.exceptions import InvalidInput
+from planner.sweep.expand import SweepPlan
+from planner.sweep.results import Journal, make_row, write_tables
+from planner.sweep.spec import Limits
+from planner.sweep.task import plan_outcome
+
+_LOG = logging.getLogger(__name__)
+
+#: Times a plan is submitted when its process dies without an outcome.
+MAX_ATTEMPTS = 2
+
+#: Thread pools of numerical libraries in each plan process: one thread (a plan is one core's work).
+SINGLE_THREAD_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+}
+
+#: Longest time limit of the warm-up plan [s] (it only has to touch every kernel once).
+WARMUP_TIME_LIMIT_S = 5.0
+
+
+def hard_limit_s(plan: SweepPlan, limits: Limits) -> float:
+    """Wall-clock limit of one plan process [s]: ``time_limit_s + grace_s``, at most ``wall_time_limit_s``."""
+    limit = float(plan.scenario.options.time_limit_s) + float(limits.grace_s)
+    if limits.wall_time_limit_s is not None:
+        limit = min(limit, float(limits.wall_time_limit_s))
+    return limit
+
+
+@dataclass
+class Job:
+    """One submission of one plan."""
+
+    plan: SweepPlan
+    task: dict[str, Any]
+    hard_limit_s: float
+    attempt: int = 1
+    submitted_at: float = 0.0
+    started_at: float | None = None
+    handle: Any = None
+    #: Process id of the worker planning it, once known (Ray: reported at the task's start).
+    pid: int | None = None
+
+
+def _failed(reason: str, message: str) -> dict[str, Any]:
+    return {"status": "failed", "reason": reason, "message": message, "document": None}
+
+
+def killed_outcome(job: Job) -> dict[str, Any]:
+    """Outcome of a plan killed at its hard limit."""
+    return _failed(
+        "time_limit_exceeded",
+        f"the plan ran past its hard wall-clock limit of {job.hard_limit_s:.3g} s and was killed",
+    )
+
+
+#: Reason of an outcome that says the process died: the plan is tried again (see MAX_ATTEMPTS).
+CRASHED = "worker_crashed"
+
+
+class Executor(Protocol):
+    """What the driver needs of an executor."""
+
+    workers: int
+    max_in_flight: int
+
+    def submit(self, job: Job) -> None:
+        """Start the job (sets ``job.handle``; ``job.started_at`` when known)."""
+
+    def poll(self, jobs: Sequence[Job], timeout_s: float) -> list[tuple[Job, dict[str, Any]]]:
+        """Wait up to ``timeout_s`` for outcomes; the finished jobs (killed ones included)."""
+
+    def close(self) -> None:
+        """Stop every process this executor started."""
+
+
+def _serve_plan(conn: Connection, plans: int) -> None:
+    """Body of one embedded plan process: plan up to ``plans`` tasks from the pipe, then exit."""
+    for _ in range(plans):
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):  # the sweep ended before this process was needed
+            return
+        if task is None:
+            return
+        conn.send(plan_outcome(task))
+    conn.close()
+
+
+@dataclass
+class _Proc:
+    process: BaseProcess
+    conn: Connection
+    remaining: int
+
+
+class EmbeddedExecutor:
+    """Plans in processes forked from a warm forkserver; by default one process per plan (as the service).
+
+    Each slot keeps a *spare* process forked ahead of time (by a background thread) and waiting on its
+    pipe, so that a plan starts the moment it is submitted; the process plans its task, sends the outcome
+    and exits (or, with ``plans_per_process`` > 1, waits for the next task). A process past its plan's
+    hard limit is killed; the other processes go on.
+
+    Args:
+        workers: Plans running at the same time (one process each).
+        warm_task: Task planned once in the forkserver before the first fork (e.g. the first plan).
+        plans_per_process: Plans one process runs before it exits (1: a fresh process per plan).
+    """
+
+    def __init__(
+        self, workers: int = 2, warm_task: dict[str, Any] | None = None, plans_per_process: int = 1
+    ) -> None:
+        self.workers = int(workers)
+        self.max_in_flight = self.workers
+        self.plans_per_process = max(1, int(plans_per_process))
+        for name, value in SINGLE_THREAD_ENV.items():
+            os.environ.setdefault(name, value)
+        self._warm_file: str | None = None
+        if warm_task is not None:
+            fd, self._warm_file = tempfile.mkstemp(prefix="cabinplan-sweep-warm-", suffix=".json")
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump(warm_task, fh)
+            # Read by planner.sweep._preload when the forkserver starts (the first plan process).
+            os.environ["CABINPLAN_SWEEP_WARMUP"] = self._warm_file
+        self._ctx = multiprocessing.get_context("forkserver")
+        self._ctx.set_forkserver_preload(["planner.sweep._preload"])
+        self._spares: deque[_Proc] = deque()
+        self._running: dict[int, _Proc] = {}
+        self._lock = threading.Lock()
+        self._want = threading.Event()
+        self._stopping = threading.Event()
+        for _ in range(self.workers):  # blocks until the forkserver has warmed up
+            self._spares.append(self._fork())
+        self._filler = threading.Thread(target=self._fill, name="cabinplan-sweep-fork", daemon=True)
+        self._filler.start()
+
+    def _fork(self) -> _Proc:
+        parent, child = self._ctx.Pipe(duplex=True)
+        proc = self._ctx.Process(
+            target=_serve_plan,
+            args=(child, self.plans_per_process),
+            name="cabinplan-sweep-plan",
+            daemon=True,
+        )
+        proc.start()
+        child.close()
+        return _Proc(proc, parent, self.plans_per_process)
+
+    def _fill(self) -> None:
+        """Background thread: keep ``workers`` spare processes forked and waiting."""
+        while not self._stopping.is_set():
+            self._want.wait(0.5)
+            self._want.clear()
+            while not self._stopping.is_set():
+                with self._lock:
+                    if len(self._spares) >= self.workers:
+                        break
+                proc = self._fork()
+                with self._lock:
+                    if self._stopping.is_set():
+                        proc.process.kill()
+                    self._spares.append(proc)
+
+    def _take_spare(self) -> _Proc:
+        with self._lock:
+            proc = self._spares.popleft() if self._spares else None
+        self._want.set()
+        return proc if proc is not None else self._fork()
+
+    def submit(self, job: Job) -> None:
+        """Hand the plan to a waiting process (forked now if none waits)."""
+        proc = self._take_spare()
+        try:
+            proc.conn.send(job.task)
+        except (BrokenPipeError, OSError):  # the spare died while waiting: use a fresh one
+            self._reap(proc, kill=True)
+            proc = self._fork()
+            proc.conn.send(job.task)
+        proc.remaining -= 1
+        job.started_at = time.monotonic()
+        job.handle = id(proc)
+        self._running[id(proc)] = proc
+
+    def _reap(self, proc: _Proc, kill: bool = False) -> None:
+        if kill and proc.process.is_alive():
+            proc.process.kill()
+        proc.process.join(timeout=5.0)
+        proc.conn.close()
+
+    def poll(self, jobs: Sequence[Job], timeout_s: float) -> list[tuple[Job, dict[str, Any]]]:
+        """Outcomes received within ``timeout_s``; processes dead without one; plans past their limit."""
+        by_handle = {j.handle: j for j in jobs}
+        procs = [self._running[h] for h in by_handle]
+        now = time.monotonic()
+        deadlines = [j.started_at + j.hard_limit_s - now for j in jobs if j.started_at is not None]
+        handles: list[Any] = [p.conn for p in procs] + [p.process.sentinel for p in procs]
+        wait(handles, timeout=max(0.0, min([timeout_s, *deadlines])))
+        out = []
+        for proc in procs:
+            job = by_handle[id(proc)]
+            outcome: dict[str, Any] | None = None
+            try:
+                if proc.conn.poll(0):
+                    outcome = proc.conn.recv()
+            except (EOFError, OSError):
+                pass
+            if outcome is not None:
+                self._running.pop(id(proc), None)
+                if proc.remaining > 0:
+                    with self._lock:
+                        self._spares.appendleft(proc)
+                else:
+                    self._reap(proc)
+            elif not proc.process.is_alive():
+                self._running.pop(id(proc), None)
+                self._reap(proc)
+                code = proc.process.exitcode
+                outcome = _failed(CRASHED, f"the plan process died without an outcome (exit code {code})")
+            elif time.monotonic() > (job.started_at or now) + job.hard_limit_s:
+                self._running.pop(id(proc), None)
+                self._reap(proc, kill=True)
+                outcome = killed_outcome(job)
+            if outcome is not None:
+                out.append((job, outcome))
+        return out
+
+    def close(self) -> None:
+        """Kill every plan and spare process."""
+        self._stopping.set()
+        self._want.set()
+        self._filler.join(timeout=10.0)
+        with self._lock:
+            procs = [*self._running.values(), *self._spares]
+            self._running.clear()
+            self._spares.clear()
+        for proc in procs:
+            if proc.process.is_alive():
+                proc.process.kill()
+        for proc in procs:
+            proc.process.join(timeout=5.0)
+            proc.conn.close()
+        if self._warm_file is not None:
+            Path(self._warm_file).unlink(missing_ok=True)
+            if os.environ.get("CABINPLAN_SWEEP_WARMUP") == self._warm_file:
+                del os.environ["CABINPLAN_SWEEP_WARMUP"]
+
+
+def _ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise InvalidInput(
+            "--ray: Ray is not installed; install the extra: pip install 'cabinplan[ray]'", field="ray"
+        ) from None
+    return ray
+
+
+#: Set in a Ray worker once it has planned its warm-up task.
+_WORKER_WARM = False
+
+
+def _ray_plan(task: dict[str, Any], meshes: dict[str, Any] | None, warm: dict[str, Any] | None) -> Any:
+    """The Ray task body: its process id once the worker is warm (the start), then the outcome.
+
+    A fresh worker (the first task on it, or one started after a kill) first imports the planner and
+    plans the warm-up task; the hard limit counts from the first item, so that cost is not charged to
+    the plan.
+    """
+    global _WORKER_WARM
+    if not _WORKER_WARM:
+        from planner.sweep.task import warm_up
+
+        warm_up(warm, meshes)
+        _WORKER_WARM = True
+    yield {"started": os.getpid()}
+    yield plan_outcome(task, meshes)
+
+
+def _ray_warm(task: dict[str, Any] | None, meshes: dict[str, Any] | None) -> float:
+    """Warm one Ray worker (import the planner, plan the warm-up plan once)."""
+    global _WORKER_WARM
+    from planner.sweep.task import warm_up
+
+    seconds = warm_up(task, meshes)
+    _WORKER_WARM = True
+    return seconds
+
+
+class RayExecutor:
+    """Plans as Ray tasks (see the module docstring).
+
+    Args:
+        address: Cluster address (``ray://...`` or ``HOST:PORT``); default ``RAY_ADDRESS`` if set, else a
+            local Ray with ``workers`` CPUs started now and bound to 127.0.0.1 (stopped by :meth:`close`).
+        workers: CPUs of the local Ray (ignored on a cluster).
+        max_in_flight: Most tasks submitted at a time; default the cluster's CPU count.
+        meshes: Mesh name -> file bytes, put into the object store once and handed to every task.
+        warm_task: Planned once in each worker before the sweep starts, and by any worker started later
+            before its first plan.
+    """
+
+    def __init__(
+        self,
+        address: str | None = None,
+        workers: int = 2,
+        max_in_flight: int | None = None,
+        meshes: dict[str, bytes] | None = None,
+        warm_task: dict[str, Any] | None = None,
+    ) -> None:
+        ray = self._ray = _ray()
+        self._owns = False
+        if not ray.is_initialized():
+            address = address or os.environ.get("RAY_ADDRESS") or None
+            if address:
+                ray.init(address=address, log_to_driver=False, configure_logging=False)
+            else:
+                ray.init(
+                    num_cpus=int(workers),
+                    include_dashboard=False,
+                    _node_ip_address="127.0.0.1",
+                    log_to_driver=False,
+                    configure_logging=False,
+                    runtime_env={"env_vars": dict(SINGLE_THREAD_ENV)},
+                )
+                self._owns = True
+        cpus = int(ray.cluster_resources().get("CPU", workers))
+        self.workers = max(1, cpus)
+        self.max_in_flight = int(max_in_flight) if max_in_flight else self.workers
+        #: Scenario hash -> worker process id of the plans running now (on their worker's node).
+        self.started: dict[str, int] = {}
+        self._plan = ray.remote(num_cpus=1, max_retries=0, num_returns="streaming")(_ray_plan)
+        self._meshes = ray.put(meshes or {})
+        self._warm_task = warm_task
+        if warm_task is not None:
+            warm = ray.remote(num_cpus=1, max_retries=0)(_ray_warm)
+            ray.get([warm.remote(warm_task, self._meshes) for _ in range(self.workers)])
+
+    def submit(self, job: Job) -> None:
+        """Submit the plan task (its start is known once it reports it)."""
+        job.handle = self._plan.remote(job.task, self._meshes, self._warm_task)
+        job.started_at = None
+
+    def _next(self, job: Job) -> tuple[str, Any]:
+        """('started', pid) | ('outcome', dict) | ('crashed', message) of a ready generator."""
+        ray = self._ray
+        try:
+            ref = next(job.handle)
+            item = ray.get(ref)
+        except StopIteration:
+            return "crashed", "the task ended without an outcome"
+        except ray.exceptions.TaskCancelledError:
+            return "crashed", "the task was cancelled"
+        except ray.exceptions.RayTaskError as exc:  # the task body raised (never by design)
+            return "outcome", _failed("internal_error", f"the plan task failed: {exc}")
+        except ray.exceptions.RayError as exc:  # the worker or its node died
+            return "crashed", f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        if isinstance(item, dict) and "started" in item:
+            return "started", item["started"]
+        return "outcome", item
+
+    def poll(self, jobs: Sequence[Job], timeout_s: float) -> list[tuple[Job, dict[str, Any]]]:
+        """Wait for the next task events; kill started tasks past their hard limit."""
+        ray = self._ray
+        by_ref = {j.handle: j for j in jobs}
+        now = time.monotonic()
+        deadlines = [j.started_at + j.hard_limit_s - now for j in jobs if j.started_at is not None]
+        wait_s = max(0.0, min([timeout_s, *deadlines]))
+        ready, rest = ray.wait(list(by_ref), num_returns=1, timeout=wait_s)
+        if rest and ready:
+            more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
+            ready += more
+        out = []
+        for ref in ready:
+            job = by_ref[ref]
+            kind, value = self._next(job)
+            if kind == "started":
+                job.started_at = time.monotonic()
+                job.pid = int(value)
+                self.started[job.plan.sha256] = job.pid
+                continue
+            self.started.pop(job.plan.sha256, None)
+            if kind == "crashed":
+                value = _failed(CRASHED, f"the plan's Ray worker died without an outcome ({value})")
+            out.append((job, value))
+        finished = {id(j) for j, _ in out}
+        now = time.monotonic()
+        for job in jobs:
+            if id(job) in finished or job.started_at is None:
+                continue
+            if now > job.started_at + job.hard_limit_s:
+                ray.cancel(job.handle, force=True)
+                self.started.pop(job.plan.sha256, None)
+                out.append((job, killed_outcome(job)))
+        return out
+
+    def close(self) -> None:
+        """Shut down the local Ray this executor started (a cluster is left running)."""
+        if self._owns:
+            self._ray.shutdown()
+
+
+@dataclass
+class Counts:
+    """Progress of a sweep run."""
+
+    total: int
+    skipped: int = 0
+    succeeded: int = 0
+    failed: int = 0
+    running: int = 0
+    retried: int = 0
+    reasons: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def done(self) -> int:
+        """Plans with a row (skipped ones included)."""
+        return self.skipped + self.succeeded + self.failed
+
+
+Progress = Callable[[Counts], None]
+
+
+def _task(plan: SweepPlan, base_dir: Path | None) -> dict[str, Any]:
+    return {
+        "scenario": plan.scenario.model_dump(mode="json"),
+        "base_dir": str(base_dir) if base_dir else None,
+    }
+
+
+def sweep_meshes(plans: Sequence[SweepPlan]) -> dict[str, bytes]:
+    """Bytes of every mesh file the plans name (not the packaged reference cabins), read once.
+
+    Handed to Ray tasks through the object store, so that the nodes of a cluster need the package but
+    no copy of the sweep's mesh files.
+    """
+    from meshes import reference_cabin_path
+
+    out: dict[str, bytes] = {}
+    for plan in plans:
+        names = []
+        s = plan.scenario
+        if s.cabin is not None and reference_cabin_path(s.cabin.mesh) is None:
+            names.append(s.cabin.mesh)
+        if s.payload is not None and s.payload.mesh is not None:
+            names.append(s.payload.mesh)
+        for name in names:
+            if name not in out:
+                try:
+                    out[name] = Path(name).read_bytes()
+                except OSError as exc:
+                    raise InvalidInput(
+                        f"mesh {name}: cannot read ({exc.strerror})", field="cabin.mesh"
+                    ) from None
+    return out
+
+
+def warm_task(plans: Sequence[SweepPlan], base_dir: Path | None = None) -> dict[str, Any] | None:
+    """The warm-up task of a sweep: its first plan with the time limit capped at WARMUP_TIME_LIMIT_S."""
+    if not plans:
+        return None
+    task = _task(plans[0], base_dir)
+    options = task["scenario"].setdefault("options", {})
+    options["time_limit_s"] = min(float(options.get("time_limit_s", 30.0)), WARMUP_TIME_LIMIT_S)
+    return task
+
+
+def run_sweep(
+    plans: Sequence[SweepPlan],
+    out_dir: Path,
+    executor: Executor,
+    limits: Limits,
+    *,
+    base_dir: Path | None = None,
+    progress: Progress | None = None,
+    poll_s: float = 0.2,
+) -> Counts:
+    """Run every plan without a row in ``out_dir`` and record the rows as they finish.
+
+    Args:
+        plans: The expanded sweep.
+        out_dir: Output folder (journal, tables, scenario and profile files).
+        executor: Where plans run; the caller closes it.
+        limits: Wall-clock limits of each plan.
+        base_dir: Folder that relative mesh paths in the scenarios refer to.
+        progress: Called with the counts whenever they change.
+        poll_s: Longest wait for outcomes before the progress is refreshed [s].
+
+    Returns:
+        The final counts. The tables (CSV, Parquet) are written at the end, also when interrupted.
+    """
+    journal = Journal(out_dir)
+    counts = Counts(total=len(plans))
+    pending: deque[Job] = deque()
+    for plan in plans:
+        journal.write_scenario(plan)
+        if journal.done(plan.sha256):
+            counts.skipped += 1
+        else:
+            pending.append(Job(plan, _task(plan, base_dir), hard_limit_s(plan, limits)))
+    report = progress or (lambda c: None)
+    running: list[Job] = []
+    report(counts)
+    try:
+        while pending or running:
+            while pending and len(running) < executor.max_in_flight:
+                job = pending.popleft()
+                job.submitted_at = time.monotonic()
+                executor.submit(job)
+                running.append(job)
+            counts.running = len(running)
+            report(counts)
+            for job, outcome in executor.poll(running, poll_s):
+                running.remove(job)
+                if outcome.get("reason") == CRASHED and job.attempt < MAX_ATTEMPTS:
+                    _LOG.warning("plan %s: %s; submitted again", job.plan.name, outcome.get("message"))
+                    counts.retried += 1
+                    pending.appendleft(Job(job.plan, job.task, job.hard_limit_s, job.attempt + 1))
+                    continue
+                start = job.started_at if job.started_at is not None else job.submitted_at
+                row = make_row(job.plan, outcome, time.monotonic() - start, job.attempt)
+                if journal.record(job.plan, row, outcome.get("document")):
+                    if row["status"] == "succeeded":
+                        counts.succeeded += 1
+                    else:
+                        counts.failed += 1
+                    reason = row["reason"] or "succeeded"
+                    counts.reasons[reason] = counts.reasons.get(reason, 0) + 1
+            counts.running = len(running)
+            report(counts)
+    finally:
+        write_tables(out_dir, journal.table(plans))
+    return counts
+
+
+__all__ = [
+    "CRASHED",
+    "MAX_ATTEMPTS",
+    "Counts",
+    "EmbeddedExecutor",
+    "Executor",
+    "Job",
+    "RayExecutor",
+    "hard_limit_s",
+    "killed_outcome",
+    "run_sweep",
+    "sweep_meshes",
+    "warm_task",
+]

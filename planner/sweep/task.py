@@ -1,0 +1,126 @@
+"""What one plan process runs: a scenario in, an outcome out (plain data, picklable, JSON-able).
+
+The same function runs in an embedded pool worker (:class:`~planner.sweep.run.EmbeddedExecutor`) and in a
+Ray task (:class:`~planner.sweep.run.RayExecutor`), so both ways give the same results. Mesh files reach
+the process as paths (embedded: the files are local) or as bytes (Ray: the driver reads each mesh once
+and puts it into the object store, so cluster nodes need no shared file system).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from planner.core.exceptions import PlannerError
+
+_LOG = logging.getLogger(__name__)
+
+#: Longest refusal evidence kept in the table [characters of JSON]; the whole document is in the profile.
+MAX_EVIDENCE_CHARS = 4000
+
+
+def _resolver(meshes: dict[str, Any] | None) -> Any:
+    if not meshes:
+        return None
+
+    def resolve(name: str) -> Path | bytes | None:
+        found = meshes.get(name)
+        if found is None:
+            return None
+        return found if isinstance(found, bytes) else Path(found)
+
+    return resolve
+
+
+def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Resolve and plan one scenario; the outcome of the plan, success or refusal.
+
+    Args:
+        task: ``{"scenario": dict, "base_dir": str | None}`` (the scenario of one sweep plan).
+        meshes: Mesh name -> file path or file bytes, looked up before the default resolution.
+
+    Returns:
+        ``{"status": "succeeded" | "failed", "reason", "message", "evidence" (JSON text of the refusal
+        details), "duration_s", "lower_bound_ratio", "min_clearance_m", "peak_force_ratio",
+        "planning_time_s" (the planner's own clock), "task_time_s" (resolution + planning, this process),
+        "document" (JSON text of the profile or the refusal document), "pid"}``. Numbers are ``None``
+        where a refusal has none. An unexpected exception is an ``internal_error`` outcome, never raised.
+    """
+    from planner.documents.output import refusal_document, result_document
+    from planner.plan.pipeline import Planner
+    from planner.scenario import ResolvedScenario, resolve_scenario, scenario_from_dict
+
+    t0 = time.perf_counter()
+    out: dict[str, Any] = {
+        "status": "failed",
+        "reason": None,
+        "message": None,
+        "evidence": None,
+        "duration_s": None,
+        "lower_bound_ratio": None,
+        "min_clearance_m": None,
+        "peak_force_ratio": None,
+        "planning_time_s": None,
+        "task_time_s": None,
+        "document": None,
+        "pid": os.getpid(),
+    }
+    sc: ResolvedScenario | None = None
+    try:
+        spec = scenario_from_dict(task["scenario"], source="sweep plan")
+        base_dir = Path(task["base_dir"]) if task.get("base_dir") else None
+        sc = resolve_scenario(spec, base_dir=base_dir, mesh_resolver=_resolver(meshes))
+        planner = Planner(sc)
+        t_plan = time.perf_counter()
+        result = planner.plan()
+    except PlannerError as exc:
+        doc = refusal_document(exc, sc, name=task["scenario"].get("name"))
+        evidence = json.dumps(doc.get("details", {}), separators=(",", ":"))
+        if len(evidence) > MAX_EVIDENCE_CHARS:
+            evidence = evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
+        out.update(reason=exc.reason, message=exc.message, evidence=evidence, document=json.dumps(doc))
+        out["task_time_s"] = time.perf_counter() - t0
+        return out
+    except Exception as exc:  # a bug: recorded as the plan's outcome, the sweep goes on
+        _LOG.exception("sweep plan %s crashed", task["scenario"].get("name"))
+        out.update(reason="internal_error", message=f"internal error: {type(exc).__name__}: {exc}")
+        out["task_time_s"] = time.perf_counter() - t0
+        return out
+    doc = result_document(sc, result)
+    report = result.report
+    out.update(
+        status="succeeded",
+        message=f"{result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
+        duration_s=float(result.profile.duration_s),
+        lower_bound_ratio=float(report["duration_ratio"]),
+        min_clearance_m=float(result.gate.min_clearance_m),
+        peak_force_ratio=float(result.gate.peak_ratios["effort"]),
+        planning_time_s=float(report.get("planning_time_s", time.perf_counter() - t_plan)),
+        document=json.dumps(doc),
+    )
+    out["task_time_s"] = time.perf_counter() - t0
+    return out
+
+
+def warm_up(task: dict[str, Any] | None, meshes: dict[str, Any] | None = None) -> float:
+    """Import the planner and plan ``task`` once (result discarded), so later plans start warm; seconds.
+
+    Planning the first plan of the sweep compiles or loads every kernel a plan uses and builds the
+    cabin's clearance grid, which processes forked afterwards inherit.
+    """
+    t0 = time.perf_counter()
+    import planner.plan.pipeline  # noqa: F401  (the import is the point)
+
+    if task is not None:
+        try:
+            plan_outcome(task, meshes)
+        except Exception:  # a failed warm-up only makes the first plans slower
+            _LOG.exception("sweep warm-up failed")
+    return time.perf_counter() - t0
+
+
+__all__ = ["MAX_EVIDENCE_CHARS", "plan_outcome", "warm_up"]

@@ -1,0 +1,94 @@
+"""POST /sweeps: the plans run as ordinary jobs under the tenant's quota; progress, summary and results."""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from tests.api.conftest import Service, make_settings, scenario, start_service
+
+QUOTA = 2
+
+
+@pytest.fixture(scope="module")
+def svc(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
+    settings = make_settings(tmp_path_factory.mktemp("sweeps"), tenant_max_active_jobs=QUOTA)
+    yield from start_service(settings)
+
+
+def sweep_body() -> dict[str, Any]:
+    """4 plans: the 100 kg aisle transfer (feasible) and 400 kg (refused at the start), 2 seeds each."""
+    return {
+        "name": "transfer-masses",
+        "base": scenario("aisle-transfer"),
+        "axes": {"payload_mass_kg": [100, 400], "seed": [1, 2]},
+    }
+
+
+def active_jobs(svc: Service) -> int:
+    """Queued + running jobs of the tenant, from one listing (one snapshot of the table)."""
+    items = svc.client.get("/api/v1/plans", params={"limit": 100}, headers=svc.h()).json()["items"]
+    return sum(1 for job in items if job["status"] in ("queued", "running"))
+
+
+def test_a_sweep_runs_as_jobs_under_the_quota_and_gives_its_results(svc: Service):
+    r = svc.client.post("/api/v1/sweeps", json=sweep_body(), headers=svc.h())
+    assert r.status_code == 202, r.text
+    doc = r.json()
+    assert r.headers["Location"] == f"/api/v1/sweeps/{doc['id']}"
+    assert doc["total"] == 4 and doc["status"] == "running"
+    most = 0
+    deadline = time.monotonic() + 240
+    while doc["status"] != "finished":
+        assert time.monotonic() < deadline, doc
+        most = max(most, active_jobs(svc))
+        assert most <= QUOTA  # the sweep never holds more than the tenant's quota of jobs
+        time.sleep(0.1)
+        doc = svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h()).json()
+    assert most >= 1
+    assert doc["progress"]["done"] == 4 and doc["progress"]["waiting"] == 0
+    assert doc["summary"] == {"succeeded": 2, "reasons": {"start_outside_limits": 2}}
+
+    table = list(
+        csv.DictReader(io.StringIO(svc.client.get(doc["links"]["results_csv"], headers=svc.h()).text))
+    )
+    assert [int(r["plan"]) for r in table] == [0, 1, 2, 3]
+    for row in table:
+        if float(row["payload_mass_kg"]) == 400:
+            assert (row["status"], row["reason"]) == ("failed", "start_outside_limits")
+        else:
+            assert row["status"] == "succeeded"
+            assert float(row["min_clearance_m"]) >= float(row["clearance_m"])
+            assert float(row["lower_bound_ratio"]) >= 1.0
+            plan = svc.client.get(row["profile_file"], headers=svc.h()).json()  # the plan's own job
+            assert plan["result"]["duration_s"] == pytest.approx(float(row["duration_s"]))
+    raw = svc.client.get(doc["links"]["results_parquet"], headers=svc.h()).content
+    rows = pq.read_table(pa.BufferReader(raw)).to_pylist()
+    assert [(r["scenario_sha256"], r["status"]) for r in rows] == [
+        (r["scenario_sha256"], r["status"]) for r in table
+    ]
+
+    assert svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h("beta")).status_code == 404
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"axes": {"payload_mass_kg": [-5]}}, "axes.payload_mass_kg[0]"),
+        ({"base": "aisle-transfer.yaml"}, "base"),
+        ({"bays": {"manifest": "cabins.json"}}, "bays.manifest"),
+        ({"axes": {"goal": {"bays": ["A1"]}}}, "axes.goal.bays[0]"),
+    ],
+)
+def test_invalid_sweeps_are_422_naming_the_field(svc: Service, change: dict[str, Any], field: str):
+    r = svc.client.post("/api/v1/sweeps", json={**sweep_body(), **change}, headers=svc.h())
+    assert r.status_code == 422, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    assert r.json()["detail"].startswith(field)

@@ -1,0 +1,99 @@
+"""Sweeps on a local Ray (2 CPUs, bound to loopback): the same rows as embedded, hard kills, lost workers."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from planner.sweep.expand import expand_sweep
+from planner.sweep.results import MACHINE_COLUMNS, read_parquet
+from planner.sweep.run import RayExecutor, run_sweep, warm_task
+from planner.sweep.spec import sweep_from_dict
+from tests.sweep.conftest import bay_sweep, invoke, write_spec
+from tests.sweep.test_run import check_stuck_rows, stuck_sweep
+
+ray = pytest.importorskip(
+    "ray", reason="ray is not installed (the [ray] extra: pip install 'cabinplan[ray]')"
+)
+
+
+@pytest.fixture(scope="module")
+def local_ray() -> Iterator[Any]:
+    ray.init(
+        num_cpus=2,
+        include_dashboard=False,
+        _node_ip_address="127.0.0.1",
+        log_to_driver=False,
+        configure_logging=False,
+    )
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def _plan_workers() -> list[int]:
+    """Process ids of Ray workers executing a sweep plan right now (their title is ray::_ray_plan)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                cmdline = (entry / "cmdline").read_bytes()
+            except OSError:
+                continue
+            if cmdline.startswith(b"ray::_ray_plan"):
+                pids.append(int(entry.name))
+    return pids
+
+
+def test_ray_gives_the_rows_the_embedded_run_gives(local_ray, embedded_run, tmp_path: Path):
+    _, embedded = embedded_run
+    spec = write_spec(tmp_path, bay_sweep())
+    result = invoke("sweep", spec, "-o", tmp_path / "out", "--ray")
+    assert result.exit_code == 0, result.stderr
+    rows = read_parquet(tmp_path / "out" / "results.parquet")
+
+    def same(row: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in row.items() if k not in MACHINE_COLUMNS}
+
+    assert [same(r) for r in rows] == [same(r) for r in embedded]
+    assert {r["status"] for r in rows} == {"succeeded", "failed"}
+
+
+def test_ray_kills_a_plan_at_its_limit_and_a_killed_worker_loses_no_row(local_ray, tmp_path: Path):
+    sweep = sweep_from_dict(stuck_sweep("ray-stuck", 10.0))
+    plans = expand_sweep(sweep)
+    executor = RayExecutor(max_in_flight=2, warm_task=warm_task(plans))
+    outcome: dict[str, Any] = {}
+
+    def run() -> None:
+        outcome["counts"] = run_sweep(plans, tmp_path, executor, sweep.limits, poll_s=0.05)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    killed = None
+    deadline = time.monotonic() + 60
+    while killed is None and time.monotonic() < deadline and thread.is_alive():
+        pid = executor.started.get(plans[0].sha256)  # the long plan, once its worker has started it
+        if pid is not None:
+            assert pid in _plan_workers()  # a real Ray worker process, executing a sweep plan
+            os.kill(pid, signal.SIGKILL)  # the worker dies mid-task
+            killed = pid
+        time.sleep(0.02)
+    thread.join(timeout=120)
+    executor.close()
+    assert killed is not None, "the long plan was never seen running"
+    assert not thread.is_alive()
+    counts = outcome["counts"]
+    assert counts.retried == 1
+    rows = read_parquet(tmp_path / "results.parquet")
+    assert len({r["scenario_sha256"] for r in rows}) == 3
+    assert [r["attempts"] for r in sorted(rows, key=lambda r: r["plan"])] == [2, 1, 1]
+    check_stuck_rows(rows, 10.0)

@@ -1,0 +1,145 @@
+"""Embedded sweeps: the result table against the plans' physics, re-runnable scenarios, resume, hard kill."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from planner.sweep.expand import expand_sweep
+from planner.sweep.results import COLUMN_NAMES, JOURNAL, read_parquet
+from planner.sweep.run import EmbeddedExecutor, run_sweep
+from planner.sweep.spec import sweep_from_dict
+from tests.sweep.conftest import bay_sweep, invoke, stuck_base, write_spec
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def test_rows_hold_what_each_plan_gives(embedded_run):
+    out, rows = embedded_run
+    assert sorted(r["plan"] for r in rows) == list(range(12))
+    with (out / "results.csv").open(newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert [c for c in table[0]] == list(COLUMN_NAMES)
+    assert [(r["scenario_sha256"], r["status"]) for r in table] == [
+        (r["scenario_sha256"], r["status"]) for r in rows
+    ]
+    for row in rows:
+        profile = json.loads((out / row["profile_file"]).read_text())
+        assert (out / row["scenario_file"]).is_file()
+        if row["payload_mass_kg"] == 400:
+            # 400 kg cannot be held at the start: refused there, with the force ratio as evidence.
+            assert (row["status"], row["reason"]) == ("failed", "start_outside_limits")
+            assert json.loads(row["evidence"])["static_force_ratio"] > 1.0
+            assert row["duration_s"] is None and profile["reason"] == "start_outside_limits"
+        else:
+            assert row["status"] == "succeeded", row["message"]
+            assert row["min_clearance_m"] >= row["clearance_m"]
+            assert row["lower_bound_ratio"] >= 1.0  # no trajectory beats the single-drive bound
+            assert 0.0 < row["peak_force_ratio"] <= 1.0
+            assert profile["duration_s"] == pytest.approx(row["duration_s"])
+            assert profile["t"][-1] == pytest.approx(row["duration_s"])
+            assert profile["scenario"]["sha256"] == row["scenario_sha256"]
+    for name in ("feasibility_map.png", "durations.png", "reasons.png"):
+        assert (out / name).read_bytes().startswith(PNG)
+
+
+def test_each_plan_is_an_ordinary_scenario_that_re_runs_alone(embedded_run, tmp_path: Path):
+    out, rows = embedded_run
+    row = next(r for r in rows if r["status"] == "succeeded" and r["bay"] == "A3")
+    result = invoke("plan", out / row["scenario_file"], "-o", tmp_path / "again.json")
+    assert result.exit_code == 0, result.stderr
+    again = json.loads((tmp_path / "again.json").read_text())
+    assert again["scenario"]["sha256"] == row["scenario_sha256"]
+    assert again["duration_s"] == pytest.approx(row["duration_s"], abs=1e-9)
+
+
+def test_a_sweep_killed_midway_resumes_without_replanning_or_duplicating(tmp_path: Path):
+    sweep = bay_sweep("resume")
+    sweep["axes"]["seed"] = [1]  # 6 plans
+    spec = write_spec(tmp_path, sweep)
+    out = tmp_path / "out"
+    journal = out / JOURNAL
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planner.cli", "sweep", str(spec), "-o", str(out), "--workers", "2"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,  # its own process group: the kill takes the forkserver and plans too
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if journal.exists() and journal.read_text().count("\n") >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the sweep ended before it could be killed"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+    before = {r["scenario_sha256"]: r for r in map(json.loads, journal.read_text().splitlines())}
+    assert 2 <= len(before) < 6
+    assert not (out / "results.parquet").exists()  # killed: the tables were never written
+
+    result = invoke("sweep", spec, "-o", out, "--workers", "2")
+    assert result.exit_code == 0, result.stderr
+    assert f"{len(before)} already done" in result.stderr
+    lines = journal.read_text().splitlines()
+    assert len(lines) == 6 and len({json.loads(x)["scenario_sha256"] for x in lines}) == 6
+    rows = read_parquet(out / "results.parquet")
+    assert len(rows) == 6
+    for row in rows:  # the plans done before the kill were not planned again (same wall-clock time)
+        if row["scenario_sha256"] in before:
+            assert row["wall_time_s"] == before[row["scenario_sha256"]]["wall_time_s"]
+    assert {r["status"] for r in rows} == {"succeeded", "failed"}
+
+    (out / "results.parquet").unlink()  # a third run plans nothing and writes the tables again
+    again = invoke("sweep", spec, "-o", out, "--no-plots")
+    assert again.exit_code == 0 and "6 already done" in again.stderr, again.stderr
+    assert read_parquet(out / "results.parquet") == rows
+
+
+def stuck_sweep(name: str, wall_time_limit_s: float) -> dict:
+    """A plan that would search for 20 s (killed at the wall-clock limit), a refusal and a feasible plan."""
+    return {
+        "name": name,
+        "base": stuck_base(),
+        "plans": [
+            {},
+            {"payload_mass_kg": 400},
+            {"payload_box_m": [0.45, 0.35, 0.30], "grasp": {"position": [0, 0, 0.2]}},
+        ],
+        "limits": {"wall_time_limit_s": wall_time_limit_s},
+    }
+
+
+def check_stuck_rows(rows: list[dict], limit_s: float) -> None:
+    by_plan = {r["plan"]: r for r in rows}
+    assert len(rows) == 3
+    killed = by_plan[0]
+    assert (killed["status"], killed["reason"]) == ("failed", "time_limit_exceeded")
+    assert limit_s <= killed["wall_time_s"] < limit_s + 3.0
+    assert killed["profile_file"] is None
+    assert by_plan[1]["reason"] == "start_outside_limits"
+    assert by_plan[2]["status"] == "succeeded", by_plan[2]["message"]
+
+
+def test_a_plan_past_its_limit_is_killed_and_recorded_while_the_others_finish(tmp_path: Path):
+    sweep = sweep_from_dict(stuck_sweep("stuck", 10.0))
+    plans = expand_sweep(sweep)
+    executor = EmbeddedExecutor(2)
+    try:
+        counts = run_sweep(plans, tmp_path, executor, sweep.limits)
+        pids = [p.process.pid for p in executor._spares]
+    finally:
+        executor.close()
+    assert (counts.succeeded, counts.failed) == (1, 2)
+    check_stuck_rows(read_parquet(tmp_path / "results.parquet"), 10.0)
+    for pid in pids:  # every process the executor started is gone
+        assert not Path(f"/proc/{pid}").exists() or "zombie" in Path(f"/proc/{pid}/status").read_text()
