@@ -39,6 +39,8 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.planning
 	$(BIN)/python -m bench.stiffness
 	$(BIN)/python -m bench.pprs6
+	mkdir -p out
+	$(BIN)/python -m bench.generalization --count 100 --seed 0 --out out/generalization.json
 
 lock:  ## re-pin requirements.lock from a fresh resolve of pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock

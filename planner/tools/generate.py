@@ -38,6 +38,7 @@ Frame (as in ``meshes/README.md``): z along the cabin axis and the rail, y up, x
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import math
@@ -113,6 +114,8 @@ _CARRIAGE_CORNERS = np.array([[0.85, -0.12], [0.85, 0.0], [-0.85, -0.12], [-0.85
 #: The tucked posture of ``meshes/README.md`` (arm along +z), apart from d1.
 _TUCKED = np.array([0.0, 0.0, 0.20, 0.0, -math.pi / 2, math.radians(15.0), -0.25, math.pi / 2])
 _FAMILY = IKOptions(grid_gamma=11, grid_d5=11)
+#: The model's own rail length [m] (cabin8.yaml); a scenario states ``rail_length`` only when shorter.
+ROBOT_RAIL_M = 6.0
 
 
 class _Redraw(Exception):
@@ -132,6 +135,8 @@ class GeneratorOptions:
         goal_kinds: Goal kinds to draw from (weights of :data:`GOAL_WEIGHTS`, renormalised).
         formats: Mesh formats, cycled by case index.
         max_attempts: Redraws per case before giving up.
+        rail_length_m: Rail length [m] (the cabin section is 0.5 m longer at each end); shorter rails make
+            smaller, faster cases (the tests' sample).
     """
 
     clearance_m: float = 0.01
@@ -139,6 +144,11 @@ class GeneratorOptions:
     goal_kinds: tuple[GoalKind, ...] = GOAL_KINDS
     formats: tuple[MeshFormat, ...] = MESH_FORMATS
     max_attempts: int = 60
+    rail_length_m: float = 6.0
+
+    def __post_init__(self) -> None:
+        if not 3.0 <= self.rail_length_m <= 6.0:
+            raise ValueError(f"rail_length_m must be within [3, 6] m, got {self.rail_length_m}")
 
 
 @dataclass(frozen=True)
@@ -177,6 +187,8 @@ class GeneratedCase:
         meta: Features of the case (goal kind, shell, free space, format, ...), JSON-able.
         start_q: The start joints (8,) the checks were made at.
         goal_q: One exact goal configuration (8,) that passed the checks.
+        layout: The cabin's geometry (base frame).
+        T_base_cabin: The frame the mesh file is authored in (the scenario's ``cabin.pose``), (4, 4).
     """
 
     name: str
@@ -186,9 +198,17 @@ class GeneratedCase:
     meta: dict[str, Any]
     start_q: Array = field(repr=False)
     goal_q: Array = field(repr=False)
+    layout: CabinLayout | None = field(default=None, repr=False)
+    T_base_cabin: Array | None = field(default=None, repr=False)
 
 
 # ------------------------------------------------------------------------------------------- geometry
+
+
+@functools.cache
+def _robot(rail_length_m: float) -> Cabin8:
+    """The cabin8 model with this rail length (built once per length: its CasADi functions take a while)."""
+    return Cabin8(rail_length=rail_length_m)
 
 
 def _merge(name: str, parts: Sequence[Part]) -> Part:
@@ -322,7 +342,8 @@ def mesh_bytes(
         for p in cabin_parts(layout)
     ]
     if fmt == "glb":
-        return glb_bytes(parts)
+        # One node per part; names must be unique (a scene keeps one geometry per name).
+        return glb_bytes([Part(f"{i:03d}_{p.name}", p.vertices, p.faces) for i, p in enumerate(parts)])
     whole = _merge(name, parts)
     if fmt == "stl":
         return binary_stl_bytes(whole.vertices, whole.faces, f"cabinplan generated cabin {name} [{units}]")
@@ -557,12 +578,12 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: GeneratorOption
     kind = opts.goal_kinds[int(rng.choice(len(opts.goal_kinds), p=weights / weights.sum()))]
     size, payload, meta = _payload(rng)
     meta["goal"] = kind
-    rail_max = 6.0
-    z_min, z_max = -0.5, 6.5
+    rail_max = opts.rail_length_m
+    z_min, z_max = -0.5, opts.rail_length_m + 0.5
     if kind == "bay-end-far":
-        rail_max = float(np.round(rng.uniform(4.0, 6.0), 3))
-    base_robot = Cabin8(rail_length=rail_max)
-    d = _Draw(rng, base_robot, payload, size, kind, _shell(rng), meta)
+        rail_max = float(np.round(rng.uniform(opts.rail_length_m - 2.0, opts.rail_length_m), 3))
+    base_robot = _robot(rail_max)
+    d = _Draw(rng, base_robot, payload, size, kind, _shell(rng, z_min, z_max), meta)
     clearance = opts.clearance_m
 
     goal_pose: Array | None = None
@@ -749,7 +770,7 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: GeneratorOption
         "start": {"drives": robot.drives_dict(robot.drives_from_joints(q_start))},
         "options": {"clearance_m": clearance, "time_limit_s": opts.time_limit_s, "seed": 0},
     }
-    if rail_max < 6.0:
+    if rail_max < ROBOT_RAIL_M:
         scenario["rail_length"] = rail_max
     if kind == "drive":
         scenario["goal"] = {"drives": robot.drives_dict(robot.drives_from_joints(q_goal))}
@@ -762,7 +783,7 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: GeneratorOption
     scenario["start"]["drives"] = {k: float(v) for k, v in scenario["start"]["drives"].items()}
     if "drives" in scenario["goal"]:
         scenario["goal"]["drives"] = {k: float(v) for k, v in scenario["goal"]["drives"].items()}
-    return GeneratedCase(name, scenario, mesh_name, data, meta, q_start, q_goal)
+    return GeneratedCase(name, scenario, mesh_name, data, meta, q_start, q_goal, layout, T_base_cabin)
 
 
 def _inside_radius(box_: tuple[Array, Array], shell: Shell, radius: float) -> bool:
