@@ -22,9 +22,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--start", type=int, default=0, help="index of the first case")
     parser.add_argument("--clearance-m", type=float, default=0.01)
+    parser.add_argument("--rail-length-m", type=float, default=6.0, help="3 to 6 m (shorter cabins)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    options = GeneratorOptions(clearance_m=args.clearance_m)
+    options = GeneratorOptions(clearance_m=args.clearance_m, rail_length_m=args.rail_length_m)
     cases = []
     for index in range(args.start, args.start + args.count):
         case = generate_case(args.seed, index, options)

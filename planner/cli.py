@@ -382,11 +382,14 @@ def generate(
     clearance: Annotated[
         float, typer.Option("--clearance-m", min=0.001, max=0.2, help="requested clearance [m]")
     ] = 0.01,
+    rail_length: Annotated[
+        float, typer.Option("--rail-length-m", min=3.0, max=6.0, help="rail length [m] (shorter cabins)")
+    ] = 6.0,
 ) -> None:
     """Generate seeded, reproducible cabins and scenarios (YAML + mesh files) that `plan` runs as they are."""
     from planner.tools.generate import GeneratorOptions, generate_case, write_case, write_manifest
 
-    options = GeneratorOptions(clearance_m=clearance)
+    options = GeneratorOptions(clearance_m=clearance, rail_length_m=rail_length)
     cases = []
     for index in range(start, start + count):
         case = generate_case(seed, index, options)

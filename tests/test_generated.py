@@ -8,11 +8,14 @@ the sampled joints with the requested clearance.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from planner.cli import app
 from planner.collision.world import CollisionWorld
 from planner.core.schemas import Pose
 from planner.dynamics.lagrange import Cabin8Dynamics
@@ -57,11 +60,21 @@ def _case(index: int, folder: Path) -> tuple[GeneratedCase, Path]:
     return _cases[index]
 
 
-def test_the_same_seed_gives_identical_files(folder: Path, tmp_path: Path) -> None:
-    case, path = _case(SAMPLE[0], folder)
-    again = write_case(generate_case(SEED, SAMPLE[0], OPTIONS), tmp_path)
-    assert again.read_bytes() == path.read_bytes()
+def test_the_same_seed_gives_identical_files_from_the_cli(folder: Path, tmp_path: Path) -> None:
+    """``cabinplan generate`` (a second, independent generation) writes the library's files byte for byte."""
+    index = SAMPLE[0]
+    case, path = _case(index, folder)
+    result = CliRunner().invoke(
+        app,
+        ["generate", "-o", str(tmp_path), "--count", "1", "--seed", str(SEED), "--start", str(index)]
+        + ["--rail-length-m", str(OPTIONS.rail_length_m)],
+    )
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["scenarios"] == [path.name]
+    assert (tmp_path / path.name).read_bytes() == path.read_bytes()
     assert (tmp_path / case.mesh_name).read_bytes() == (folder / case.mesh_name).read_bytes()
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["seed"] == SEED and manifest["cases"][0]["name"] == case.name
 
 
 def test_case_index_is_independent_of_the_other_cases(folder: Path) -> None:

@@ -42,7 +42,7 @@ import functools
 import json
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -509,7 +509,12 @@ def _tucked(d1: float) -> Array:
     return q
 
 
-def _hatch(d: _Draw, world_of: Any, z_bh: float, clearance: float) -> Bulkhead | None:
+def _hatch(
+    d: _Draw,
+    world_of: Callable[[Bulkhead], tuple[CollisionWorld, StaticForceCheck]],
+    z_bh: float,
+    clearance: float,
+) -> Bulkhead | None:
     """A bulkhead at ``z_bh`` whose stepped opening passes the tucked posture with this payload.
 
     The arm step is sized from the payload box at the tucked posture plus a drawn margin, then widened
