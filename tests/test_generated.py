@@ -21,8 +21,8 @@ from planner.core.schemas import Pose
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.meshio.load import load_mesh
 from planner.plan.goals import StaticForceCheck
-from planner.plan.pipeline import PlanResult, plan
-from planner.scenario.schema import ResolvedScenario, load_scenario
+from planner.plan.pipeline import plan
+from planner.scenario.schema import load_scenario
 from planner.tools.generate import (
     MESH_FORMATS,
     START_EXTRA_M,
@@ -131,9 +131,6 @@ def test_every_file_format_loads_to_the_cabin(fmt: str, folder: Path) -> None:
     c_ref = np.sort(np.round(ref.vertices[ref.faces].mean(axis=1), 4), axis=0)
     c_got = np.sort(np.round(mesh.vertices[mesh.faces].mean(axis=1), 4), axis=0)
     assert np.max(np.abs(c_ref - c_got)) <= 2e-4
-
-
-_plans: dict[int, tuple[ResolvedScenario, PlanResult]] = {}
 
 
 @pytest.mark.parametrize(
