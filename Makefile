@@ -55,6 +55,8 @@ bench: $(DEV_STAMP)
 	$(BIN)/python -m bench.startup
 	$(BIN)/python -m bench.load
 	$(BIN)/python -m bench.sweep
+	mkdir -p out
+	$(BIN)/python -m bench.generalization --count 100 --seed 0 --out out/generalization.json
 
 lock:  ## re-pin requirements.lock (runtime) and requirements-dev.lock (development) from pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock

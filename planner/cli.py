@@ -520,6 +520,37 @@ def profile(
     )
 
 
+@app.command()
+@handle_errors
+def generate(
+    out: Annotated[Path, typer.Option("-o", "--out", help="folder for the scenario and mesh files")],
+    count: Annotated[int, typer.Option(min=1, max=10000, help="number of scenarios")] = 10,
+    seed: Annotated[int, typer.Option(min=0, help="seed: the same seed gives the same files")] = 0,
+    start: Annotated[int, typer.Option(min=0, help="index of the first case")] = 0,
+    clearance: Annotated[
+        float, typer.Option("--clearance-m", min=0.001, max=0.2, help="requested clearance [m]")
+    ] = 0.01,
+    rail_length: Annotated[
+        float, typer.Option("--rail-length-m", min=3.0, max=6.0, help="rail length [m] (shorter cabins)")
+    ] = 6.0,
+) -> None:
+    """Generate seeded, reproducible cabins and scenarios (YAML + mesh files) that `plan` runs as they are."""
+    from planner.tools.generate import GeneratorOptions, generate_case, write_case, write_manifest
+
+    options = GeneratorOptions(clearance_m=clearance, rail_length_m=rail_length)
+    cases = []
+    for index in range(start, start + count):
+        case = generate_case(seed, index, options)
+        path = write_case(case, out)
+        typer.echo(
+            f"cabinplan: {path} ({case.meta['goal']}, {case.meta['format']} in {case.meta['units']})",
+            err=True,
+        )
+        cases.append(case)
+    write_manifest(cases, out, seed)
+    _emit({"out": str(out), "seed": seed, "scenarios": [f"{c.name}.yaml" for c in cases]})
+
+
 def main() -> None:
     """Console-script entry point.
 
