@@ -46,7 +46,7 @@ from multiprocessing.context import ForkServerContext
 from multiprocessing.process import BaseProcess
 from typing import Any, Protocol, cast
 
-from sqlalchemy import CursorResult, delete, or_, select, update
+from sqlalchemy import CursorResult, delete, func, or_, select, update
 
 from api.db import TERMINAL_STATES, Database, Job, now_s
 from api.lifeline import SERVER_PID_ENV
@@ -107,6 +107,10 @@ def expire_leases(db: Database, now: float | None = None) -> dict[str, int]:
     lapsed = (Job.status == "running", or_(Job.lease_expires_at.is_(None), Job.lease_expires_at < t))
     free = {"owner": None, "lease_expires_at": None}
     with db.session() as s:
+        # Read first: every instance runs this at each heartbeat, and an UPDATE is a write transaction
+        # (an fsync on SQLite) even when it matches nothing.
+        if not s.scalar(select(func.count()).select_from(Job).where(*lapsed)):
+            return {"requeued": 0, "failed": 0, "cancelled": 0}
         cancelled = rows_matched(
             s.execute(
                 update(Job)
