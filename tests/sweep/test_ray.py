@@ -68,7 +68,7 @@ def test_ray_gives_the_rows_the_embedded_run_gives(local_ray, embedded_run, tmp_
 
 
 def test_ray_kills_a_plan_at_its_limit_and_a_killed_worker_loses_no_row(local_ray, tmp_path: Path):
-    sweep = sweep_from_dict(stuck_sweep("ray-stuck", 10.0))
+    sweep = sweep_from_dict(stuck_sweep("ray-stuck", 15.0))
     plans = expand_sweep(sweep)
     executor = RayExecutor(max_in_flight=2, warm_task=warm_task(plans))
     outcome: dict[str, Any] = {}
@@ -96,4 +96,4 @@ def test_ray_kills_a_plan_at_its_limit_and_a_killed_worker_loses_no_row(local_ra
     rows = read_parquet(tmp_path / "results.parquet")
     assert len({r["scenario_sha256"] for r in rows}) == 3
     assert [r["attempts"] for r in sorted(rows, key=lambda r: r["plan"])] == [2, 1, 1]
-    check_stuck_rows(rows, 10.0)
+    check_stuck_rows(rows, 15.0)

@@ -131,7 +131,7 @@ def check_stuck_rows(rows: list[dict], limit_s: float) -> None:
 
 
 def test_a_plan_past_its_limit_is_killed_and_recorded_while_the_others_finish(tmp_path: Path):
-    sweep = sweep_from_dict(stuck_sweep("stuck", 10.0))
+    sweep = sweep_from_dict(stuck_sweep("stuck", 15.0))
     plans = expand_sweep(sweep)
     executor = EmbeddedExecutor(2)
     try:
@@ -140,6 +140,6 @@ def test_a_plan_past_its_limit_is_killed_and_recorded_while_the_others_finish(tm
     finally:
         executor.close()
     assert (counts.succeeded, counts.failed) == (1, 2)
-    check_stuck_rows(read_parquet(tmp_path / "results.parquet"), 10.0)
+    check_stuck_rows(read_parquet(tmp_path / "results.parquet"), 15.0)
     for pid in pids:  # every process the executor started is gone
         assert not Path(f"/proc/{pid}").exists() or "zombie" in Path(f"/proc/{pid}/status").read_text()
