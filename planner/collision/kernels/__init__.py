@@ -12,5 +12,8 @@ By concern, each module importing only those above it:
 * :mod:`.state` -- one state check in one call (poses, bounds, verdict code);
 * :mod:`.walk` -- the certified motion walk, resumable around the FCL probes that stay in Python.
 
-Every kernel is compiled with ``cache=True`` (numba's on-disk cache next to these files).
+Every kernel is compiled with ``cache=True`` (numba's on-disk cache next to these files). Numba checks a
+cached function against its own file only: after editing one of these modules, delete
+``planner/collision/kernels/__pycache__`` so that the kernels of the other modules that call into it are
+compiled again.
 """

@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
-from planner.collision.kernels.bounds import bounds_of_state, certain_contact
+from planner.collision.kernels.bounds import bounds_of_state, certain_cabin_contact
 from planner.collision.kernels.buffers import Packed, unpack
 from planner.collision.kernels.poses import N_CONSTRAINTS, body_poses
 
@@ -77,14 +77,15 @@ def packed_check(
     for i in range(q.shape[0]):
         if not math.isfinite(q[i]):
             return NOT_FINITE, poses, np.empty(0), np.empty(0)
-    u = unpack(fbuf, ibuf)
-    cabin, pairs, ok = _packed_state(q, u, grid, self_clearance, poses)
+    cabin, pairs, ok = _packed_state(q, unpack(fbuf, ibuf), grid, self_clearance, poses)
     if not ok:
         return INADMISSIBLE, poses, cabin, pairs
     code = CLEAR
     for b in range(cabin.shape[0]):
         if not cabin[b] > clearance:
-            if upper_slack >= 0.0 and certain_contact(b, poses, clearance, u, grid, upper_slack):
+            if upper_slack >= 0.0 and certain_cabin_contact(
+                b, poses, clearance, fbuf, ibuf, grid, upper_slack
+            ):
                 return CONTACT, poses, cabin, pairs
             code = UNDECIDED
     if code == CLEAR:
