@@ -31,6 +31,7 @@ CONTRACT = {
     "position",
     "velocity",
     "acceleration",
+    "jerk",
     "effort",
     "joints",
     "duration_s",

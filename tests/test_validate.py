@@ -36,6 +36,7 @@ ALL_CHECKS = {
     "position",
     "velocity",
     "acceleration",
+    "jerk",
     "effort",
     "consistency",
     "goal",
@@ -159,9 +160,10 @@ EVERYTHING_ELSE = ALL_CHECKS - {"consistency"}
 TAMPERS: list[tuple[Callable[[Plan], dict[str, Any]], set[str], set[str]]] = [
     # (tampering, checks that must fail, checks that must still pass)
     (scale_velocity, {"velocity", "consistency"}, {"finite", "time", "start", "end_at_rest", "goal"}),
-    (raise_acceleration, {"acceleration"}, ALL_CHECKS - {"acceleration"}),
+    # One sample's acceleration raised: a step of the acceleration, so its jerk fails too.
+    (raise_acceleration, {"acceleration", "jerk"}, ALL_CHECKS - {"acceleration", "jerk"}),
     (alter_effort, {"effort"}, ALL_CHECKS - {"effort"}),
-    (reverse_time, {"time"}, EVERYTHING_ELSE - {"time", "acceleration"}),
+    (reverse_time, {"time"}, EVERYTHING_ELSE - {"time", "acceleration", "jerk"}),
     (move_start, {"start"}, EVERYTHING_ELSE - {"start"}),
     (move_goal, {"goal"}, EVERYTHING_ELSE - {"goal"}),
     (
@@ -381,15 +383,16 @@ def test_csv_has_a_header_and_one_row_per_sample_that_parse_back(plan: Plan) -> 
     p = plan.profile
     rows = list(csv.reader(io.StringIO(p.to_csv())))
     header, body = rows[0], rows[1:]
-    assert len(header) == 33 == 1 + 4 * 8 and len(set(header)) == 33
+    assert len(header) == 41 == 1 + 5 * 8 and len(set(header)) == 41
     assert header[0] == "t_s"
     for j, (name, unit) in enumerate(zip(p.drive_names, p.drive_units, strict=True)):
         assert header[1 + j] == f"{name}_pos_{unit}"
         assert header[9 + j].startswith(f"{name}_vel_") and header[17 + j].startswith(f"{name}_acc_")
-        assert header[25 + j] == f"{name}_effort_{'N' if unit == 'm' else 'Nm'}"
-    assert len(body) == len(p.t) and all(len(r) == 33 for r in body)
+        assert header[25 + j] == f"{name}_jerk_{unit}/s3"
+        assert header[33 + j] == f"{name}_effort_{'N' if unit == 'm' else 'Nm'}"
+    assert len(body) == len(p.t) and all(len(r) == 41 for r in body)
     data = np.array(body, dtype=float)
-    expected = np.column_stack([p.t, p.position, p.velocity, p.acceleration, p.effort])
+    expected = np.column_stack([p.t, p.position, p.velocity, p.acceleration, p.jerk, p.effort])
     np.testing.assert_allclose(data, expected, rtol=1e-8, atol=0.0)
 
 
