@@ -38,6 +38,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.collision
 	$(BIN)/python -m bench.planning
 	$(BIN)/python -m bench.stiffness
+	$(BIN)/python -m bench.timing
 	$(BIN)/python -m bench.pprs6
 	$(BIN)/python -m bench.startup
 
