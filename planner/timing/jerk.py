@@ -234,9 +234,11 @@ class JerkLimitedStage:
 
         The averaged speed where the path crosses break b is the mean of TOPP-RA's speed over the
         window's positions, which lie within c T of b when that speed is at most c there: the cap c holds
-        over [b - c T, b + c T], widened by one grid step (TOPP-RA's x = sd^2 is linear between grid points).
+        over [b - c T, b + c T]. The zone's ends and points inside it are grid points (TOPP-RA's x = sd^2
+        is linear between grid points, so the cap holds between them too).
         """
-        half = caps * window * 1.05 + self.grid_step + 2.0 * BREAK_OFFSET
+        half = caps * window * 1.05 + 1e-6
+        extra = (breaks[:, None] + half[:, None] * np.linspace(-1.0, 1.0, 9)[None, :]).ravel()
 
         def cap(s: Array) -> Array:
             near = np.abs(s[:, None] - breaks[None, :]) <= half[None, :]
@@ -250,6 +252,7 @@ class JerkLimitedStage:
             self.min_points,
             self.max_points,
             path_speed_cap=cap if len(breaks) else None,
+            extra_points=extra if len(breaks) else None,
         )
 
     def _jump_caps(self, path: JointPath, j_target: float) -> tuple[Array, Array]:

@@ -201,6 +201,8 @@ class ToppraStage:
     #: Optional bound on the path speed, ``cap(s) -> sd_max`` at grid points (inf: none); the jerk-limited
     #: stage (:mod:`planner.timing.jerk`) slows down with it where the path's curvature jumps.
     path_speed_cap: Callable[[Array], Array] | None = None
+    #: Optional extra grid points (path parameters), e.g. the ends of the zones ``path_speed_cap`` bounds.
+    extra_points: Array | None = None
 
     def __post_init__(self) -> None:
         self.dynamics = drive_dynamics(self.robot)
@@ -223,6 +225,10 @@ class ToppraStage:
         if self.dynamics is not None:
             constraints.append(_DriveForceConstraint(self.dynamics, self.payload, sf * lim.effort_max))
         grid = _grid(path, self.grid_step, self.min_points, self.max_points)
+        if self.extra_points is not None:
+            extra = np.clip(np.asarray(self.extra_points, dtype=float), 0.0, path.length)
+            grid = np.unique(np.concatenate([grid, extra]))
+            grid = grid[np.concatenate([[True], np.diff(grid) > 1e-9])]
         # A drive that cannot even hold the payload somewhere makes the problem infeasible at any speed
         # (and gives toppra's LP a row 0 * x <= negative, which it divides by): refuse it first, by name.
         overload = self._static_overload(path, grid) if self.dynamics is not None else None

@@ -67,7 +67,9 @@ def test_an_acceleration_limited_plan_passes_its_gate_but_not_a_jerk_limited_che
     assert check_profile(sc, doc).passed
 
 
-def test_a_jerk_limited_plan_reports_its_stage_and_passes_the_caller_check(scenario: ResolvedScenario) -> None:
+def test_a_jerk_limited_plan_reports_its_stage_and_passes_the_caller_check(
+    scenario: ResolvedScenario,
+) -> None:
     res = Planner(scenario).plan()
     assert res.report["timing"]["stage"] == "jerk_limited"
     assert 0 < res.report["timing"]["stage_s"] < 5
