@@ -32,7 +32,7 @@ FLOORS = (
 #: Engines and edge libraries, and the only rooms that may import them.
 ENGINES = {
     "ompl": ("planner.plan.ompl_adapter",),
-    "matplotlib": ("planner.documents",),
+    "matplotlib": ("planner.documents", "planner.sweep.plots"),
     "fastapi": (),
     "typer": ("planner.cli",),
     "api": (),
