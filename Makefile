@@ -51,6 +51,7 @@ bench: $(DEV_STAMP)
 	$(BIN)/python -m bench.collision
 	$(BIN)/python -m bench.planning
 	$(BIN)/python -m bench.stiffness
+	$(BIN)/python -m bench.timing
 	$(BIN)/python -m bench.pprs6
 	$(BIN)/python -m bench.startup
 	$(BIN)/python -m bench.load

@@ -41,6 +41,13 @@ def test_robot_summary_lists_drives_with_units_and_limits() -> None:
     theta3 = out["drives"][4]
     assert theta3["unit"] == "rad" and theta3["upper"] == pytest.approx(np.radians(105))
     assert out["parallel_stage"]["L1_m"] == 0.40
+    # Jerk limits of issue 14: d1 2 m/s^3, sliders 1.5 m/s^3, theta3 200 deg/s^3, theta6 300 deg/s^3.
+    jerk = {d["name"]: d["j_max"] for d in out["drives"]}
+    assert jerk["d1"] == 2.0 and jerk["x2"] == 1.5 and jerk["d5"] == 1.5
+    assert jerk["theta3"] == pytest.approx(np.radians(200))
+    assert jerk["theta6"] == pytest.approx(np.radians(300))
+    code, out, _ = run("robot", "pprs6")
+    assert code == 0 and out is not None and all(d["j_max"] > 0 for d in out["drives"])
 
 
 def test_fk_from_drives_and_from_joints_agree(robot: Cabin8) -> None:

@@ -31,6 +31,7 @@ CONTRACT = {
     "position",
     "velocity",
     "acceleration",
+    "jerk",
     "effort",
     "joints",
     "duration_s",
@@ -138,9 +139,11 @@ def test_plan_writes_csv_and_png(planned: tuple[Any, Path], doc: dict[str, Any])
     n = len(doc["t"])
     assert text.count("\n") == n + 1 and len(text.splitlines()) == n + 1
     rows = list(csv.reader(io.StringIO(text)))
-    assert len(rows[0]) == 1 + 4 * 8 and rows[0][0] == "t_s" and rows[0][1].startswith("d1_pos")
+    assert len(rows[0]) == 1 + 5 * 8 and rows[0][0] == "t_s" and rows[0][1].startswith("d1_pos")
+    assert rows[0][25] == "d1_jerk_m/s3"
     data = np.array(rows[1:], dtype=float)
-    assert data.shape == (n, 33)
+    assert data.shape == (n, 41)
+    np.testing.assert_allclose(data[:, 25:33], doc["jerk"], rtol=1e-8, atol=1e-9)
     np.testing.assert_allclose(data[:, 0], doc["t"], rtol=1e-8, atol=1e-12)
     np.testing.assert_allclose(data[:, 1:9], doc["position"], rtol=1e-8, atol=1e-12)
     png = (out / "out.png").read_bytes()

@@ -30,6 +30,9 @@ def _write(tmp_path: Path, mutate) -> Path:  # type: ignore[no-untyped-def]
         (lambda r: r["parallel_stage"].update(extra=1), "parallel_stage.extra"),
         (lambda r: r["drives"].reverse(), "<root>"),
         (lambda r: r.pop("masses"), "masses"),
+        (lambda r: r["drives"][3].update(j_max=0.0), "drives.3.j_max"),
+        (lambda r: r["drives"][3].update(j_max=float("inf")), "drives.3.j_max"),
+        (lambda r: r["drives"][5].pop("j_max"), "j_max must be given for every drive or for none"),
     ],
 )
 def test_invalid_descriptions_name_the_field(tmp_path: Path, mutate, field: str) -> None:  # type: ignore[no-untyped-def]

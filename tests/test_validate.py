@@ -36,6 +36,7 @@ ALL_CHECKS = {
     "position",
     "velocity",
     "acceleration",
+    "jerk",
     "effort",
     "consistency",
     "goal",
@@ -159,9 +160,11 @@ EVERYTHING_ELSE = ALL_CHECKS - {"consistency"}
 TAMPERS: list[tuple[Callable[[Plan], dict[str, Any]], set[str], set[str]]] = [
     # (tampering, checks that must fail, checks that must still pass)
     (scale_velocity, {"velocity", "consistency"}, {"finite", "time", "start", "end_at_rest", "goal"}),
-    (raise_acceleration, {"acceleration"}, ALL_CHECKS - {"acceleration"}),
+    # One sample's acceleration raised (the jerk it implies is reported, not required: the default time
+    # law is acceleration-limited).
+    (raise_acceleration, {"acceleration"}, ALL_CHECKS - {"acceleration", "jerk"}),
     (alter_effort, {"effort"}, ALL_CHECKS - {"effort"}),
-    (reverse_time, {"time"}, EVERYTHING_ELSE - {"time", "acceleration"}),
+    (reverse_time, {"time"}, EVERYTHING_ELSE - {"time", "acceleration", "jerk"}),
     (move_start, {"start"}, EVERYTHING_ELSE - {"start"}),
     (move_goal, {"goal"}, EVERYTHING_ELSE - {"goal"}),
     (
@@ -245,7 +248,7 @@ def _executed_overshoot(plan: Plan) -> DriveProfile:
     those the modified motion needs: only the acceleration check's dv/dt rows can catch it.
     """
     p, lim, dt = plan.profile, plan.robot.limits, plan.profile.sample_period_s
-    k = 50
+    k = 90  # inside the rail's constant-acceleration phase (after the jerk-limited ramp)
     ud, udd, eff = p.velocity.copy(), p.acceleration.copy(), p.effort.copy()
     ud[k + 1, 0] = ud[k, 0] + 1.04 * lim.a_max[0] * dt
     udd[k, 0] = lim.a_max[0]
@@ -258,7 +261,7 @@ def _executed_overshoot(plan: Plan) -> DriveProfile:
 
 def test_executed_overshoot_is_only_visible_in_dv_dt(plan: Plan) -> None:
     lim = plan.robot.limits
-    assert abs(plan.profile.acceleration[50, 0]) >= 0.95 * lim.a_max[0]  # in the acceleration phase
+    assert abs(plan.profile.acceleration[90, 0]) >= 0.95 * lim.a_max[0]  # in the acceleration phase
     p = _executed_overshoot(plan)
     executed = np.abs(np.diff(p.velocity, axis=0)) / p.sample_period_s / lim.a_max
     assert executed.max() == pytest.approx(1.04, abs=1e-9)
@@ -381,15 +384,16 @@ def test_csv_has_a_header_and_one_row_per_sample_that_parse_back(plan: Plan) -> 
     p = plan.profile
     rows = list(csv.reader(io.StringIO(p.to_csv())))
     header, body = rows[0], rows[1:]
-    assert len(header) == 33 == 1 + 4 * 8 and len(set(header)) == 33
+    assert len(header) == 41 == 1 + 5 * 8 and len(set(header)) == 41
     assert header[0] == "t_s"
     for j, (name, unit) in enumerate(zip(p.drive_names, p.drive_units, strict=True)):
         assert header[1 + j] == f"{name}_pos_{unit}"
         assert header[9 + j].startswith(f"{name}_vel_") and header[17 + j].startswith(f"{name}_acc_")
-        assert header[25 + j] == f"{name}_effort_{'N' if unit == 'm' else 'Nm'}"
-    assert len(body) == len(p.t) and all(len(r) == 33 for r in body)
+        assert header[25 + j] == f"{name}_jerk_{unit}/s3"
+        assert header[33 + j] == f"{name}_effort_{'N' if unit == 'm' else 'Nm'}"
+    assert len(body) == len(p.t) and all(len(r) == 41 for r in body)
     data = np.array(body, dtype=float)
-    expected = np.column_stack([p.t, p.position, p.velocity, p.acceleration, p.effort])
+    expected = np.column_stack([p.t, p.position, p.velocity, p.acceleration, p.jerk, p.effort])
     np.testing.assert_allclose(data, expected, rtol=1e-8, atol=0.0)
 
 

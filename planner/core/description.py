@@ -37,6 +37,9 @@ class DriveSpec(_Frozen):
     v_max: float = Field(gt=0, description="speed limit [m/s] or [rad/s]")
     a_max: float = Field(gt=0, description="acceleration limit [m/s^2] or [rad/s^2]")
     effort_max: float = Field(gt=0, description="force [N] or torque [N m] limit")
+    j_max: float | None = Field(
+        None, gt=0, allow_inf_nan=False, description="jerk limit [m/s^3] or [rad/s^3] (optional)"
+    )
 
     @model_validator(mode="after")
     def _ordered(self) -> DriveSpec:
@@ -48,6 +51,21 @@ class DriveSpec(_Frozen):
     def unit(self) -> str:
         """Position unit of the drive."""
         return "m" if self.kind == "prismatic" else "rad"
+
+
+def jerk_limits(drives: tuple[DriveSpec, ...]) -> Array | None:
+    """Jerk limits in drive order (n_drives,), or None when the description gives none.
+
+    Raises:
+        ValueError: some drives have a jerk limit and others not (a partial set cannot bound the jerk).
+    """
+    given = [d.j_max is not None for d in drives]
+    if not any(given):
+        return None
+    if not all(given):
+        missing = [d.name for d in drives if d.j_max is None]
+        raise ValueError(f"j_max must be given for every drive or for none; missing for {missing}")
+    return np.array([float(d.j_max) for d in drives if d.j_max is not None])
 
 
 class ParallelStageSpec(_Frozen):
@@ -206,6 +224,7 @@ class Hybrid8Description(_Frozen):
             raise ValueError(f"serial_chain variables must be {list(expected_joints[4:])}, got {variables}")
         if set(self.home) != set(expected_drives):
             raise ValueError(f"home must give every drive {list(expected_drives)}")
+        jerk_limits(self.drives)
         return self
 
     @property

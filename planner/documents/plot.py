@@ -35,13 +35,15 @@ def profile_png(
 ) -> bytes:
     """PNG bytes of the profile against its limits.
 
-    Positions (fraction of travel), velocity / acceleration / effort as fractions of their limits per
-    drive, the clearance to the cabin along the path (if given) with the required clearance, and the
+    Positions (fraction of travel), velocity / acceleration / jerk (the change of the sampled
+    acceleration, with jerk limits) / effort as fractions of their limits per drive, the clearance to
+    the cabin along the path (if given) with the required clearance, and the
     predicted static deflection (if given: (N, 6) twists at the profile's samples, translation [m] and
     rotation [rad]) as its translation norm [mm] and rotation norm [mrad].
     """
     lim = robot.limits
-    rows = 4 + (clearance_m is not None) + (deflection is not None)
+    jerk = lim.j_max is not None
+    rows = 4 + jerk + (clearance_m is not None) + (deflection is not None)
     fig, axes = plt.subplots(rows, 1, figsize=(11, 2.6 * rows), sharex=True)
     t = profile.t
     names = profile.drive_names
@@ -52,11 +54,14 @@ def profile_png(
     ax.set_ylabel("position\n(fraction of travel)")
     ax.set_ylim(-0.05, 1.05)
     ax.legend(ncol=8, fontsize=7, loc="upper center")
-    for ax, values, limit, label in (
-        (axes[1], profile.velocity, lim.v_max, "velocity / v_max"),
-        (axes[2], profile.acceleration, lim.a_max, "acceleration / a_max"),
-        (axes[3], profile.effort, lim.effort_max, "effort / effort_max"),
-    ):
+    panels: list[tuple[Array | None, Array, str]] = [
+        (profile.velocity, lim.v_max, "velocity / v_max"),
+        (profile.acceleration, lim.a_max, "acceleration / a_max"),
+    ]
+    if lim.j_max is not None:
+        panels.append((profile.jerk, lim.j_max, "jerk / j_max"))
+    panels.append((profile.effort, lim.effort_max, "effort / effort_max"))
+    for ax, (values, limit, label) in zip(axes[1:], panels, strict=False):
         if values is None:  # a profile without forces
             ax.text(0.5, 0.5, "no force model", transform=ax.transAxes, ha="center")
             continue
@@ -67,7 +72,7 @@ def profile_png(
         ax.set_ylabel(label)
         ax.set_ylim(-1.15, 1.15)
     if clearance_m is not None and clearance_t is not None:
-        ax = axes[4]
+        ax = axes[4 + jerk]
         ax.plot(clearance_t, 1e3 * np.asarray(clearance_m), color="black", lw=1)
         if required_clearance_m is not None:
             ax.axhline(1e3 * required_clearance_m, color="red", lw=0.8, ls="--", label="required")

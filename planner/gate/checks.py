@@ -14,6 +14,10 @@ re-derives and checks:
 ``position``        every drive within its travel (1e-9);
 ``velocity``        |u_dot| <= v_max (1% tolerance);
 ``acceleration``    |u_ddot| <= a_max (1%);
+``jerk``            (with jerk limits) |a_{k+1} - a_k| / dt <= j_max (1%), from the sampled accelerations;
+                    reported but not binding for ``options.timing: acceleration_limited``;
+``on_path``         (when the certified path is given, as the planner does) every sample's joints lie on
+                    it within 1e-6 (:mod:`planner.gate.path_check`);
 ``effort``          the forces recomputed here from the inverse dynamics (payload included) match the
                     reported ones and are within effort_max (1%);
 ``consistency``     the positions integrate the velocities and the velocities the accelerations
@@ -47,6 +51,7 @@ from planner.dynamics.stiffness import (
     stiffness_model,
 )
 from planner.gate.drive_checks import Check, GateReport, drive_checks, ratio_check
+from planner.gate.path_check import path_deviation
 from planner.gate.requirements import (
     APPROACH_BACKOUT_TOL_M,
     GATE_MAX_EXTRA_M,
@@ -55,6 +60,7 @@ from planner.gate.requirements import (
     GOAL_POSITION_TOL_M,
     LIMIT_TOLERANCE,
     LINE_TOL_M,
+    PATH_DEVIATION_TOL,
     GateRequirements,
     deflection_sample_indices,
 )
@@ -70,7 +76,7 @@ def validate_profile(
     dynamics: Cabin8Dynamics | None = None,
 ) -> GateReport:
     """Run every check of the gate on a sampled profile (see the module docstring)."""
-    checks, peaks = drive_checks(profile, robot, req.start_u, req.sample_period_s)
+    checks, peaks = drive_checks(profile, robot, req.start_u, req.sample_period_s, req.jerk_limited)
     n = len(profile.t)
     if not checks[0].passed:  # not finite: nothing else can be evaluated
         return GateReport(tuple(checks), n, float("nan"), {})
@@ -93,6 +99,18 @@ def validate_profile(
             checks.append(
                 Check("workspace", True, "stage on its working branch with every margin at every sample")
             )
+    if q is not None and req.path_legs is not None:
+        dev = path_deviation(q, req.path_legs)
+        k = int(np.argmax(dev))
+        checks.append(
+            Check(
+                "on_path",
+                float(dev[k]) <= PATH_DEVIATION_TOL,
+                f"samples off the certified path by at most {dev[k]:.3g} (joint space, sample {k})",
+                float(dev[k]),
+                k,
+            )
+        )
     if q is None:
         missing = ["effort", "goal", "collision"]
         if req.approach_direction is not None and req.T_base_payload_goal is not None:

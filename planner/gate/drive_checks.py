@@ -1,7 +1,8 @@
 """The checks every drive profile must pass, whatever the robot: the drive-space half of the gate.
 
 ``finite``, ``time``, ``start``, ``end_at_rest``, ``position``, ``velocity``, ``acceleration`` (reported and
-executed dv/dt) and ``consistency`` (see :mod:`planner.gate.checks`), from the sampled drives and the
+executed dv/dt), ``jerk`` (the change of the sampled acceleration over each period, for a robot with jerk
+limits) and ``consistency`` (see :mod:`planner.gate.checks`), from the sampled drives and the
 robot's :class:`~planner.robots.base.DriveLimits` alone. Each robot's gate adds its own checks (cabin8:
 workspace, forces, goal, approach, collision; pprs6: pose path, singularity).
 """
@@ -98,7 +99,11 @@ def ratio_check(
 
 
 def drive_checks(
-    profile: DriveProfile, robot: RobotModel, start_u: Array, sample_period_s: float | None
+    profile: DriveProfile,
+    robot: RobotModel,
+    start_u: Array,
+    sample_period_s: float | None,
+    require_jerk: bool = True,
 ) -> tuple[list[Check], dict[str, float]]:
     """The robot-independent checks of a sampled profile and the peak limit ratios.
 
@@ -109,6 +114,8 @@ def drive_checks(
         robot: Its robot (drive names and limits).
         start_u: The start the profile must begin at, at rest (n_drives,).
         sample_period_s: The controller period the profile must be sampled at (None: its own).
+        require_jerk: Whether the jerk limits bind (False for an acceleration-limited profile, asked for
+            by ``options.timing``: the check then reports the peak and passes).
     """
     checks: list[Check] = []
     lim = robot.limits
@@ -169,6 +176,13 @@ def drive_checks(
         ("acceleration", executed, lim.a_max, "/s^2"),
     ):
         chk, peaks[name] = ratio_check(name, vals, limit, robot, unit, n)
+        checks.append(chk)
+    if lim.j_max is not None:
+        # Jerk from the sampled accelerations: (a_{k+1} - a_k) / dt, the jerk a controller executes.
+        jerk = np.diff(udd, axis=0) / dt[:, None]
+        chk, peaks["jerk"] = ratio_check("jerk", jerk, lim.j_max, robot, "/s^3", 0)
+        if not require_jerk:
+            chk = Check("jerk", True, f"not required (acceleration-limited timing): {chk.detail}", chk.worst)
         checks.append(chk)
     # Kinematic consistency: positions integrate the velocities (trapezoid rule), and the mean
     # acceleration of each step, dv/dt, lies between the reported accelerations at its ends (the time

@@ -19,6 +19,7 @@ from planner.dynamics.payload import RigidPayload
 
 if TYPE_CHECKING:
     from planner.scenario.resolve import ResolvedScenario
+    from planner.timing.path import JointPath
 
 #: Certification margin of the gate's collision check [m]: the certified walk proves the requested
 #: clearance with this margin at the states it starts from (the scenario's ``motion_margin_m`` is the
@@ -28,6 +29,8 @@ LIMIT_TOLERANCE = 0.01  # 1% above velocity / acceleration / force limits
 GOAL_POSITION_TOL_M = 1e-3
 GOAL_ANGLE_TOL_RAD = np.deg2rad(0.1)
 LINE_TOL_M = 1e-3
+#: The sampled joint positions may lie this far off the certified path (joint space, m and rad).
+PATH_DEVIATION_TOL = 1e-6
 #: Along the insertion the payload may not step back out of the bay by more than this [m] (rounding).
 APPROACH_BACKOUT_TOL_M = 1e-9
 START_TOL = 1e-9
@@ -67,6 +70,11 @@ class GateRequirements:
     #: The controller period the scenario asks for [s]: the profile must be sampled at exactly it (a
     #: profile timed at another period runs faster or slower on the controller than it was checked).
     sample_period_s: float | None = None
+    #: Whether the drive jerk limits bind (``options.timing: jerk_limited``, the default with jerk limits).
+    jerk_limited: bool = True
+    #: The certified geometric path, leg by leg: when given, every sample must lie on it
+    #: (:data:`PATH_DEVIATION_TOL`). The planner passes it; a caller's profile (CLI ``check``) has none.
+    path_legs: tuple[JointPath, ...] | None = field(default=None, repr=False)
 
 
 #: Samples of a profile at which the static deflection is predicted (the gate's deflected collision check,
@@ -156,4 +164,28 @@ def requirements_for(
         T_base_payload_commanded=T_base_payload_commanded,
         sample_period_s=sc.options.sample_period_s,
         deflection_check=sc.payload is not None and sc.robot.desc.stiffness is not None,
+        jerk_limited=timing_of(sc) == "jerk_limited",
     )
+
+
+def timing_of(sc: ResolvedScenario) -> str:
+    """The timing stage of a scenario: ``options.timing``, default acceleration-limited.
+
+    The jerk-limited stage is chosen explicitly: on the reference suite it costs 1.02-1.52 times the
+    acceleration-limited duration (median 1.33, measured by ``bench.timing``; the planner's C1 blends step
+    the path's curvature at both ends, so the robot crosses each blend end slowly), above the 1.05 the
+    product accepts as a default.
+
+    Raises:
+        InvalidInput: ``jerk_limited`` asked for a robot whose description has no jerk limits.
+    """
+    option = sc.options.timing
+    has_jerk = sc.robot.limits.j_max is not None
+    if option == "jerk_limited" and not has_jerk:
+        raise InvalidInput(
+            f"options.timing: robot {sc.robot.name!r} has no jerk limits in its description",
+            field="options.timing",
+        )
+    if option is None:
+        return "acceleration_limited"
+    return str(option)

@@ -19,10 +19,12 @@ from planner.core.exceptions import NoPathFound, NoPathWithinBudget
 from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
+from planner.gate.requirements import timing_of
 from planner.kinematics import chain
 from planner.plan.goals import StaticForceCheck
 from planner.plan.motion import motion_clear
-from planner.timing.stage import TimingFactory
+from planner.timing.jerk import JerkLimitedStage
+from planner.timing.stage import TimingFactory, TimingStage
 from planner.timing.toppra import ToppraStage
 
 if TYPE_CHECKING:
@@ -39,6 +41,22 @@ PLANNER_SLACK_M = 0.0015
 BLEND_EXTRA_M = 0.001
 #: Fraction of the time limit kept for timing and validation.
 TIME_RESERVE = 0.15
+
+
+def timing_factory(sc: ResolvedScenario) -> TimingFactory:
+    """The scenario's timing stage (``options.timing``, :func:`~planner.gate.requirements.timing_of`).
+
+    ``jerk_limited``: :class:`~planner.timing.jerk.JerkLimitedStage` checked at the scenario's controller
+    period; ``acceleration_limited``: :class:`~planner.timing.toppra.ToppraStage`.
+    """
+    if timing_of(sc) == "acceleration_limited":
+        return ToppraStage
+    period = float(sc.options.sample_period_s)
+
+    def jerk_stage(robot: Any, payload: Any, safety: tuple[float, float, float]) -> TimingStage:
+        return JerkLimitedStage(robot, payload, safety, sample_period_s=period)
+
+    return jerk_stage
 
 
 @dataclass(frozen=True)
@@ -166,7 +184,7 @@ class PlanContext:
             forces=StaticForceCheck(dynamics, payload),
             clearances=Clearances.of(sc.options),
             preset=preset,
-            timing=timing or ToppraStage,
+            timing=timing or timing_factory(sc),
             progress=progress or (lambda stage, fraction: None),
         )
         ctx.warm_up(sc.start_q)

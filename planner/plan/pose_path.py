@@ -5,14 +5,15 @@ default). Each straight leg ``x(s) = x_a + s (x_b - x_a)``, s in [0, 1], is a on
 :class:`~planner.timing.path.JointPath` in pose coordinates (the platform pose is pprs6's joint vector);
 the robot model maps it to the drive path (:meth:`planner.robots.pprs6.Pprs6.drive_path`: closed-form IK,
 analytic Jacobian, its derivative along the leg by a central difference). Corners are sharp, so the
-platform stops at every waypoint: each leg is timed rest to rest by the shared TOPP-RA stage
-(:class:`~planner.timing.toppra.ToppraStage`, drive velocity and acceleration limits: pprs6 has no force
-model) on a uniform grid of 300 intervals, and the legs are sampled one after the other at the controller
+platform stops at every waypoint: each leg is timed rest to rest by the shared jerk-limited stage
+(:class:`~planner.timing.jerk.JerkLimitedStage` over TOPP-RA, drive velocity, acceleration and jerk limits:
+pprs6 has no force model; TOPP-RA alone for a description without jerk limits) on a uniform grid of 300
+intervals, and the legs are sampled one after the other at the controller
 period by the shared sampler (:func:`~planner.timing.profile.sample_legs`).
 
 The gate (:func:`validate`) runs the robot-independent drive checks of every profile
 (:func:`~planner.gate.drive_checks.drive_checks`: finite, time, start, end at rest, position, velocity,
-acceleration with the executed dv/dt, consistency) and pprs6's own: the forward kinematics (Newton, from
+acceleration with the executed dv/dt, jerk, consistency) and pprs6's own: the forward kinematics (Newton, from
 the previous samples' pose) of every sample on its leg of the pose path within 1e-6 (m, rad), start and
 end poses within 1e-9, and the singularity measure (condition number) below the path's bound.
 """
@@ -30,8 +31,10 @@ from planner.core.types import Array, IntArray
 from planner.gate.drive_checks import Check, GateReport, drive_checks
 from planner.kinematics import pprs6 as kin
 from planner.robots.pprs6 import Pprs6
+from planner.timing.jerk import JerkLimitedStage
 from planner.timing.path import JointPath, LinePiece
 from planner.timing.profile import DriveProfile, sample_legs
+from planner.timing.stage import TimingStage
 from planner.timing.toppra import ToppraStage
 
 #: The paper's closed path E -> F -> G -> H (Fig. 6 shows only its shape): a saddle-shaped spatial
@@ -213,7 +216,7 @@ def build_profile(
 
     Raises:
         OutsideWorkspace: the path leaves the workspace or nears a singularity.
-        RetimingFailed: TOPP-RA found no time law.
+        RetimingFailed: no time law (jerk-limited with the description's jerk limits, else TOPP-RA).
         ValidationFailed: the gate rejected the samples (``details['report']``).
     """
     period = robot.sample_period_s if period_s is None else float(period_s)
@@ -222,7 +225,11 @@ def build_profile(
             f"sample_period_s: must be in [0.0005, 0.1] s, got {period}", field="sample_period_s"
         )
     check_path(robot, path)
-    stage = ToppraStage(robot, None, min_points=grid_points, max_points=grid_points)
+    stage: TimingStage = (
+        JerkLimitedStage(robot, None, sample_period_s=period, min_points=grid_points, max_points=grid_points)
+        if robot.limits.j_max is not None
+        else ToppraStage(robot, None, min_points=grid_points, max_points=grid_points)
+    )
     timed = [stage.time_path(leg) for leg in leg_paths(path)]
     profile, leg = sample_legs(robot, timed, period, None)
     gate, poses = validate(robot, path, profile, leg, period)

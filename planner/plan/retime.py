@@ -7,6 +7,7 @@ limit tightened to the next of :data:`SAFETY_LEVELS`; any other failure refuses.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from planner.core.exceptions import ValidationFailed
@@ -20,7 +21,7 @@ from planner.timing.stage import TimedPath
 #: Limit scalings (velocity, acceleration, force) tried when the gate finds a limit exceeded.
 SAFETY_LEVELS = ((0.995, 0.97, 0.97), (0.98, 0.92, 0.92), (0.95, 0.85, 0.85))
 #: The gate checks whose failure a re-timing can cure.
-LIMIT_CHECKS = {"velocity", "acceleration", "effort", "consistency"}
+LIMIT_CHECKS = {"velocity", "acceleration", "effort", "consistency", "jerk"}
 
 
 def time_and_validate(
@@ -29,11 +30,13 @@ def time_and_validate(
     """Time every leg, sample and gate; re-time with tighter limits when only a limit check fails.
 
     Only the limits that failed are tightened (velocity, acceleration, force: the next of
-    :data:`SAFETY_LEVELS` for each; a consistency failure tightens the acceleration): the others keep
+    :data:`SAFETY_LEVELS` for each; a consistency or jerk failure tightens the acceleration, which also
+    scales the jerk-limited stage's jerk target): the others keep
     their margin, so a drive holding a heavy payload near its force limit is not refused because an
     acceleration peak had to come down.
     """
     last: GateReport | None = None
+    req = dataclasses.replace(req, path_legs=tuple(legs))  # the gate checks the samples stay on the path
     level = [0, 0, 0]  # velocity, acceleration, force
     for attempt in range(len(SAFETY_LEVELS)):
         safety = (
@@ -45,6 +48,12 @@ def time_and_validate(
         t1 = time.perf_counter()
         timed = [stage.time_path(leg) for leg in legs]
         ctx.stage_done(f"timing_{attempt}", t1)
+        ctx.report["timing"] = {
+            "stage": stage.name,
+            "stage_s": round(time.perf_counter() - t1, 6),
+            "legs": len(legs),
+            "duration_s": round(sum(tl.duration for tl in timed), 6),
+        }
         ctx.progress("sample", 0.85)
         profile, _ = sample_legs(ctx.robot, timed, ctx.opts.sample_period_s, ctx.payload, ctx.dynamics)
         ctx.progress("validate", 0.9)
@@ -57,7 +66,13 @@ def time_and_validate(
         failed = {c.name for c in gate.failures}
         if not failed <= LIMIT_CHECKS:
             break
-        for name, k in (("velocity", 0), ("acceleration", 1), ("consistency", 1), ("effort", 2)):
+        for name, k in (
+            ("velocity", 0),
+            ("acceleration", 1),
+            ("consistency", 1),
+            ("jerk", 1),
+            ("effort", 2),
+        ):
             if name in failed:
                 level[k] = min(level[k] + 1, len(SAFETY_LEVELS) - 1)
         ctx.report.setdefault("retimed", []).append({"failed": sorted(failed), "safety": list(safety)})

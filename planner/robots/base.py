@@ -26,16 +26,22 @@ class DriveLimits:
     v_max: Array
     a_max: Array
     effort_max: Array
+    #: Jerk limits [m/s^3] or [rad/s^3]; None for a robot whose description gives none.
+    j_max: Array | None = None
 
     def __post_init__(self) -> None:
         n = self.lower.shape
-        for name in ("upper", "v_max", "a_max", "effort_max"):
-            if getattr(self, name).shape != n:
-                raise ValueError(f"DriveLimits.{name} has shape {getattr(self, name).shape}, expected {n}")
+        for name in ("upper", "v_max", "a_max", "effort_max", "j_max"):
+            value = getattr(self, name)
+            if value is not None and value.shape != n:
+                raise ValueError(f"DriveLimits.{name} has shape {value.shape}, expected {n}")
         if np.any(self.lower >= self.upper):
             raise ValueError("DriveLimits: every lower limit must be below its upper limit")
-        for arr in (self.lower, self.upper, self.v_max, self.a_max, self.effort_max):
-            arr.setflags(write=False)
+        if self.j_max is not None and not np.all(np.isfinite(self.j_max) & (self.j_max > 0)):
+            raise ValueError("DriveLimits.j_max: every jerk limit must be finite and > 0")
+        for arr in (self.lower, self.upper, self.v_max, self.a_max, self.effort_max, self.j_max):
+            if arr is not None:
+                arr.setflags(write=False)
 
 
 class RobotModel(ABC):

@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.core.description import Hybrid8Description, description_hash, load_description
+from planner.core.description import Hybrid8Description, description_hash, jerk_limits, load_description
 from planner.core.exceptions import InvalidInput, LimitViolation
 from planner.core.types import Array
 from planner.kinematics import chain, parallel
@@ -169,6 +169,7 @@ class Cabin8(RobotModel):
             v_max=np.array([d.v_max for d in desc.drives]),
             a_max=np.array([d.a_max for d in desc.drives]),
             effort_max=np.array([d.effort_max for d in desc.drives]),
+            j_max=jerk_limits(desc.drives),
         )
         ps = desc.parallel_stage
         self.home_drives = self.drives_from_dict(desc.home, field="home")
@@ -334,6 +335,7 @@ class Cabin8(RobotModel):
                     "v_max": d.v_max,
                     "a_max": d.a_max,
                     "effort_max": d.effort_max,
+                    "j_max": d.j_max,
                     "effort_unit": "N" if u == "m" else "N*m",
                 }
                 for d, u, lo, hi in zip(

@@ -25,7 +25,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from planner.core.description import DriveSpec, load_description_file
+from planner.core.description import DriveSpec, jerk_limits, load_description_file
 from planner.core.exceptions import InvalidInput, OutsideWorkspace
 from planner.core.types import Array, BoolArray
 from planner.kinematics import pprs6 as kin
@@ -84,6 +84,7 @@ class Pprs6Description(_Frozen):
             raise ValueError(f"chains must be PPRS, PPRS, RPRS (the model's kinematics), got {list(types)}")
         if set(self.home) != set(kin.POSE):
             raise ValueError(f"home must give every pose coordinate {list(kin.POSE)}")
+        jerk_limits(self.drives)
         return self
 
 
@@ -145,6 +146,7 @@ class Pprs6(RobotModel):
             v_max=np.array([d.v_max for d in desc.drives]),
             a_max=np.array([d.a_max for d in desc.drives]),
             effort_max=np.array([d.effort_max for d in desc.drives]),
+            j_max=jerk_limits(desc.drives),
         )
         self.sample_period_s = desc.sample_period_s
         self.home_pose = np.array([desc.home[n] for n in kin.POSE])
@@ -323,8 +325,9 @@ class Pprs6(RobotModel):
                     "v_max": float(v),
                     "a_max": float(a),
                     "effort_max": float(f),
+                    "j_max": d.j_max,
                 }
-                for n, un, lo, hi, v, a, f in zip(
+                for n, un, lo, hi, v, a, f, d in zip(
                     self.drive_names,
                     self.drive_units,
                     lim.lower,
@@ -332,6 +335,7 @@ class Pprs6(RobotModel):
                     lim.v_max,
                     lim.a_max,
                     lim.effort_max,
+                    self.desc.drives,
                     strict=True,
                 )
             ],

@@ -259,6 +259,13 @@ class PlanOptions(BaseModel):
         "Default (null): true when a payload is given.",
     )
 
+    timing: Literal["jerk_limited", "acceleration_limited"] | None = Field(
+        None,
+        description="Time law of the drive profile: 'jerk_limited' (every drive's jerk within its limit, "
+        "the path kept exactly) or 'acceleration_limited' (TOPP-RA alone: acceleration steps). Default "
+        "(null): acceleration_limited (the jerk-limited law costs 1.3x the duration on blended paths today).",
+    )
+
     @model_validator(mode="before")
     @classmethod
     def _one_clearance_key(cls, data: Any) -> Any:

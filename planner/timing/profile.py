@@ -48,6 +48,18 @@ class DriveProfile:
         """Time of the last sample [s]."""
         return float(self.t[-1])
 
+    @property
+    def jerk(self) -> Array:
+        """Drive jerk (N, n drives): row k is (a_{k+1} - a_k) / (t_{k+1} - t_k), the last row 0.
+
+        The jerk a controller executes ramping the acceleration linearly from sample to sample (what the
+        gate checks); after the last sample the robot rests.
+        """
+        dt = np.diff(self.t)[:, None]
+        out = np.zeros_like(self.acceleration)
+        out[:-1] = np.diff(self.acceleration, axis=0) / dt
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         """The profile's fields of the JSON output contract (no ``effort`` without forces)."""
         names = list(zip(self.drive_names, self.drive_units, strict=True))
@@ -56,6 +68,7 @@ class DriveProfile:
             "position": dict(names),
             "velocity": {n: f"{u}/s" for n, u in names},
             "acceleration": {n: f"{u}/s^2" for n, u in names},
+            "jerk": {n: f"{u}/s^3" for n, u in names},
         }
         doc: dict[str, Any] = {
             "drives": list(self.drive_names),
@@ -65,6 +78,7 @@ class DriveProfile:
             "position": self.position.tolist(),
             "velocity": self.velocity.tolist(),
             "acceleration": self.acceleration.tolist(),
+            "jerk": self.jerk.tolist(),
         }
         if self.effort is not None:
             units["effort"] = {n: ("N" if u == "m" else "N m") for n, u in names}
@@ -77,7 +91,8 @@ class DriveProfile:
     def from_dict(cls, data: dict[str, Any], robot: RobotModel) -> DriveProfile:
         """Read a profile written by :meth:`to_dict` (e.g. for ``cabinplan check``); validates shapes.
 
-        Joint positions are recomputed from the drive positions (the drives are what a controller runs).
+        Joint positions are recomputed from the drive positions (the drives are what a controller runs);
+        a ``jerk`` array in the document is not read: the jerk is the change of the accelerations.
         Forces are required of a robot with a dynamics model (the gate checks them).
         """
         arrays: dict[str, Array] = {}
@@ -130,15 +145,15 @@ class DriveProfile:
         return cls(robot.drive_names, robot.drive_units, robot.joint_names, period, joints=joints, **arrays)
 
     def to_csv(self) -> str:
-        """One row per sample: t, then position, velocity, acceleration, effort of each drive."""
+        """One row per sample: t, then position, velocity, acceleration, jerk, effort of each drive."""
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         header = ["t_s"]
-        for kind, suffix in (("pos", ""), ("vel", "/s"), ("acc", "/s2")):
+        for kind, suffix in (("pos", ""), ("vel", "/s"), ("acc", "/s2"), ("jerk", "/s3")):
             header += [
                 f"{n}_{kind}_{u}{suffix}" for n, u in zip(self.drive_names, self.drive_units, strict=True)
             ]
-        columns = [self.t, self.position, self.velocity, self.acceleration]
+        columns = [self.t, self.position, self.velocity, self.acceleration, self.jerk]
         if self.effort is not None:
             header += [
                 f"{n}_effort_{'N' if u == 'm' else 'Nm'}"

@@ -36,6 +36,10 @@ def test_every_sample_within_limits(robot: Pprs6, document: dict) -> None:
     assert np.all(np.abs(vel) <= 1.01 * lim.v_max)
     assert np.all(np.abs(acc) <= 1.01 * lim.a_max)
     assert np.all(np.abs(np.diff(vel, axis=0)) / np.diff(t)[:, None] <= 1.01 * lim.a_max)
+    # The shared jerk-limited stage: the change of the sampled acceleration within the jerk limits.
+    assert lim.j_max is not None
+    assert np.all(np.abs(np.diff(acc, axis=0)) / np.diff(t)[:, None] <= 1.01 * lim.j_max)
+    np.testing.assert_allclose(np.array(document["jerk"])[:-1], np.diff(acc, axis=0) / np.diff(t)[:, None])
     assert np.allclose(np.diff(t), document["sample_period_s"], atol=1e-12) and t[0] == 0
     # time-optimal under the limits: some drive reaches its velocity limit
     assert np.max(np.abs(vel) / lim.v_max) > 0.95

@@ -1,0 +1,84 @@
+"""``options.timing``: the stage a plan uses, the gate's jerk requirement, and the caller's-profile check."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+import yaml
+
+from planner.core.exceptions import InvalidInput
+from planner.documents.output import result_document
+from planner.gate.check_profile import check_profile
+from planner.gate.requirements import timing_of
+from planner.plan.context import timing_factory
+from planner.plan.pipeline import Planner
+from planner.robots.cabin8 import Cabin8, default_description_path
+from planner.scenario.resolve import ResolvedScenario, load_scenario
+from planner.timing.toppra import ToppraStage
+
+TRANSFER = Path(__file__).parent.parent / "scenarios" / "aisle-transfer.yaml"
+
+
+@pytest.fixture(scope="module")
+def scenario() -> ResolvedScenario:
+    return load_scenario(TRANSFER)
+
+
+def timed(sc: ResolvedScenario, timing: str | None) -> ResolvedScenario:
+    return dataclasses.replace(sc, options=sc.options.model_copy(update={"timing": timing}))
+
+
+def test_default_is_acceleration_limited_and_jerk_limited_is_refused_without_limits(
+    scenario: ResolvedScenario, tmp_path: Path
+) -> None:
+    assert timing_of(scenario) == "acceleration_limited"
+    assert timing_factory(scenario) is ToppraStage
+    jerky = timed(scenario, "jerk_limited")
+    assert timing_of(jerky) == "jerk_limited"
+    stage = timing_factory(jerky)(scenario.robot, None, (0.995, 0.97, 0.97))
+    assert stage.name == "jerk_limited"
+    raw = yaml.safe_load(default_description_path().read_text())
+    for d in raw["drives"]:
+        d.pop("j_max")
+    path = tmp_path / "nojerk.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    plain = dataclasses.replace(scenario, robot=Cabin8(path))
+    assert plain.robot.limits.j_max is None
+    assert timing_of(plain) == "acceleration_limited"
+    with pytest.raises(InvalidInput) as err:
+        timing_of(timed(plain, "jerk_limited"))
+    assert err.value.details["field"] == "options.timing"
+
+
+def test_an_acceleration_limited_plan_passes_its_gate_but_not_a_jerk_limited_check(
+    scenario: ResolvedScenario,
+) -> None:
+    sc = timed(scenario, "acceleration_limited")
+    res = Planner(sc).plan()
+    assert res.report["timing"]["stage"] == "toppra" and res.report["timing"]["stage_s"] > 0
+    jerk = next(c for c in res.gate.checks if c.name == "jerk")
+    assert jerk.passed and "not required" in jerk.detail and jerk.worst is not None and jerk.worst > 5
+    assert next(c for c in res.gate.checks if c.name == "on_path").passed
+    doc = result_document(sc, res)
+    # The same document checked against jerk-limited requirements: refused.
+    report = check_profile(timed(scenario, "jerk_limited"), doc)
+    assert {c.name for c in report.failures} == {"jerk"}
+    assert check_profile(sc, doc).passed
+
+
+def test_a_jerk_limited_plan_reports_its_stage_and_passes_the_caller_check(
+    scenario: ResolvedScenario,
+) -> None:
+    scenario = timed(scenario, "jerk_limited")
+    res = Planner(scenario).plan()
+    assert res.report["timing"]["stage"] == "jerk_limited"
+    assert 0 < res.report["timing"]["stage_s"] < 5
+    checks = {c.name: c for c in res.gate.checks}
+    assert checks["jerk"].passed and checks["jerk"].worst is not None and checks["jerk"].worst <= 1.01
+    assert checks["on_path"].passed and checks["on_path"].worst is not None
+    assert checks["on_path"].worst <= 1e-6
+    doc = result_document(scenario, res)
+    assert len(doc["jerk"]) == len(doc["t"]) and len(doc["jerk"][0]) == 8
+    assert check_profile(scenario, doc).passed
