@@ -323,7 +323,7 @@ _RESULTS_MAX = 8
 _RESULTS_LOCK = threading.Lock()
 
 
-def _result_text(ctx: AppContext, row: Job) -> str | None:
+def result_text(ctx: AppContext, row: Job) -> str | None:
     """The result document's JSON text (unpacked from storage, or a legacy text row), or ``None``."""
     if row.status in ACTIVE_STATES:
         return None
@@ -363,7 +363,7 @@ def get_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """
     row = _tenant_job(ctx, principal.tenant, plan_id)
     head = json.dumps(job_document(row, ctx.runner.warming()), allow_nan=False, separators=(",", ":"))
-    body = f'{head[:-1]},"result":{_result_text(ctx, row) or "null"}}}'
+    body = f'{head[:-1]},"result":{result_text(ctx, row) or "null"}}}'
     return Response(body, media_type="application/json")
 
 

@@ -36,6 +36,7 @@ from api.context import AppContext
 from api.db import ACTIVE_STATES, Job
 from api.problems import Problem
 from api.routes.deps import Ctx
+from api.routes.plans import result_text
 from api.routes.pprs6 import Orientation, PosePath
 from api.store import scenario_mesh_resolver
 from planner.core.exceptions import InvalidInput, InvalidMesh
@@ -110,7 +111,8 @@ def _scene_document(ctx: AppContext, row: Job) -> dict[str, Any]:
     from planner.documents.scene import plan_scene, refusal_scene
     from planner.timing.profile import DriveProfile
 
-    result: dict[str, Any] = json.loads(row.result_json) if row.result_json else {}
+    text = result_text(ctx, row)
+    result: dict[str, Any] = json.loads(text) if text else {}
     sc = _resolved(ctx, row)
     base: dict[str, Any] = {
         "plan_id": row.id,
@@ -142,7 +144,7 @@ def _scene_document(ctx: AppContext, row: Job) -> dict[str, Any]:
 def get_scene(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """The scene document of a finished plan (see :mod:`planner.documents.scene`); 409 while it is active."""
     row = _finished_job(ctx, principal.tenant, plan_id)
-    digest = hashlib.sha256((row.result_json or "").encode()).hexdigest()
+    digest = hashlib.sha256((result_text(ctx, row) or "").encode()).hexdigest()
     key = f"{row.id}:{row.status}:{digest}"
     body = _SCENES.get(key)
     if body is None:

@@ -23,7 +23,7 @@ from api.context import AppContext
 from api.db import Job
 from api.problems import Problem
 from api.routes.deps import Ctx
-from api.routes.plans import _mesh_map
+from api.routes.plans import _mesh_map, result_text
 from api.store import scenario_mesh_resolver
 from api.sweeps import Sweep, SweepJob, new_sweep
 from planner.core.exceptions import InvalidInput
@@ -197,7 +197,7 @@ def _rows(ctx: AppContext, row: Sweep) -> list[dict[str, Any]]:
         plan = SweepPlan(
             int(stored["index"]), scenario_from_dict(stored["scenario"]), stored["sha256"], stored["labels"]
         )
-        outcome = outcome_from_document(job.status, job.reason, job.message, job.result_json)
+        outcome = outcome_from_document(job.status, job.reason, job.message, result_text(ctx, job))
         wall = (job.finished_at - job.started_at) if job.finished_at and job.started_at else None
         result = make_row(plan, outcome, wall if wall is not None else float("nan"), job.attempts)
         if wall is None:

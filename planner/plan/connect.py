@@ -77,7 +77,7 @@ def ompl_attempt(
         joint_lower=lo,
         joint_upper=hi,
         state_ok=ctx.search_state_ok,
-        motion_ok=ctx.forces.segment_ok,
+        motion_ok=ctx.search_motion_ok,
         max_motion_checks=max_checks,
         planner_range=ctx.preset.planner_range,
     )
@@ -138,8 +138,8 @@ def via_transit(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple
         targets[0],
         ctx.clearances.planner_m,
         ctx.clearances.motion_margin_m,
-        ctx.forces.ok,
-        ctx.forces.segment_ok,
+        ctx.search_state_ok,
+        ctx.search_motion_ok,
         ctx.opts.seed,
         deadline=ctx.out_of_time,
     )

@@ -241,6 +241,7 @@ class PlanContext:
         Raises:
             NoPathFound: the time is up (``details['ended_by'] == 'time_limit'``).
         """
+        self.tick()
         if self.remaining() <= 0:
             raise self.no_path()
         return False
@@ -286,6 +287,11 @@ class PlanContext:
         """The sampling planner's extra state check (static forces), ticking the search's progress."""
         self.tick()
         return self.forces.ok(q)
+
+    def search_motion_ok(self, q_a: Array, q_b: Array) -> bool:
+        """The sampling planner's extra motion check (static forces along it), ticking the progress."""
+        self.tick()
+        return self.forces.segment_ok(q_a, q_b)
 
     def motion_ok(self, q_a: Array, q_b: Array) -> bool:
         """A planner motion: certified clear by the planner's clearance, holdable along its length."""
