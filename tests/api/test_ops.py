@@ -358,7 +358,10 @@ def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tm
         assert csv.status_code == png.status_code == 200
         rows = [line.split(",") for line in csv.text.strip().splitlines()]
         table = np.array(rows[1:], dtype=float)
-        assert rows[0][0] == "t_s" and table.shape == (len(result["t"]), 1 + 5 * 8)  # t; pos, vel, acc, jerk, effort
+        assert rows[0][0] == "t_s" and table.shape == (
+            len(result["t"]),
+            1 + 5 * 8,
+        )  # t; pos, vel, acc, jerk, effort
         for k, name in enumerate(("position", "velocity", "acceleration", "effort")):
             got = table[:, 1 + 8 * k : 9 + 8 * k]
             np.testing.assert_allclose(got, np.array(result[name]), rtol=1e-8, atol=1e-12)
