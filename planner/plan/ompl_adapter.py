@@ -144,7 +144,8 @@ def _problem(
 
     def valid(state: ob.State) -> bool:
         q = _to_q(state, scale)
-        return world.is_valid(q, clearance) and extra_state(q)
+        # The caller's check first: it also ticks the search's progress, also on invalid states.
+        return extra_state(q) and world.is_valid(q, clearance)
 
     ss.setStateValidityChecker(valid)
 

@@ -362,7 +362,7 @@ def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tm
             len(result["t"]),
             1 + 5 * 8,
         )  # t; pos, vel, acc, jerk, effort
-        for k, name in enumerate(("position", "velocity", "acceleration", "effort")):
+        for k, name in enumerate(("position", "velocity", "acceleration", "jerk", "effort")):
             got = table[:, 1 + 8 * k : 9 + 8 * k]
             np.testing.assert_allclose(got, np.array(result[name]), rtol=1e-8, atol=1e-12)
         np.testing.assert_allclose(table[:, 0], result["t"], rtol=1e-8, atol=1e-12)
