@@ -54,6 +54,8 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
+        if value.dtype.kind in "iub" or (value.dtype.kind == "f" and bool(np.isfinite(value).all())):
+            return value.tolist()  # already plain ints / finite floats: one C pass, no walk per number
         return _jsonable(value.tolist())
     if isinstance(value, np.floating | float):
         f = float(value)
@@ -72,7 +74,7 @@ def result_document(sc: ResolvedScenario, result: PlanResult) -> dict[str, Any]:
         "scenario": {"name": sc.spec.name, "sha256": sc.scenario_sha256},
         "status": "succeeded",
     }
-    doc.update(result.profile.to_dict())
+    doc.update(result.profile.to_dict(as_lists=False))
     doc["min_clearance_m"] = result.gate.min_clearance_m
     doc["report"] = {**result.report, "gate": result.gate.to_dict()}
     doc["provenance"] = provenance(sc)
