@@ -136,7 +136,7 @@ def test_a_plan_past_its_limit_is_killed_and_recorded_while_the_others_finish(tm
     executor = EmbeddedExecutor(2)
     try:
         counts = run_sweep(plans, tmp_path, executor, sweep.limits)
-        pids = [p.process.pid for p in executor._spares]
+        pids = [p.process.pid for p in executor._idle]
     finally:
         executor.close()
     assert (counts.succeeded, counts.failed) == (1, 2)
