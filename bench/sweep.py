@@ -25,7 +25,11 @@ figures are medians over the rounds; the load average is printed before and afte
 ms embedded, <= 100 ms on Ray; 2 workers >= 1.7x the throughput of 1.
 
 "driver CPU ms" is the CPU time of the sweep's own process per plan (handing tasks over, receiving
-outcomes, the journal): a figure the machine's load does not move.
+outcomes, the journal); "CPU overhead ms" is the CPU time every process of the run spent per plan
+(driver, forkserver, workers, Ray's daemons; read from ``/proc``) minus the in-process CPU time per plan
+of the same round. Both hardly move with the machine's load, unlike the wall-clock figures: with free
+cores, ``workers`` workers plan ``workers * 60 / (T_cpu_in + CPU overhead)`` plans a minute as long as the
+driver (one core) keeps up.
 
 Run: ``python -m bench.sweep [--seeds N] [--rounds R] [--no-ray] [--no-fresh]`` (or ``make bench``).
 """
@@ -94,14 +98,41 @@ def _in_process_parallel(pool: Any, plans: list[SweepPlan], workers: int) -> flo
     return time.perf_counter() - t0
 
 
-def _timed(plans: list[SweepPlan], limits: Limits, executor: Any, out: Path) -> tuple[float, float]:
-    """(wall time, CPU time of this driver process) of one sweep run [s]."""
+def tree_cpu_s() -> float:
+    """CPU time [s] of this process and every process below it, the reaped ones included.
+
+    Sums user + system time and the children's (``cutime``/``cstime``, the processes already reaped by
+    it) over the live processes of the tree (``/proc``): forkserver, plan workers, pool workers, Ray's
+    GCS, raylet, agents and workers. Each CPU second is counted once.
+    """
+    children: dict[int, list[int]] = {}
+    stats: dict[int, list[str]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            stats[int(entry.name)] = fields
+            children.setdefault(int(fields[1]), []).append(int(entry.name))
+    ticks, todo, total = os.sysconf("SC_CLK_TCK"), [os.getpid()], 0
+    while todo:
+        pid = todo.pop()
+        fields = stats.get(pid)
+        if fields is not None:
+            total += sum(int(x) for x in fields[11:15])  # utime, stime, cutime, cstime
+        todo.extend(children.get(pid, []))
+    return total / ticks
+
+
+def _timed(plans: list[SweepPlan], limits: Limits, executor: Any, out: Path) -> tuple[float, float, float]:
+    """(wall time, CPU time of this driver process, CPU time of the process tree) of one sweep run [s]."""
     shutil.rmtree(out, ignore_errors=True)
-    t0, c0 = time.perf_counter(), time.process_time()
+    t0, c0, k0 = time.perf_counter(), time.process_time(), tree_cpu_s()
     counts = run_sweep(plans, out, executor, limits)
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    wall, cpu, tree = time.perf_counter() - t0, time.process_time() - c0, tree_cpu_s() - k0
     assert counts.done == len(plans) and counts.retried == 0, counts
-    return wall, cpu
+    return wall, cpu, tree
 
 
 def _load() -> str:
@@ -154,20 +185,25 @@ def main() -> None:
 
     walls: dict[str, list[float]] = {label: [] for label in executors}
     driver_cpu: dict[str, list[float]] = {label: [] for label in executors}
+    tree_cpu: dict[str, list[float]] = {label: [] for label in executors}
+    cpu_ins: list[float] = []
     t_ins: list[float] = []
     par_walls: list[float] = []
     planning: list[float] = []
     try:
         for r in range(args.rounds):
+            k0 = tree_cpu_s()
             t_in, t_plan = _in_process(plans)
+            cpu_ins.append((tree_cpu_s() - k0) / len(plans))
             t_ins.append(t_in)
             planning.append(t_plan)
             par_walls.append(_in_process_parallel(pool, plans, 2))
             for label, (_, ex, _) in executors.items():
                 out = root / f"{label.replace(' ', '_').replace(',', '')}-{r}"
-                wall, cpu = _timed(plans, spec.limits, ex, out)
+                wall, cpu, tree = _timed(plans, spec.limits, ex, out)
                 walls[label].append(wall)
                 driver_cpu[label].append(cpu)
+                tree_cpu[label].append(tree)
                 shutil.rmtree(out, ignore_errors=True)
     finally:
         pool.terminate()
@@ -184,6 +220,7 @@ def main() -> None:
         + f"); planner's own planning_time_s of the feasible plans {1e3 * median(planning):.0f} ms"
     )
     machine = [n * t / w for t, w in zip(t_ins, par_walls, strict=True)]
+    print(f"in-process CPU per plan: median {1e3 * median(cpu_ins):.1f} ms")
     print(
         f"in-process, 2 processes (no sweep): {median(par_walls):.2f} s, the machine's 2-process speed-up "
         f"{median(machine):.2f} (rounds: " + ", ".join(f"{m:.2f}" for m in machine) + "); 1.00 means the"
@@ -191,7 +228,7 @@ def main() -> None:
     )
     print(
         f"{'configuration':<28} {'wall s':>7} {'plans/min':>10} {'overhead ms':>12} "
-        f"{'per round (ms)':>22} {'x vs 1':>7} {'driver CPU ms':>14}"
+        f"{'per round (ms)':>22} {'x vs 1':>7} {'driver CPU ms':>14} {'CPU overhead ms':>16}"
     )
     extra: list[str] = []
     for label, (workers, _, _) in executors.items():
@@ -213,8 +250,10 @@ def main() -> None:
             )
         rounds = " ".join(f"{1e3 * o:.0f}" for o in per_round)
         cpu = 1e3 * median(driver_cpu[label]) / n
+        # CPU seconds all processes spent per plan, against the same round's in-process CPU per plan.
+        cpu_over = 1e3 * median(t / n - c for t, c in zip(tree_cpu[label], cpu_ins, strict=True))
         head = f"{label:<28} {w:7.2f} {60 * n / w:10.1f} {1e3 * overhead:12.1f}"
-        print(f"{head} {rounds:>22} {ratio:>7} {cpu:14.1f}")
+        print(f"{head} {rounds:>22} {ratio:>7} {cpu:14.1f} {cpu_over:16.1f}")
     for line in extra:
         print(line)
     print(f"load average after: {_load()}")
