@@ -431,7 +431,7 @@ class RayExecutor:
         warm_task: dict[str, Any] | None = None,
     ) -> None:
         address = address or os.environ.get("RAY_ADDRESS") or None
-        ray = self._ray = _ray()
+        ray = self._ray = _ray(local=address is None)
         self._owns = False
         if not ray.is_initialized():
             if address:

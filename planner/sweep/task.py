@@ -120,7 +120,12 @@ def _deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
         return
     from planner.sweep.results import atomic_write
 
-    atomic_write(Path(path), document + "\n")
+    try:
+        atomic_write(Path(path), document + "\n")
+    except OSError as exc:  # the driver writes it then (and reports a lasting error itself)
+        _LOG.warning("profile %s: cannot write (%s); handed to the driver", path, exc.strerror)
+        out["document"] = document
+        return
     out["profile_written"] = True
 
 
