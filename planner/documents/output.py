@@ -15,6 +15,8 @@ Arrays are (N samples, 8 drives) in drive order, SI units.
 
 from __future__ import annotations
 
+import math
+
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -52,8 +54,14 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
+        if all(type(v) is float for v in value):  # a row of samples: one pass, no call per element
+            return [v if math.isfinite(v) else None for v in value]
         return [_jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
+        if value.dtype.kind == "f" and not np.isfinite(value).all():
+            return _jsonable(value.tolist())  # element by element: non-finite values become null
+        if value.dtype.kind in "fiub":
+            return value.tolist()  # Python floats, ints and bools throughout: no walk over the elements
         return _jsonable(value.tolist())
     if isinstance(value, np.floating | float):
         f = float(value)
