@@ -15,8 +15,6 @@ Arrays are (N samples, 8 drives) in drive order, SI units.
 
 from __future__ import annotations
 
-import math
-
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -27,6 +25,7 @@ from planner.core.provenance import code_version
 if TYPE_CHECKING:
     from planner.plan.pipeline import PlanResult
     from planner.scenario.resolve import ResolvedScenario
+    from planner.timing.profile import DriveProfile
 
 
 def provenance(sc: ResolvedScenario) -> dict[str, Any]:
@@ -54,14 +53,8 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        if all(type(v) is float for v in value):  # a row of samples: one pass, no call per element
-            return [v if math.isfinite(v) else None for v in value]
         return [_jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
-        if value.dtype.kind == "f" and not np.isfinite(value).all():
-            return _jsonable(value.tolist())  # element by element: non-finite values become null
-        if value.dtype.kind in "fiub":
-            return value.tolist()  # Python floats, ints and bools throughout: no walk over the elements
         return _jsonable(value.tolist())
     if isinstance(value, np.floating | float):
         f = float(value)
@@ -73,18 +66,40 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def _samples(profile: DriveProfile) -> dict[str, Any]:
+    """The profile's fields; its sample arrays go out as ``tolist()`` made them when all are finite.
+
+    ``tolist`` gives Python floats already: walking the ~10^5 samples of a plan again through
+    :func:`_jsonable` cost a CLI call 0.1-0.4 s (measured with cProfile), for nothing to change.
+    """
+    arrays = (
+        profile.t,
+        profile.position,
+        profile.velocity,
+        profile.acceleration,
+        profile.jerk,
+        profile.joints,
+    )
+    extra = () if profile.effort is None else (profile.effort,)
+    doc = profile.to_dict()
+    if all(np.isfinite(a).all() for a in (*arrays, *extra)):
+        return doc
+    return _jsonable(doc)  # a non-finite sample becomes null (the gate refuses such a profile anyway)
+
+
 def result_document(sc: ResolvedScenario, result: PlanResult) -> dict[str, Any]:
     """The success document of a validated plan."""
-    doc: dict[str, Any] = {
+    head = {
         "robot": sc.robot.name,
         "scenario": {"name": sc.spec.name, "sha256": sc.scenario_sha256},
         "status": "succeeded",
     }
-    doc.update(result.profile.to_dict())
-    doc["min_clearance_m"] = result.gate.min_clearance_m
-    doc["report"] = {**result.report, "gate": result.gate.to_dict()}
-    doc["provenance"] = provenance(sc)
-    return _jsonable(doc)
+    tail = {
+        "min_clearance_m": result.gate.min_clearance_m,
+        "report": {**result.report, "gate": result.gate.to_dict()},
+        "provenance": provenance(sc),
+    }
+    return {**_jsonable(head), **_samples(result.profile), **_jsonable(tail)}
 
 
 def refusal_document(
