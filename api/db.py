@@ -8,6 +8,8 @@ run) apart. Times are stored as UNIX seconds (float) so that both back ends agre
 
 from __future__ import annotations
 
+import hashlib
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -128,6 +130,15 @@ def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
     cur.close()
 
 
+_TENANT_LOCKS: dict[str, threading.Lock] = {}
+_TENANT_LOCKS_GUARD = threading.Lock()
+
+
+def _process_tenant_lock(tenant: str) -> threading.Lock:
+    with _TENANT_LOCKS_GUARD:
+        return _TENANT_LOCKS.setdefault(tenant, threading.Lock())
+
+
 class Database:
     """The engine, its session factory and schema creation.
 
@@ -198,6 +209,22 @@ class Database:
             except BaseException:
                 s.rollback()
                 raise
+
+    @contextmanager
+    def tenant_quota_session(self, tenant: str) -> Iterator[Session]:
+        """A session whose transaction holds ``tenant``'s quota lock: count the active jobs, then insert.
+
+        Two submissions of one tenant cannot both pass the quota between their count and their insert: a
+        lock per tenant in this process, and on PostgreSQL also a transaction-level advisory lock keyed by
+        the schema and the tenant, so the instances sharing the database take turns too (released at
+        commit or rollback). SQLite serves one instance (its file lives on that machine).
+        """
+        with _process_tenant_lock(tenant), self.session() as s:
+            if not self.is_sqlite:
+                digest = hashlib.sha256(f"quota:{self.schema or ''}:{tenant}".encode()).digest()
+                key = int.from_bytes(digest[:8], "big", signed=True)
+                s.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": key})
+            yield s
 
     def dispose(self) -> None:
         """Close every pooled connection."""

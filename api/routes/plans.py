@@ -197,15 +197,6 @@ def _replay(
     return job_document(row)
 
 
-_TENANT_LOCKS: dict[str, threading.Lock] = {}
-_TENANT_LOCKS_GUARD = threading.Lock()
-
-
-def _tenant_lock(tenant: str) -> threading.Lock:
-    with _TENANT_LOCKS_GUARD:
-        return _TENANT_LOCKS.setdefault(tenant, threading.Lock())
-
-
 @router.post(
     "/plans",
     status_code=202,
@@ -245,50 +236,51 @@ def _submit(
     spec, resolved, meshes = _resolve(ctx, tenant, body)
     from planner.documents.output import provenance
 
-    # Count and insert under the tenant's lock, so concurrent submissions cannot pass the quota together
-    # (per instance: with several instances a tenant may briefly exceed its quota by one job each).
-    with _tenant_lock(tenant):
-        with ctx.db.session() as s:
-            active = s.scalar(
-                select(func.count())
-                .select_from(Job)
-                .where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
+    # Count and insert in one transaction under the tenant's quota lock (every instance sharing the
+    # database takes it), so concurrent submissions cannot pass the quota together.
+    row = Job(
+        id=uuid.uuid4().hex,
+        tenant=tenant,
+        status="queued",
+        progress=0.0,
+        scenario=spec.model_dump(mode="json"),
+        scenario_name=spec.name,
+        request_sha256=request_sha256,
+        idempotency_key=idempotency_key,
+        meshes=meshes,
+        provenance=provenance(resolved),
+        time_limit_s=float(spec.options.time_limit_s),
+        attempts=0,
+        created_at=now_s(),
+    )
+    limit = ctx.settings.tenant_max_active_jobs
+    try:
+        with ctx.db.tenant_quota_session(tenant) as s:
+            active = int(
+                s.scalar(
+                    select(func.count())
+                    .select_from(Job)
+                    .where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
+                )
+                or 0
             )
-        limit = ctx.settings.tenant_max_active_jobs
-        if (active or 0) >= limit:
-            raise Problem(
-                429,
-                "quota_exceeded",
-                f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
-                headers={"Retry-After": str(ctx.settings.retry_after_s)},
-                active_jobs=int(active or 0),
-                limit=limit,
-            )
-        row = Job(
-            id=uuid.uuid4().hex,
-            tenant=tenant,
-            status="queued",
-            progress=0.0,
-            scenario=spec.model_dump(mode="json"),
-            scenario_name=spec.name,
-            request_sha256=request_sha256,
-            idempotency_key=idempotency_key,
-            meshes=meshes,
-            provenance=provenance(resolved),
-            time_limit_s=float(spec.options.time_limit_s),
-            attempts=0,
-            created_at=now_s(),
-        )
-        try:
-            with ctx.db.session() as s:
-                s.add(row)
-        except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
-            if idempotency_key is None:
-                raise
-            replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
-            if replay is None:
-                raise
-            return replay
+            if active >= limit:
+                raise Problem(
+                    429,
+                    "quota_exceeded",
+                    f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
+                    headers={"Retry-After": str(ctx.settings.retry_after_s)},
+                    active_jobs=active,
+                    limit=limit,
+                )
+            s.add(row)
+    except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
+        if idempotency_key is None:
+            raise
+        replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
+        if replay is None:
+            raise
+        return replay
     ctx.runner.wake()
     response.headers["Location"] = f"/api/v1/plans/{row.id}"
     return job_document(row)

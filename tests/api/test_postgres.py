@@ -70,3 +70,42 @@ def test_jobs_keys_and_meshes_live_in_postgres(pg: tuple[Service, str]) -> None:
     assert status == "succeeded"
     assert recover_jobs(db) == {"requeued": 0, "failed": 0}
     db.dispose()
+
+
+def test_tenant_quota_lock_is_shared_by_every_instance_on_the_database(pg: tuple[Service, str]) -> None:
+    """Another process (another instance) holding a tenant's quota lock makes this one wait for it.
+
+    The count and the insert of a submission run under the lock, so two instances cannot both pass a
+    tenant's quota; another tenant's lock is independent.
+    """
+    import subprocess
+    import sys
+    import time
+
+    _, schema = pg
+    hold_s = 1.5
+    code = (
+        "import sys, time\n"
+        "from api.db import Database\n"
+        f"db = Database({PG_URL!r}, {schema!r})\n"
+        "with db.tenant_quota_session('alpha'):\n"
+        "    print('locked', flush=True)\n"
+        f"    time.sleep({hold_s})\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    other = subprocess.Popen([sys.executable, "-c", code], cwd=root, stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout is not None and other.stdout.readline().strip() == "locked"
+        db = Database(PG_URL, schema)
+        try:
+            t0 = time.monotonic()
+            with db.tenant_quota_session("beta"):  # another tenant: no wait
+                pass
+            assert time.monotonic() - t0 < 0.5 * hold_s
+            with db.tenant_quota_session("alpha"):
+                waited = time.monotonic() - t0
+            assert waited > 0.5 * hold_s, waited
+        finally:
+            db.dispose()
+    finally:
+        assert other.wait(timeout=30) == 0
