@@ -82,6 +82,20 @@ class Mesh(Base):
     created_at: Mapped[float] = mapped_column(Float)
 
 
+class MeshBlob(Base):
+    """The bytes of an uploaded mesh file, by SHA-256: every instance sharing the database can read them.
+
+    Each instance keeps the files it plans with in its own data directory as a cache
+    (:meth:`api.store.MeshStore.localize`), filled from here when another instance took the upload.
+    """
+
+    __tablename__ = "mesh_blobs"
+
+    sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    created_at: Mapped[float] = mapped_column(Float)
+
+
 class Job(Base):
     """A planning job: the scenario as submitted, its state, and (when done) its result and files."""
 
@@ -240,5 +254,6 @@ __all__ = [
     "Database",
     "Job",
     "Mesh",
+    "MeshBlob",
     "now_s",
 ]

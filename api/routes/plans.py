@@ -154,7 +154,7 @@ def _mesh_map(ctx: AppContext, tenant: str, spec: Scenario) -> dict[str, str]:
                 f"the scenario says {units!r}",
                 errors=[{"field": units_field, "reason": f"must be {row.units!r} for this mesh"}],
             )
-        meshes[name] = str(ctx.store.path_of(row))
+        meshes[name] = str(ctx.store.local_path(row))
     return meshes
 
 

@@ -109,3 +109,28 @@ def test_tenant_quota_lock_is_shared_by_every_instance_on_the_database(pg: tuple
             db.dispose()
     finally:
         assert other.wait(timeout=30) == 0
+
+
+def test_a_mesh_uploaded_on_one_instance_plans_on_another(pg: tuple[Service, str], tmp_path: Path) -> None:
+    """Instances keep their own data directories; the mesh bytes travel through the shared database."""
+    from api.store import MeshStore
+    from planner.meshio import MeshLimits
+
+    _, schema = pg
+    db = Database(PG_URL, schema)
+    try:
+        here, there = MeshStore(db, tmp_path / "a", MeshLimits()), MeshStore(db, tmp_path / "b", MeshLimits())
+        data = box_stl((2.0, 3.0, 7.0))  # bytes no other test of the module stores
+        row, created = here.add("gamma", data, "box.stl", "m", "box")
+        assert created and here.path_of(row).read_bytes() == data
+        assert not there.path_of(row).exists()
+        job_meshes = {row.sha256: str(here.path_of(row))}  # what a job submitted to "here" records
+        local = there.local_files(job_meshes)[row.sha256]
+        assert Path(local).parent == tmp_path / "b" and Path(local).read_bytes() == data
+        assert there.local_path(row) == Path(local)  # now from its own disk
+        assert here.delete("gamma", row.sha256)  # the last reference: the bytes go from the database too
+        Path(local).unlink()
+        with pytest.raises(FileNotFoundError, match="neither on this instance nor in the database"):
+            there.local_files(job_meshes)
+    finally:
+        db.dispose()
