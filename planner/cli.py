@@ -176,7 +176,7 @@ def stiffness(
     ``cabinplan stiffness calibrate MEASUREMENTS.csv -o calibrated.yaml`` instead fits the stiffness data
     to measured deflections and writes a description the planner can use (scenario ``robot_description``).
     """
-    from planner.dynamics.stiffness import stiffness_document
+    from planner.documents.stiffness import stiffness_document
 
     if robot == "calibrate":
         from planner.dynamics.calibration import calibrate_file
