@@ -34,6 +34,7 @@ from __future__ import annotations
 import hashlib
 import math
 from functools import cache
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -63,6 +64,9 @@ DEFAULT_MOTION_MARGIN_M = 0.005
 DEFAULT_SELF_CLEARANCE_M = 0.005
 MIN_MOTION_MARGIN_M = 1e-4
 
+#: The world's robot model type (``world.robot`` keeps it: cabin8's world gives a Cabin8).
+RobotT = TypeVar("RobotT", bound=RobotModel)
+
 
 @cache
 def _cabin_grid(sha256: str, vertices_bytes: bytes, faces_bytes: bytes, step: float) -> ClearanceGrid:
@@ -86,7 +90,7 @@ def cabin_key(cabin: LoadedMesh) -> tuple[str, bytes, bytes]:
     )
 
 
-class CollisionWorld:
+class CollisionWorld(Generic[RobotT]):
     """Robot (+ payload) and cabin, with exact, certified state and motion checks.
 
     Args:
@@ -106,7 +110,7 @@ class CollisionWorld:
 
     def __init__(
         self,
-        robot: RobotModel,
+        robot: RobotT,
         cabin: LoadedMesh | None = None,
         payload: PayloadGeometry | None = None,
         grid_step_m: float = 0.03,

@@ -37,7 +37,7 @@ from planner.kinematics.compiled import FastFunction, dense_function
 from planner.robots import kernels
 from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
 from planner.robots.cabin8_kernels import KIND_CODES, PARAMS
-from planner.robots.geometry import PAYLOAD, Shape
+from planner.robots.geometry import PAYLOAD, Admissibility, Shape
 
 BODY_NAMES = ("carriage", "link_ab", "link_cd", "link_ef", "platform", "column", "arm", "slide", "payload")
 #: Pairs joined by a joint (or resting on one another by design): never checked against each other.
@@ -79,16 +79,17 @@ class Cabin8CollisionModel:
         robot: The cabin8 model (its description's stage, chain and limits size the bodies).
     """
 
-    body_names = tuple(n for n in BODY_NAMES if n != PAYLOAD)
-    n_joints = 8
-    kernel = kernels.CABIN8
-    ratio_rows = (13, 14, 15)
-    slope_bodies = ("link_ab", "link_cd", "link_ef")
+    body_names: tuple[str, ...] = tuple(n for n in BODY_NAMES if n != PAYLOAD)
+    n_joints: int = 8
+    kernel: int = kernels.CABIN8
+    #: The link-height ratios y_B/L1, y_C/L3, y_E/L4 in c(q) (``Cabin8.constraint_specs``).
+    ratio_rows: tuple[int, ...] = (13, 14, 15)
+    slope_bodies: tuple[str, ...] = ("link_ab", "link_cd", "link_ef")
     rail_body: str | None = "carriage"
 
     def __init__(self, robot: Cabin8) -> None:
         self.robot = robot
-        self.admissibility = robot
+        self.admissibility: Admissibility = robot
         g = robot.geometry
         self.slope_half_width = 0.5 * g.L2
         self.rail_range = (float(robot.limits.lower[0]), float(robot.limits.upper[0]))
