@@ -39,6 +39,7 @@ from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
 from planner.robots.cabin8_kernels import KIND_CODES, PARAMS
 from planner.robots.geometry import PAYLOAD, Admissibility, Shape
 
+#: cabin8's bodies in pose order, the payload last (when carried).
 BODY_NAMES = ("carriage", "link_ab", "link_cd", "link_ef", "platform", "column", "arm", "slide", "payload")
 #: Pairs joined by a joint (or resting on one another by design): never checked against each other.
 ADJACENT = frozenset(
@@ -72,6 +73,10 @@ RIGID_GROUPS: tuple[frozenset[str], ...] = (
 )
 
 
+#: The constraints that bound the stage links' slopes (``Cabin8.constraint_specs`` names).
+_LINK_RATIOS = ("yB_over_L1", "yC_over_L3", "yE_over_L4")
+
+
 class Cabin8CollisionModel:
     """cabin8's :class:`~planner.robots.geometry.CollisionModel` (one per model: ``Cabin8.collision_model``).
 
@@ -82,14 +87,16 @@ class Cabin8CollisionModel:
     body_names: tuple[str, ...] = tuple(n for n in BODY_NAMES if n != PAYLOAD)
     n_joints: int = 8
     kernel: int = kernels.CABIN8
-    #: The link-height ratios y_B/L1, y_C/L3, y_E/L4 in c(q) (``Cabin8.constraint_specs``).
-    ratio_rows: tuple[int, ...] = (13, 14, 15)
     slope_bodies: tuple[str, ...] = ("link_ab", "link_cd", "link_ef")
     rail_body: str | None = "carriage"
 
     def __init__(self, robot: Cabin8) -> None:
         self.robot = robot
         self.admissibility: Admissibility = robot
+        #: The link-height ratios y_B/L1, y_C/L3, y_E/L4 in c(q) (:attr:`Cabin8.constraint_specs`).
+        self.ratio_rows: tuple[int, ...] = tuple(
+            i for i, spec in enumerate(robot.constraint_specs) if spec.name in _LINK_RATIOS
+        )
         g = robot.geometry
         self.slope_half_width = 0.5 * g.L2
         self.rail_range = (float(robot.limits.lower[0]), float(robot.limits.upper[0]))
