@@ -179,7 +179,7 @@ def stiffness(
     from planner.documents.stiffness import stiffness_document
 
     if robot == "calibrate":
-        from planner.dynamics.calibration import calibrate_file
+        from planner.documents.calibration import calibrate_file
 
         if measurements is None or output is None:
             _fail("stiffness calibrate: give MEASUREMENTS.csv and -o OUTPUT.yaml", EXIT_INVALID)
