@@ -31,6 +31,7 @@ from api.bodies import parse_body
 from api.compact import unpack_document, unpack_text
 from api.context import AppContext
 from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
+from api.examples import docked
 from api.jobs import rows_matched
 from api.openapi import scenario_request_body
 from api.problems import Problem, problem_responses
@@ -55,30 +56,8 @@ _SCENARIO_DESCRIPTION = (
 _SCENARIO_EXAMPLE: dict[str, Any] = {
     "name": "transfer",
     "robot": "cabin8",
-    "start": {
-        "drives": {
-            "d1": 1.0,
-            "x1": -0.46,
-            "x2": 0.46,
-            "x3": -0.09,
-            "theta3": 1.2,
-            "theta4": -0.8,
-            "d5": -0.25,
-            "theta6": 0,
-        }
-    },
-    "goal": {
-        "drives": {
-            "d1": 2.0,
-            "x1": -0.46,
-            "x2": 0.46,
-            "x3": -0.09,
-            "theta3": 1.2,
-            "theta4": -0.8,
-            "d5": -0.25,
-            "theta6": 0,
-        }
-    },
+    "start": docked(d1=1.0),
+    "goal": docked(d1=2.0),
 }
 
 

@@ -27,6 +27,7 @@ from api.settings import Settings
 from tests.api.conftest import (
     ADMIN_KEY,
     SCENARIOS,
+    Server,
     Service,
     free_transfer,
     make_settings,
@@ -36,7 +37,6 @@ from tests.api.conftest import (
     stuck,
     wait_for,
 )
-from tests.api.test_restart import Server
 
 PROBLEM = "application/problem+json"
 
