@@ -25,9 +25,10 @@ from sqlalchemy.orm import undefer
 from api.auth import CurrentPrincipal
 from api.context import AppContext
 from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
+from api.examples import aisle_bay_goal, docked
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
-from api.routes.plans import _forget_result, _mesh_map, _tenant_lock, result_text
+from api.routes.plans import _forget_result, _mesh_map, result_text
 from api.store import scenario_mesh_resolver
 from api.sweeps import Sweep, SweepJob, new_sweep
 from planner.core.exceptions import InvalidInput
@@ -48,25 +49,8 @@ _SWEEP_BODY = Body(
                 "name": "bay",
                 "cabin": {"mesh": "cabin-aisle"},
                 "payload": {"box": [0.45, 0.35, 0.3], "mass": 60, "grasp": {"position": [0, 0, 0.2]}},
-                "start": {
-                    "drives": {
-                        "d1": 1.0,
-                        "x1": -0.46,
-                        "x2": 0.46,
-                        "x3": -0.09,
-                        "theta3": 1.2,
-                        "theta4": -0.8,
-                        "d5": -0.25,
-                        "theta6": 0,
-                    }
-                },
-                "goal": {
-                    "pose": {
-                        "position": [0.885, 0.675, 2.7],
-                        "orientation": {"w": 0.70710678, "x": 0, "y": 0.70710678, "z": 0},
-                    },
-                    "approach": {"direction": [1, 0, 0], "distance": 0.48},
-                },
+                "start": docked(),
+                "goal": aisle_bay_goal(),
             },
             "axes": {"goal": {"bays": "all"}, "payload_mass_kg": [60, 90]},
         }
@@ -246,7 +230,7 @@ def delete_sweep(sweep_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Respon
             _forget_result(job_id)
         return Response(status_code=204)
     # Under the tenant's lock the feeder holds while it queues a sweep's jobs: no job is queued after this.
-    with _tenant_lock(row.tenant), ctx.db.session() as s:
+    with ctx.db.tenant_quota_session(row.tenant) as s:
         s.execute(
             update(Sweep)
             .where(Sweep.id == row.id, Sweep.status == "running")

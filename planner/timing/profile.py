@@ -60,15 +60,8 @@ class DriveProfile:
         out[:-1] = np.diff(self.acceleration, axis=0) / dt
         return out
 
-    def to_dict(self, as_lists: bool = True) -> dict[str, Any]:
-        """The profile's fields of the JSON output contract (no ``effort`` without forces).
-
-        Args:
-            as_lists: Series as nested lists (JSON-ready); False keeps them (N, n) arrays, for a caller
-                that converts them itself (:func:`planner.documents.output.result_document` does it in
-                one pass per array instead of one call per number).
-        """
-        conv: Any = (lambda a: a.tolist()) if as_lists else (lambda a: a)
+    def to_dict(self) -> dict[str, Any]:
+        """The profile's fields of the JSON output contract (no ``effort`` without forces)."""
         names = list(zip(self.drive_names, self.drive_units, strict=True))
         units: dict[str, Any] = {
             "t": "s",
@@ -81,16 +74,16 @@ class DriveProfile:
             "drives": list(self.drive_names),
             "units": units,
             "sample_period_s": self.sample_period_s,
-            "t": conv(self.t),
-            "position": conv(self.position),
-            "velocity": conv(self.velocity),
-            "acceleration": conv(self.acceleration),
-            "jerk": conv(self.jerk),
+            "t": self.t.tolist(),
+            "position": self.position.tolist(),
+            "velocity": self.velocity.tolist(),
+            "acceleration": self.acceleration.tolist(),
+            "jerk": self.jerk.tolist(),
         }
         if self.effort is not None:
             units["effort"] = {n: ("N" if u == "m" else "N m") for n, u in names}
-            doc["effort"] = conv(self.effort)
-        doc["joints"] = {"names": list(self.joint_names), "position": conv(self.joints)}
+            doc["effort"] = self.effort.tolist()
+        doc["joints"] = {"names": list(self.joint_names), "position": self.joints.tolist()}
         doc["duration_s"] = self.duration_s
         return doc
 
