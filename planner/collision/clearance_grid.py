@@ -22,16 +22,18 @@ keeps built grids on disk, keyed by the mesh content, pose and step.
 from __future__ import annotations
 
 import hashlib
+import json
 import logging
 import math
 import os
 import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 
-from planner.core.cache import cache_dir
+from planner.core.cache import cache_dir, prune, touch
 from planner.core.types import Array, IntArray
 
 log = logging.getLogger(__name__)
@@ -124,46 +126,75 @@ class ClearanceGrid:
         return self.lower_bound.reshape(-1)[flat]
 
 
-#: Bump when the grid's construction changes: cached grids of an older version are not used.
-GRID_VERSION = 1
+#: Bump when the grid's construction or its cache layout changes: cached grids of an older one are not used.
+GRID_VERSION = 2
 
 
 def cached_build(key: str, vertices: Array, faces: IntArray, step: float) -> ClearanceGrid:
     """:meth:`ClearanceGrid.build`, cached on disk by ``key`` (the mesh's content and pose) and ``step``.
 
-    Building costs about a second for a reference cabin (a Euclidean distance transform); loading the
-    cached grid, milliseconds. The file is written atomically; a missing, unreadable or mismatched file is
-    simply rebuilt, so the cache can never change a result.
+    Building costs about a second for a reference cabin (a Euclidean distance transform). A cached grid is
+    two files: the bounds as a ``.npy`` that is memory-mapped, not read (a plan touches a few pages of a
+    30-45 MB grid: loading it whole cost a CLI call 0.1-0.2 s), and a ``.json`` with the grid's frame,
+    written last, so a reader never sees half an entry. A missing, unreadable or mismatched entry is
+    simply rebuilt, so the cache can never change a result; the folder is kept within its size bound
+    (:func:`planner.core.cache.prune`).
     """
     folder = cache_dir()
     name = hashlib.sha256(f"{key}|{step!r}|{GRID_VERSION}".encode()).hexdigest()[:32]
-    path = folder / f"grid-{name}.npz" if folder is not None else None
-    if path is not None and path.is_file():
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                grid = ClearanceGrid(
-                    np.array(data["origin"]),
-                    float(data["step"]),
-                    np.array(data["lower_bound"]),
-                    float(data["sample_spacing"]) if "sample_spacing" in data else 0.015,
-                )
-            if grid.step == float(step) and grid.lower_bound.ndim == 3 and grid.origin.shape == (3,):
-                return grid
-        except (OSError, ValueError, KeyError):
-            log.warning("clearance grid cache %s unreadable; rebuilding", path)
+    if folder is not None:
+        grid = _read_cached(folder / f"grid-{name}.json", folder / f"grid-{name}.npy", step)
+        if grid is not None:
+            return grid
     grid = ClearanceGrid.build(vertices, faces, step=step)
-    if path is not None:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as tmp:
-                np.savez(
-                    tmp,
-                    origin=grid.origin,
-                    step=grid.step,
-                    lower_bound=grid.lower_bound,
-                    sample_spacing=grid.sample_spacing,
-                )
-            os.replace(tmp.name, path)
-        except OSError as exc:
-            log.warning("clearance grid cache not written (%s)", exc)
+    if folder is not None:
+        _write_cached(folder, name, grid)
     return grid
+
+
+def _read_cached(meta_path: Path, data_path: Path, step: float) -> ClearanceGrid | None:
+    try:
+        meta = json.loads(meta_path.read_text())
+        bounds = np.load(data_path, mmap_mode="r", allow_pickle=False)
+        grid = ClearanceGrid(
+            np.array(meta["origin"], dtype=float),
+            float(meta["step"]),
+            bounds,
+            float(meta["sample_spacing"]),
+        )
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError):
+        log.warning("clearance grid cache %s unreadable; rebuilding", data_path)
+        return None
+    if (
+        grid.step != float(step)
+        or bounds.ndim != 3
+        or list(bounds.shape) != list(meta.get("shape", ()))
+        or bounds.dtype != np.float64
+        or grid.origin.shape != (3,)
+    ):
+        log.warning("clearance grid cache %s does not match its description; rebuilding", data_path)
+        return None
+    touch(meta_path, data_path)
+    return grid
+
+
+def _write_cached(folder: Path, name: str, grid: ClearanceGrid) -> None:
+    meta = {
+        "origin": grid.origin.tolist(),
+        "step": grid.step,
+        "sample_spacing": grid.sample_spacing,
+        "shape": list(grid.lower_bound.shape),
+    }
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=folder, suffix=".tmp", delete=False) as tmp:
+            np.save(tmp, np.ascontiguousarray(grid.lower_bound, dtype=np.float64), allow_pickle=False)
+        os.replace(tmp.name, folder / f"grid-{name}.npy")
+        with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as tmp_meta:
+            json.dump(meta, tmp_meta)
+        os.replace(tmp_meta.name, folder / f"grid-{name}.json")  # last: the entry is complete
+        prune(folder, ("grid-*", "meshes/*.npz"))
+    except OSError as exc:
+        log.warning("clearance grid cache not written (%s)", exc)

@@ -47,7 +47,7 @@ from typing import Any, get_args
 import numpy as np
 from numpy.typing import ArrayLike
 
-from planner.core.cache import cache_dir
+from planner.core.cache import cache_dir, prune, touch
 from planner.core.types import Array, IntArray
 from planner.meshio.build import validate_and_build, validate_pose
 from planner.meshio.parse import concatenate, parse_obj, parse_with_trimesh
@@ -189,7 +189,9 @@ def _read_parts(path: Path) -> tuple[list[tuple[Array, IntArray]], int] | None:
                 (np.asarray(npz[f"v{i}"], dtype=np.float64), np.asarray(npz[f"f{i}"], dtype=np.int64))
                 for i in range(n_parts)
             ]
-            return parts, int(npz["n_ignored"])
+            n_ignored = int(npz["n_ignored"])
+        touch(path)
+        return parts, n_ignored
     except FileNotFoundError:
         return None
     except Exception as exc:  # a truncated or foreign file: parse again (and overwrite it)
@@ -207,6 +209,7 @@ def _write_parts(path: Path, parts: list[tuple[Array, IntArray]], n_ignored: int
         with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as tmp:
             np.savez(tmp, **arrays)
         os.replace(tmp.name, path)  # atomic: a reader sees the old entry or the whole new one
+        prune(path.parent.parent, ("grid-*", "meshes/*.npz"))
     except OSError as exc:  # a read-only or full cache folder only costs the next call a parse
         _LOG.warning("mesh parse cache %s not written: %s", path, exc)
 

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import logging
+import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +13,7 @@ import pytest
 import trimesh
 
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
+from planner.core.cache import prune
 
 
 @pytest.fixture
@@ -24,9 +28,9 @@ def test_cache_hit_returns_the_grid_that_was_built(
     monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
     v, f = box_mesh
     built = cached_build("box", v, f, 0.05)
-    files = list(tmp_path.glob("grid-*.npz"))
-    assert len(files) == 1
+    assert len(list(tmp_path.glob("grid-*.npy"))) == len(list(tmp_path.glob("grid-*.json"))) == 1
     loaded = cached_build("box", v, f, 0.05)
+    assert isinstance(loaded.lower_bound, np.memmap)  # mapped, not read
     fresh = ClearanceGrid.build(v, f, step=0.05)
     for g in (built, loaded):
         assert g.step == fresh.step
@@ -34,7 +38,7 @@ def test_cache_hit_returns_the_grid_that_was_built(
         assert np.array_equal(g.lower_bound, fresh.lower_bound)
     # Another step is another grid, another file.
     cached_build("box", v, f, 0.1)
-    assert len(list(tmp_path.glob("grid-*.npz"))) == 2
+    assert len(list(tmp_path.glob("grid-*.npy"))) == 2
 
 
 def test_corrupt_cache_file_is_rebuilt(
@@ -43,8 +47,8 @@ def test_corrupt_cache_file_is_rebuilt(
     monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
     v, f = box_mesh
     cached_build("box", v, f, 0.05)
-    (path,) = tmp_path.glob("grid-*.npz")
-    path.write_bytes(b"not a zip file")
+    (path,) = tmp_path.glob("grid-*.npy")
+    path.write_bytes(b"not an npy file")
     with caplog.at_level(logging.WARNING):
         grid = cached_build("box", v, f, 0.05)
     assert "rebuilding" in caplog.text
@@ -58,4 +62,36 @@ def test_empty_cache_dir_disables_the_cache(
     monkeypatch.chdir(tmp_path)
     v, f = box_mesh
     cached_build("box", v, f, 0.05)
-    assert not list(tmp_path.rglob("*.npz"))
+    assert not list(tmp_path.rglob("*.np[yz]"))
+
+
+def test_a_description_that_does_not_match_its_bounds_is_rebuilt(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, box_mesh
+) -> None:
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
+    v, f = box_mesh
+    cached_build("box", v, f, 0.05)
+    (meta,) = tmp_path.glob("grid-*.json")
+    doc = json.loads(meta.read_text())
+    meta.write_text(json.dumps({**doc, "shape": [1, 2, 3]}))
+    grid = cached_build("box", v, f, 0.05)
+    assert np.array_equal(grid.lower_bound, ClearanceGrid.build(v, f, step=0.05).lower_bound)
+    assert json.loads(meta.read_text())["shape"] == doc["shape"]  # rewritten whole
+
+
+def test_the_cache_keeps_the_most_recently_used_entries_within_its_bound(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, box_mesh
+) -> None:
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
+    v, f = box_mesh
+    cached_build("box", v, f, 0.05)
+    one_entry = sum(p.stat().st_size for p in tmp_path.glob("grid-*"))
+    monkeypatch.setenv("CABINPLAN_CACHE_MAX_BYTES", str(int(2.5 * one_entry)))
+    old = time.time() - 3600
+    for p in tmp_path.glob("grid-*"):
+        os.utime(p, (old, old))
+    cached_build("box2", v, f, 0.05)
+    cached_build("box", v, f, 0.05)  # a hit: "box" is now the most recently used
+    cached_build("box3", v, f, 0.05)  # over the bound: the least recently used entry ("box2") goes
+    assert len(list(tmp_path.glob("grid-*.npy"))) == 2
+    assert prune(tmp_path, ("grid-*",), limit=0) > 0 and not list(tmp_path.glob("grid-*"))
