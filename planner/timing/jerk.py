@@ -76,8 +76,10 @@ END_LEVELS = 10
 #: Sub-steps per grid interval of the time integral t(s) = int ds / sd (4-point Gauss-Legendre each).
 SUBSTEPS = 4
 #: Trust-region refinements after the first jerk LP (each may raise sd by TRUST where the jerk allows).
-REFINE = 1
+REFINE = 0
 TRUST = 1.15
+#: Tangent points of the time objective, as fractions of the reference speed's x = sd^2.
+TANGENTS = np.array([1.0, 0.6, 0.35, 0.18, 0.08, 0.03])
 
 
 @dataclass(frozen=True)
@@ -190,9 +192,11 @@ class _Coefficients:
     """The drive path and the force split at the grid points (see the module docstring)."""
 
     du: Array  # (N + 1, m) u'
+    du_mid: Array  # (N, m) u' at the middle of each interval
     ddu: Array  # (N + 1, m) u'' (from the right at a piece boundary)
     ddu_left: Array  # (N + 1, m) u'' from the left (differs at a boundary where the path is not C2)
-    dddu: Array  # (N, m) u''' on each interval (its mean)
+    ddu_mid: Array  # (N, m) u'' at the middle of each interval
+    dddu: Array  # (2, N, m) u''' at the start and the end of each interval
     force: tuple[Array, Array, Array] | None  # A, B, C (N + 1, m)
 
 
@@ -226,7 +230,7 @@ class JerkLimitedStage:
     payload: RigidPayload | None = None
     safety: tuple[float, float, float] = (0.995, 0.97, 0.97)
     sample_period_s: float = 0.004
-    grid_step: float = 0.08
+    grid_step: float = 0.12
     min_points: int = 24
     max_points: int = 3000
     name: str = "jerk_limited"
@@ -246,7 +250,7 @@ class JerkLimitedStage:
         coef = self._coefficients(path, s)
         sv, sa, sf = self.safety
         frac = [sv, sa, sf, JERK_TARGET * sa / 0.97]
-        targets = (min(1.004, sv + 0.009), min(1.0, sa + 0.02), min(1.0, sf + 0.02))
+        targets = (min(1.005, sv + 0.01), min(1.0, sa + 0.02), min(1.0, sf + 0.02))
         last: _Sampled | None = None
         for _ in range(MAX_ITERATIONS):
             x, y = self._solve(path, s, coef, (frac[0], frac[1], frac[2], frac[3]))
@@ -308,7 +312,13 @@ class JerkLimitedStage:
             eps = 1e-9 * max(path.length, 1.0)
             ql, dql, ddql = path.evaluate(s[inner] - eps)
             ddu_left[inner] = self.robot.drive_path(ql, dql, ddql)[2]
-        dddu = (ddu_left[1:] - ddu[:-1]) / np.diff(s)[:, None]
+        # u''' at both ends of each interval: u'' quadratic through its ends and midpoint (exact for the
+        # blends' quadratic q'' along a joint-space path; u''' may step at a piece boundary).
+        ds = np.diff(s)[:, None]
+        qm, dqm, ddqm = path.evaluate(0.5 * (s[1:] + s[:-1]))
+        _, du_mid, ddu_mid = self.robot.drive_path(qm, dqm, ddqm)
+        a, mid, b = ddu[:-1], ddu_mid, ddu_left[1:]
+        dddu = np.stack([(-3 * a + 4 * mid - b) / ds, (a - 4 * mid + 3 * b) / ds])
         force = None
         if self.dynamics is not None:
             z = np.zeros_like(q)
@@ -317,7 +327,7 @@ class JerkLimitedStage:
             )
             n = len(s)
             force = (tau[n : 2 * n] - tau[:n], tau[2 * n :] - tau[:n], tau[:n])
-        return _Coefficients(du, ddu, ddu_left, dddu, force)
+        return _Coefficients(du, du_mid, ddu, ddu_left, ddu_mid, dddu, force)
 
     def _solve(
         self, path: JointPath, s: Array, c: _Coefficients, frac: tuple[float, float, float, float]
@@ -332,7 +342,13 @@ class JerkLimitedStage:
         X, Y = np.arange(n + 1), n + 1 + np.arange(n + 1)
         # Bounds: velocity (and the speed caps where u'' jumps), rest at both ends.
         du_abs = np.maximum(np.abs(c.du), 1e-300)
+        # Velocity: at each point and the middle of its intervals (u' changes along a blend).
         x_max = np.min(np.minimum(sv * lim.v_max[None, :] / du_abs, 1e3) ** 2, axis=1)
+        x_mid = np.min(
+            np.minimum(sv * lim.v_max[None, :] / np.maximum(np.abs(c.du_mid), 1e-300), 1e3) ** 2, axis=1
+        )
+        x_max[:-1] = np.minimum(x_max[:-1], x_mid)
+        x_max[1:] = np.minimum(x_max[1:], x_mid)
         jump = np.abs(c.ddu - c.ddu_left)
         if np.any(jump > 0):
             budget = JUMP_SHARE * sj * lim.j_max * self.sample_period_s
@@ -379,25 +395,108 @@ class JerkLimitedStage:
             )
         if c.force is not None:
             A, B, C = c.force
-            blocks.append(_rows(X[pts], Y[pts], B[pts], A[pts], C[pts], sf * lim.effort_max, x_box[pts],
-                                y_best[pts], n))
+            blocks.append(
+                _rows(X[pts], Y[pts], B[pts], A[pts], C[pts], sf * lim.effort_max, x_box[pts], y_best[pts], n)
+            )
+        # The middle of each inner interval (x is quadratic there, u' and u'' change along a blend):
+        # x_mid = x_i + ds (0.75 y_i + 0.25 y_{i+1}) within the velocity bound there, and the
+        # acceleration rows with y_mid = (y_i + y_{i+1}) / 2.
+        iv = np.arange(1, n - 1)
+        ni = len(iv)
+        if ni:
+            xv_mid = np.min(
+                np.minimum(sv * lim.v_max[None, :] / np.maximum(np.abs(c.du_mid[iv]), 1e-300), 1e3) ** 2,
+                axis=1,
+            )
+            rr = np.arange(ni)
+            blocks.append(
+                (
+                    sp.csr_matrix(
+                        (
+                            np.concatenate([np.ones(ni), 0.75 * ds[iv], 0.25 * ds[iv]]),
+                            (np.concatenate([rr, rr, rr]), np.concatenate([X[iv], Y[iv], Y[iv + 1]])),
+                        ),
+                        shape=(ni, 2 * (n + 1)),
+                    ),
+                    xv_mid,
+                )
+            )
+            dm, ddm = c.du_mid[iv], c.ddu_mid[iv]
+            cyi = 0.75 * ds[iv, None] * ddm + 0.5 * dm
+            cyj = 0.25 * ds[iv, None] * ddm + 0.5 * dm
+            yb = np.maximum(y_best[iv], y_best[iv + 1])[:, None]
+            peak = np.abs(ddm) * xv_mid[:, None] + (np.abs(cyi) + np.abs(cyj)) * np.minimum(yb, 1e12)
+            amax = sa * lim.a_max[None, :]
+            ii, jj = np.nonzero(peak >= amax * (1 - 1e-9))
+            nr = len(ii)
+            if nr:
+                rr = np.arange(nr)
+                M = sp.csr_matrix(
+                    (
+                        np.concatenate([ddm[ii, jj], cyi[ii, jj], cyj[ii, jj]]),
+                        (np.concatenate([rr, rr, rr]), np.concatenate([X[iv[ii]], Y[iv[ii]], Y[iv[ii] + 1]])),
+                    ),
+                    shape=(nr, 2 * (n + 1)),
+                )
+                b_mid = np.broadcast_to(amax, dm.shape)[ii, jj]
+                blocks.append((sp.vstack([M, -M], format="csr"), np.concatenate([b_mid, b_mid])))
         base_A = sp.vstack([b[0] for b in blocks], format="csr")
         base_b = np.concatenate([b[1] for b in blocks])
-        weight = np.zeros(2 * (n + 1))
-        weight[X[1:-1]] = (ds[:-1] + ds[1:]) / 2
+        nv = 2 * (n + 1)
+        h = (ds[:-1] + ds[1:]) / 2  # each inner point's share of the path
 
-        def run(extra: tuple[sp.csr_matrix, Array] | None, hi_x: Array) -> Array:
-            A_ub, b_ub = (base_A, base_b) if extra is None else (
-                sp.vstack([base_A, extra[0]], format="csr"), np.concatenate([base_b, extra[1]])
+        def run(extra: tuple[sp.csr_matrix, Array], x_ref: Array) -> Array:
+            """Minimise the time sum h_i / sqrt(x_i) (epigraph tau_i over tangents of the convex 1/sqrt)."""
+            xr = x_ref[1:-1, None] * TANGENTS[None, :]
+            slope = -0.5 * h[:, None] * xr**-1.5
+            icpt = h[:, None] * xr**-0.5 - slope * xr
+            k = len(TANGENTS)
+            rr = np.arange((n - 1) * k)
+            pt = np.repeat(np.arange(n - 1), k)
+            epi = sp.csr_matrix(
+                (
+                    np.concatenate([slope.ravel(), -np.ones(len(rr))]),
+                    (np.concatenate([rr, rr]), np.concatenate([X[1:-1][pt], nv + pt])),
+                ),
+                shape=(len(rr), nv + n - 1),
             )
-            bounds = np.column_stack([lo, np.concatenate([hi_x, hi[Y]])])
-            res = linprog(-weight, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
+            pad = sp.csr_matrix((0, n - 1))
+            A_ub = sp.vstack(
+                [
+                    sp.hstack(
+                        [
+                            sp.vstack([base_A, extra[0]]),
+                            sp.csr_matrix((base_A.shape[0] + extra[0].shape[0], n - 1)),
+                        ]
+                    ),
+                    epi,
+                ],
+                format="csr",
+            )
+            b_ub = np.concatenate([base_b, extra[1], -icpt.ravel()])
+            del pad
+            cost = np.concatenate([np.zeros(nv), np.ones(n - 1)])
+            bounds = np.column_stack(
+                [
+                    np.concatenate([lo, np.zeros(n - 1)]),
+                    np.concatenate([x_ref, hi[Y], np.full(n - 1, np.inf)]),
+                ]
+            )
+            res = linprog(
+                cost,
+                A_ub=A_ub,
+                b_ub=b_ub,
+                A_eq=sp.hstack([A_eq, sp.csr_matrix((n, n - 1))], format="csr"),
+                b_eq=b_eq,
+                bounds=bounds,
+                method="highs",
+            )
             if res.status != 0 or res.x is None:
                 raise RetimingFailed(
                     f"no time law satisfies the drive limits along the path (HiGHS: {res.message})",
                     stage=self.name,
                 )
-            return np.asarray(res.x)
+            return np.asarray(res.x[:nv])
 
         # The reference: the acceleration-limited law (forward-backward pass), averaged over a ramp time.
         ref_rows = [(c.ddu, c.du, np.broadcast_to(sa * lim.a_max, c.du.shape))]
@@ -457,7 +556,7 @@ class JerkLimitedStage:
             bound = jm[None, :] / np.maximum(sd_ref[k], 1e-9)[:, None]
             # Prune: row j bounds |w| by (bound + E) / |u'|, and is implied where (bound - E) / |u'| is
             # above the tightest such bound (E: the largest |3 u'' y + u''' x| within the bounds).
-            E = 3 * np.abs(ddu) * y_best[k, None] + np.abs(c.dddu[iv]) * x_box[k, None]
+            E = 3 * np.abs(ddu) * y_best[k, None] + np.abs(c.dddu[end, iv]) * x_box[k, None]
             dua = np.maximum(np.abs(du), 1e-300)
             w_best = np.min((bound + E) / dua, axis=1)
             keep = dua * w_best[:, None] + E >= bound * (1 - 1e-9)
@@ -471,7 +570,7 @@ class JerkLimitedStage:
             rows = np.concatenate([rr, rr, rr, rr])
             cols = np.concatenate([Y[i + 1], Y[i], Y[kk], X[kk]])
             vals = np.concatenate(
-                [du[ii, jj] / ds[i], -du[ii, jj] / ds[i], 3 * ddu[ii, jj], c.dddu[i, jj]]
+                [du[ii, jj] / ds[i], -du[ii, jj] / ds[i], 3 * ddu[ii, jj], c.dddu[end, i, jj]]
             )
             M = sp.csr_matrix((vals, (rows, cols)), shape=(nr, 2 * (n + 1)))
             mats += [M, -M]
@@ -534,7 +633,10 @@ def _rows(
     nr = len(ii)
     rr = np.arange(nr)
     M = sp.csr_matrix(
-        (np.concatenate([cx[ii, jj], cy[ii, jj]]), (np.concatenate([rr, rr]), np.concatenate([xi[ii], yi[ii]]))),
+        (
+            np.concatenate([cx[ii, jj], cy[ii, jj]]),
+            (np.concatenate([rr, rr]), np.concatenate([xi[ii], yi[ii]])),
+        ),
         shape=(nr, 2 * (n + 1)),
     )
     return sp.vstack([M, -M], format="csr"), np.concatenate([b[ii, jj] - o[ii, jj], b[ii, jj] + o[ii, jj]])
