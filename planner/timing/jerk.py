@@ -72,7 +72,8 @@ JERK_TARGET = 0.96
 JERK_SLACK = 0.04
 #: Geometric refinement of the grid towards each end (halvings of the grid step): the constant-jerk phase
 #: from rest covers only s ~ J t^3 / 6 (0.02 path units for the rail's 0.25 s ramp).
-END_LEVELS = 10
+END_LEVELS = 20
+END_RATIO = 0.5**0.5
 #: Sub-steps per grid interval of the time integral t(s) = int ds / sd (4-point Gauss-Legendre each).
 SUBSTEPS = 4
 #: Trust-region refinements after the first jerk LP (each may raise sd by TRUST where the jerk allows).
@@ -294,7 +295,7 @@ class JerkLimitedStage:
             if not isinstance(piece, LinePiece):
                 m = int(np.clip(np.ceil(piece.length / (0.5 * self.grid_step)), 8, 400))
                 pts.append(path.breaks[k] + np.linspace(0.0, piece.length, m + 1))
-        end = min(self.grid_step, 0.25 * length) * 0.5 ** np.arange(1, END_LEVELS + 1)
+        end = min(self.grid_step, 0.25 * length) * END_RATIO ** np.arange(1, END_LEVELS + 1)
         pts += [end, length - end]
         grid = np.unique(np.clip(np.concatenate(pts), 0.0, length))
         keep = np.concatenate([[True], np.diff(grid) > 1e-9 * max(length, 1.0)])
