@@ -169,8 +169,9 @@ def requirements_for(
 
 
 def timing_of(sc: ResolvedScenario) -> str:
-    """The timing stage of a scenario: ``options.timing``; by default jerk-limited when the robot
-    description has jerk limits, else acceleration-limited.
+    """The timing stage of a scenario: ``options.timing``, else jerk-limited when the robot has jerk limits.
+
+    Without jerk limits in the robot description the default is acceleration-limited (TOPP-RA alone).
 
     On the reference suite the jerk-limited law lasts 1.02-1.08 times the acceleration-limited one (median
     1.04, ``bench.timing``): the planner's corner blends are curvature-continuous (C2), so the jerk

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -178,8 +179,8 @@ class JerkTimedPath:
         return out[: order + 1]
 
 
-def _x_inside(x: Array, y: Array, ds: Array, i: Array, sigma: Array) -> Array:
-    """x = sd^2 at offset sigma into interval i: x_i + 2 y_i sigma + (y_{i+1} - y_i) sigma^2 / ds_i."""
+def _x_inside(x: Array, y: Array, ds: Array, i: Any, sigma: Array) -> Array:
+    """Path speed squared at offset sigma into interval i: x_i + 2 y_i sigma + w sigma^2 (w = dy/ds)."""
     return x[i] + 2.0 * y[i] * sigma + (y[i + 1] - y[i]) / ds[i] * sigma**2
 
 
@@ -295,7 +296,7 @@ class JerkLimitedStage:
             if not isinstance(piece, LinePiece):
                 m = int(np.clip(np.ceil(piece.length / (0.5 * self.grid_step)), 8, 400))
                 pts.append(path.breaks[k] + np.linspace(0.0, piece.length, m + 1))
-        end = min(self.grid_step, 0.25 * length) * END_RATIO ** np.arange(1, END_LEVELS + 1)
+        end = min(self.grid_step, 0.25 * length) * np.power(END_RATIO, np.arange(1.0, END_LEVELS + 1))
         pts += [end, length - end]
         grid = np.unique(np.clip(np.concatenate(pts), 0.0, length))
         keep = np.concatenate([[True], np.diff(grid) > 1e-9 * max(length, 1.0)])
@@ -339,7 +340,6 @@ class JerkLimitedStage:
         sv, sa, sf, sj = frac
         n = len(s) - 1
         ds = np.diff(s)
-        m = self.robot.n_drives
         X, Y = np.arange(n + 1), n + 1 + np.arange(n + 1)
         # Bounds: velocity (and the speed caps where u'' jumps), rest at both ends.
         du_abs = np.maximum(np.abs(c.du), 1e-300)
@@ -546,7 +546,6 @@ class JerkLimitedStage:
     ) -> tuple[sp.csr_matrix, Array]:
         """|u'_j (y_{i+1} - y_i) / ds_i + 3 u''_j y_k + u'''_j x_k| <= j_max / sd_ref_k at both ends k."""
         iv = np.arange(1, n - 1)
-        m = len(jm)
         X, Y = np.arange(n + 1), n + 1 + np.arange(n + 1)
         mats: list[sp.csr_matrix] = []
         rhs: list[Array] = []
@@ -612,8 +611,8 @@ class JerkLimitedStage:
 
 
 def _rows(
-    xi: Array,
-    yi: Array,
+    xi: Any,
+    yi: Any,
     cx: Array,
     cy: Array,
     off: Array | None,

@@ -1,13 +1,15 @@
 """Geometric joint-space paths: straight segments, corner blends and interpolating splines.
 
-A path is a C1 curve q(s) in joint space over s in [0, length], built from pieces:
+A path is a C2 curve q(s) in joint space over s in [0, length] (C1 where a spline meets a line), built from
+pieces:
 
 - :class:`LinePiece`: the certified straight segments of the global planner;
-- :class:`BlendPiece`: a quadratic Bezier replacing the corner at a waypoint w between the points
-  a = w - lam * d_in and b = w + lam * d_out (d the segments' constant derivatives dq/ds). Its derivative
-  at its ends equals the neighbouring segments' derivatives, so the path is C1 there and a time-optimal
-  profile need not stop at the corner. The blend stays inside the triangle (a, w, b); it is certified by
-  the collision layer like every other motion before it is used;
+- :class:`BlendPiece`: a quintic Bezier replacing the corner at a waypoint w between the points
+  a = w - lam * d_in and b = w + lam * d_out (d the segments' constant derivatives dq/ds). Its first
+  derivative at its ends equals the neighbouring segments' derivatives and its second derivative is zero
+  there, so the path is C2 (curvature-continuous): a time-optimal profile need not stop at the corner, and
+  a jerk-limited one need not slow down where the blend begins and ends. The blend stays inside the
+  triangle (a, w, b); it is certified by the collision layer like every other motion before it is used;
 - :class:`SplinePiece`: a cubic spline through densely tracked configurations (the straight-line
   insertion), C2.
 
@@ -165,7 +167,7 @@ def segment_time_length(robot: Cabin8, q0: Array, q1: Array) -> float:
 def blended_polyline(
     robot: Cabin8, waypoints: Array, blend_fraction: Array | float = 0.4
 ) -> tuple[JointPath, list[int]]:
-    """A C1 path along a polyline with a quadratic blend at every interior waypoint.
+    """A C2 path along a polyline with a quintic blend (:class:`BlendPiece`) at every interior waypoint.
 
     Args:
         robot: The robot (for time-like segment lengths).

@@ -75,7 +75,9 @@ def acceleration_limited(ds: Array, cx: Array, cy: Array, b: Array, x_max: Array
 
     Args:
         ds: (N,) grid intervals.
-        cx, cy, b: (N + 1, R) rows cx x + cy y <= b at each grid point (x = sd^2, y = sdd).
+        cx: (N + 1, R) coefficients of x = sd^2 in the rows cx x + cy y <= b at each grid point.
+        cy: (N + 1, R) coefficients of y = sdd.
+        b: (N + 1, R) right-hand sides.
         x_max: (N + 1,) upper bound of x at each point (velocity limits).
     """
     return np.asarray(

@@ -21,7 +21,6 @@ holds on every sample.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -113,21 +112,6 @@ class _DrivePathAdapter(toppra.interpolator.AbstractGeometricPath):
         return None
 
 
-class _CappedVelocityConstraint(toppra.constraint.JointVelocityConstraint):
-    """Drive velocity limits, and the path speed sd <= cap(s) where ``cap`` is finite (sd^2 bound)."""
-
-    def __init__(self, vlim: Array, cap: Callable[[Array], Array]) -> None:
-        super().__init__(vlim)
-        self.cap = cap
-
-    def compute_constraint_params(self, path: Any, gridpoints: Array) -> tuple[Any, ...]:
-        out = list(super().compute_constraint_params(path, gridpoints))
-        xbound = np.array(out[6], dtype=float)
-        xbound[:, 1] = np.minimum(xbound[:, 1], np.asarray(self.cap(np.asarray(gridpoints))) ** 2)
-        out[6] = xbound
-        return tuple(out)
-
-
 class _DriveForceConstraint(toppra.constraint.LinearConstraint):
     """|tau_u| <= F_max along the path, coefficients from the vectorised inverse dynamics."""
 
@@ -198,11 +182,6 @@ class ToppraStage:
     min_points: int = 60
     max_points: int = 3000
     name: str = "toppra"
-    #: Optional bound on the path speed, ``cap(s) -> sd_max`` at grid points (inf: none); the jerk-limited
-    #: stage (:mod:`planner.timing.jerk`) slows down with it where the path's curvature jumps.
-    path_speed_cap: Callable[[Array], Array] | None = None
-    #: Optional extra grid points (path parameters), e.g. the ends of the zones ``path_speed_cap`` bounds.
-    extra_points: Array | None = None
 
     def __post_init__(self) -> None:
         self.dynamics = drive_dynamics(self.robot)
@@ -214,9 +193,7 @@ class ToppraStage:
         adapter = _DrivePathAdapter(path, self.robot)
         vlim = np.column_stack([-sv * lim.v_max, sv * lim.v_max])
         constraints: list[toppra.constraint.Constraint] = [
-            toppra.constraint.JointVelocityConstraint(vlim)
-            if self.path_speed_cap is None
-            else _CappedVelocityConstraint(vlim, self.path_speed_cap),
+            toppra.constraint.JointVelocityConstraint(vlim),
             toppra.constraint.JointAccelerationConstraint(
                 np.column_stack([-sa * lim.a_max, sa * lim.a_max]),
                 discretization_scheme=toppra.constraint.DiscretizationType.Interpolation,
@@ -225,10 +202,6 @@ class ToppraStage:
         if self.dynamics is not None:
             constraints.append(_DriveForceConstraint(self.dynamics, self.payload, sf * lim.effort_max))
         grid = _grid(path, self.grid_step, self.min_points, self.max_points)
-        if self.extra_points is not None:
-            extra = np.clip(np.asarray(self.extra_points, dtype=float), 0.0, path.length)
-            grid = np.unique(np.concatenate([grid, extra]))
-            grid = grid[np.concatenate([[True], np.diff(grid) > 1e-9])]
         # A drive that cannot even hold the payload somewhere makes the problem infeasible at any speed
         # (and gives toppra's LP a row 0 * x <= negative, which it divides by): refuse it first, by name.
         overload = self._static_overload(path, grid) if self.dynamics is not None else None
