@@ -77,9 +77,6 @@ END_LEVELS = 20
 END_RATIO = 0.5**0.5
 #: Sub-steps per grid interval of the time integral t(s) = int ds / sd (4-point Gauss-Legendre each).
 SUBSTEPS = 4
-#: Trust-region refinements after the first jerk LP (each may raise sd by TRUST where the jerk allows).
-REFINE = 0
-TRUST = 1.15
 #: Tangent points of the time objective, as fractions of the reference speed's x = sd^2.
 TANGENTS = np.array([1.0, 0.6, 0.35, 0.18, 0.08, 0.03])
 
@@ -334,200 +331,124 @@ class JerkLimitedStage:
     def _solve(
         self, path: JointPath, s: Array, c: _Coefficients, frac: tuple[float, float, float, float]
     ) -> tuple[Array, Array]:
-        """The sequential LP (see the module docstring): grid values x = sd^2, y = sdd."""
+        """The jerk LP (see the module docstring): grid values x = sd^2, y = sdd.
+
+        Columns: x_0..x_N, y_0..y_N, then the time epigraph tau_1..tau_{N-1} of the inner points.
+        """
         lim = self.robot.limits
         assert lim.j_max is not None
         sv, sa, sf, sj = frac
         n = len(s) - 1
         ds = np.diff(s)
-        X, Y = np.arange(n + 1), n + 1 + np.arange(n + 1)
-        # Bounds: velocity (and the speed caps where u'' jumps), rest at both ends.
+        X, Y, T = np.arange(n + 1), n + 1 + np.arange(n + 1), 2 * (n + 1) + np.arange(n - 1)
+        pts, iv = np.arange(1, n), np.arange(1, n - 1)  # inner points, inner intervals
+        v_max, a_max = sv * lim.v_max, sa * lim.a_max
         du_abs = np.maximum(np.abs(c.du), 1e-300)
-        # Velocity: at each point and the middle of its intervals (u' changes along a blend).
-        x_max = np.min(np.minimum(sv * lim.v_max[None, :] / du_abs, 1e3) ** 2, axis=1)
-        x_mid = np.min(
-            np.minimum(sv * lim.v_max[None, :] / np.maximum(np.abs(c.du_mid), 1e-300), 1e3) ** 2, axis=1
-        )
+        # Bounds. Velocity at each point and the middle of its intervals (u' changes along a blend);
+        # the speed caps where u'' jumps; rest at both ends.
+        x_max = np.min(np.minimum(v_max / du_abs, 1e3) ** 2, axis=1)
+        x_mid = np.min(np.minimum(v_max / np.maximum(np.abs(c.du_mid), 1e-300), 1e3) ** 2, axis=1)
         x_max[:-1] = np.minimum(x_max[:-1], x_mid)
         x_max[1:] = np.minimum(x_max[1:], x_mid)
         jump = np.abs(c.ddu - c.ddu_left)
         if np.any(jump > 0):
             budget = JUMP_SHARE * sj * lim.j_max * self.sample_period_s
-            with np.errstate(divide="ignore"):
-                x_max = np.minimum(x_max, np.min(budget[None, :] / np.maximum(jump, 1e-300), axis=1))
-        lo = np.concatenate([np.zeros(n + 1), np.full(n + 1, -np.inf)])
-        hi = np.concatenate([x_max, np.full(n + 1, np.inf)])
+            x_max = np.minimum(x_max, np.min(budget / np.maximum(jump, 1e-300), axis=1))
         jm = sj * lim.j_max
+        y_lo, y_hi = np.full(n + 1, -np.inf), np.full(n + 1, np.inf)
         # Constant-jerk end phases: J = sqrt(y^3 / (6 ds)) <= the path jerk every drive allows there.
         for k, inner, e in ((0, 1, 0), (n, n - 1, n - 1)):
-            J = float(np.min(jm / np.maximum(np.maximum(du_abs[k], du_abs[inner]), 1e-12)))
-            ymax = np.cbrt(6.0 * ds[e] * J**2)
+            J = float(np.min(jm / np.maximum(du_abs[k], du_abs[inner])))
+            y_end = float(np.cbrt(6.0 * ds[e] * J**2))
             if k == 0:
-                hi[Y[inner]] = min(hi[Y[inner]], ymax)
+                y_hi[inner] = y_end
             else:
-                lo[Y[inner]] = max(lo[Y[inner]], -ymax)
-        for v in (X[0], X[n], Y[0], Y[n]):
-            lo[v] = hi[v] = 0.0
-        # Dynamics: x_{i+1} = x_i + (y_i + y_{i+1}) ds_i; the end phases x = 1.5 |y| ds.
-        r = np.arange(n)
-        mid = np.arange(1, n - 1)
-        rows = np.concatenate([r, r, mid, mid])
-        cols = np.concatenate([X[1:], X[:-1], Y[mid], Y[mid + 1]])
-        vals = np.concatenate([np.ones(n), -np.ones(n), -ds[mid], -ds[mid]])
-        vals[n] = 0.0  # x_0 = 0 (fixed): the first interval's row is x_1 - 1.5 ds_0 y_1
-        rows = np.concatenate([rows, [0, n - 1]])
-        cols = np.concatenate([cols, [Y[1], Y[n - 1]]])
-        vals = np.concatenate([vals, [-1.5 * ds[0], -1.5 * ds[n - 1]]])
-        A_eq = sp.csr_matrix((vals, (rows, cols)), shape=(n, 2 * (n + 1)))
-        b_eq = np.zeros(n)
-        # Acceleration and force rows at the inner grid points (both sides of a boundary where u'' jumps).
-        pts = np.arange(1, n)
-        x_box = hi[X]
-        blocks: list[tuple[sp.csr_matrix, Array]] = []
+                y_lo[inner] = -y_end
+        y_lo[[0, n]] = y_hi[[0, n]] = 0.0
+        # |y| at each point is at most what its tightest acceleration row allows (for pruning).
         y_best = np.full(n + 1, np.inf)
         for ddu in (c.ddu, c.ddu_left):
-            y_best = np.minimum(
-                y_best, np.min((sa * lim.a_max + np.abs(ddu) * x_box[:, None]) / du_abs, axis=1)
-            )
-        left_rows = np.flatnonzero(np.any(jump[pts] > 0, axis=1))
-        for ddu, at in ((c.ddu, pts), (c.ddu_left, pts[left_rows])):
-            blocks.append(
-                _rows(X[at], Y[at], ddu[at], c.du[at], None, sa * lim.a_max, x_box[at], y_best[at], n)
-            )
+            y_best = np.minimum(y_best, np.min((a_max + np.abs(ddu) * x_max[:, None]) / du_abs, axis=1))
+
+        # Dynamics: x_{i+1} = x_i + (y_i + y_{i+1}) ds_i; the end phases x = 1.5 |y| ds.
+        eq = _Rows()
+        eq.add([X[iv + 1], X[iv], Y[iv], Y[iv + 1]], [1.0, -1.0, -ds[iv], -ds[iv]], np.zeros(len(iv)))
+        eq.add([X[[1, n - 1]], Y[[1, n - 1]]], [1.0, np.array([-1.5 * ds[0], 1.5 * ds[n - 1]])], np.zeros(2))
+        rows = _Rows()
+        # Acceleration and force rows at the inner points (both sides of a boundary where u'' jumps).
+        left = pts[np.any(jump[pts] > 0, axis=1)]
+        for ddu, at in ((c.ddu, pts), (c.ddu_left, left)):
+            rows.two_sided([X[at], Y[at]], [ddu[at], c.du[at]], a_max, None, [x_max[at], y_best[at]])
         if c.force is not None:
             A, B, C = c.force
-            blocks.append(
-                _rows(X[pts], Y[pts], B[pts], A[pts], C[pts], sf * lim.effort_max, x_box[pts], y_best[pts], n)
+            rows.two_sided(
+                [X[pts], Y[pts]], [B[pts], A[pts]], sf * lim.effort_max, C[pts], [x_max[pts], y_best[pts]]
             )
         # The middle of each inner interval (x is quadratic there, u' and u'' change along a blend):
         # x_mid = x_i + ds (0.75 y_i + 0.25 y_{i+1}) within the velocity bound there, and the
         # acceleration rows with y_mid = (y_i + y_{i+1}) / 2.
-        iv = np.arange(1, n - 1)
-        ni = len(iv)
-        if ni:
-            xv_mid = np.min(
-                np.minimum(sv * lim.v_max[None, :] / np.maximum(np.abs(c.du_mid[iv]), 1e-300), 1e3) ** 2,
-                axis=1,
-            )
-            rr = np.arange(ni)
-            blocks.append(
-                (
-                    sp.csr_matrix(
-                        (
-                            np.concatenate([np.ones(ni), 0.75 * ds[iv], 0.25 * ds[iv]]),
-                            (np.concatenate([rr, rr, rr]), np.concatenate([X[iv], Y[iv], Y[iv + 1]])),
-                        ),
-                        shape=(ni, 2 * (n + 1)),
-                    ),
-                    xv_mid,
-                )
-            )
+        if len(iv):
+            rows.add([X[iv], Y[iv], Y[iv + 1]], [1.0, 0.75 * ds[iv], 0.25 * ds[iv]], x_mid[iv])
             dm, ddm = c.du_mid[iv], c.ddu_mid[iv]
-            cyi = 0.75 * ds[iv, None] * ddm + 0.5 * dm
-            cyj = 0.25 * ds[iv, None] * ddm + 0.5 * dm
-            yb = np.maximum(y_best[iv], y_best[iv + 1])[:, None]
-            peak = np.abs(ddm) * xv_mid[:, None] + (np.abs(cyi) + np.abs(cyj)) * np.minimum(yb, 1e12)
-            amax = sa * lim.a_max[None, :]
-            ii, jj = np.nonzero(peak >= amax * (1 - 1e-9))
-            nr = len(ii)
-            if nr:
-                rr = np.arange(nr)
-                M = sp.csr_matrix(
-                    (
-                        np.concatenate([ddm[ii, jj], cyi[ii, jj], cyj[ii, jj]]),
-                        (np.concatenate([rr, rr, rr]), np.concatenate([X[iv[ii]], Y[iv[ii]], Y[iv[ii] + 1]])),
-                    ),
-                    shape=(nr, 2 * (n + 1)),
-                )
-                b_mid = np.broadcast_to(amax, dm.shape)[ii, jj]
-                blocks.append((sp.vstack([M, -M], format="csr"), np.concatenate([b_mid, b_mid])))
-        base_A = sp.vstack([b[0] for b in blocks], format="csr")
-        base_b = np.concatenate([b[1] for b in blocks])
-        nv = 2 * (n + 1)
-        h = (ds[:-1] + ds[1:]) / 2  # each inner point's share of the path
-
-        def run(extra: tuple[sp.csr_matrix, Array], x_ref: Array) -> Array:
-            """Minimise the time sum h_i / sqrt(x_i) (epigraph tau_i over tangents of the convex 1/sqrt)."""
-            xr = x_ref[1:-1, None] * TANGENTS[None, :]
-            slope = -0.5 * h[:, None] * xr**-1.5
-            icpt = h[:, None] * xr**-0.5 - slope * xr
-            k = len(TANGENTS)
-            rr = np.arange((n - 1) * k)
-            pt = np.repeat(np.arange(n - 1), k)
-            epi = sp.csr_matrix(
-                (
-                    np.concatenate([slope.ravel(), -np.ones(len(rr))]),
-                    (np.concatenate([rr, rr]), np.concatenate([X[1:-1][pt], nv + pt])),
-                ),
-                shape=(len(rr), nv + n - 1),
+            d = ds[iv, None]
+            y_mid = np.maximum(y_best[iv], y_best[iv + 1])
+            rows.two_sided(
+                [X[iv], Y[iv], Y[iv + 1]],
+                [ddm, 0.75 * d * ddm + 0.5 * dm, 0.25 * d * ddm + 0.5 * dm],
+                a_max,
+                None,
+                [x_mid[iv], y_mid, y_mid],
             )
-            pad = sp.csr_matrix((0, n - 1))
-            A_ub = sp.vstack(
-                [
-                    sp.hstack(
-                        [
-                            sp.vstack([base_A, extra[0]]),
-                            sp.csr_matrix((base_A.shape[0] + extra[0].shape[0], n - 1)),
-                        ]
-                    ),
-                    epi,
-                ],
-                format="csr",
-            )
-            b_ub = np.concatenate([base_b, extra[1], -icpt.ravel()])
-            del pad
-            cost = np.concatenate([np.zeros(nv), np.ones(n - 1)])
-            bounds = np.column_stack(
-                [
-                    np.concatenate([lo, np.zeros(n - 1)]),
-                    np.concatenate([x_ref, hi[Y], np.full(n - 1, np.inf)]),
-                ]
-            )
-            res = linprog(
-                cost,
-                A_ub=A_ub,
-                b_ub=b_ub,
-                A_eq=sp.hstack([A_eq, sp.csr_matrix((n, n - 1))], format="csr"),
-                b_eq=b_eq,
-                bounds=bounds,
-                method="highs",
-            )
-            if res.status != 0 or res.x is None:
-                raise RetimingFailed(
-                    f"no time law satisfies the drive limits along the path (HiGHS: {res.message})",
-                    stage=self.name,
-                )
-            return np.asarray(res.x[:nv])
 
         # The reference: the acceleration-limited law (forward-backward pass), averaged over a ramp time.
-        ref_rows = [(c.ddu, c.du, np.broadcast_to(sa * lim.a_max, c.du.shape))]
+        ref = [
+            (c.ddu, c.du, np.broadcast_to(a_max, c.du.shape)),
+            (-c.ddu, -c.du, np.broadcast_to(a_max, c.du.shape)),
+        ]
         if c.force is not None:
             A, B, C = c.force
-            ref_rows.append((B, A, sf * lim.effort_max[None, :] - C))
-            ref_rows.append((-B, -A, sf * lim.effort_max[None, :] + C))
-        ref_rows.insert(1, (-c.ddu, -c.du, ref_rows[0][2]))
-        cx, cy, cb = (np.hstack([r[k] for r in ref_rows]) for k in range(3))
-        x_acc = acceleration_limited(ds, cx, cy, cb, hi[X])
-        x_ref = np.minimum(x_acc, self._box_reference(path, s, x_acc, sa / 0.97 * JERK_TARGET))
+            ref += [(B, A, sf * lim.effort_max - C), (-B, -A, sf * lim.effort_max + C)]
+        cx, cy, cb = (np.hstack([r[k] for r in ref]) for k in range(3))
+        x_acc = acceleration_limited(ds, cx, cy, cb, x_max)
+        window = float(np.max(a_max / jm))  # the ramp time of the slowest acceleration change
+        x_ref = np.minimum(x_acc, self._box_reference(path, s, x_acc, window))
         x_ref = np.maximum(x_ref, 1e-12)
-        z = run(self._jerk_rows(c, ds, np.sqrt(x_ref), jm, x_ref, y_best, n), x_ref)
-        for _ in range(REFINE):
-            x_ref = np.maximum(np.minimum(hi[X], TRUST**2 * np.maximum(z[X], 0.0)), 1e-12)
-            z = run(self._jerk_rows(c, ds, np.sqrt(x_ref), jm, x_ref, y_best, n), x_ref)
+        self._jerk_rows(rows, c, ds, np.sqrt(x_ref), jm, x_ref, y_best)
+        # The time sum h_i / sqrt(x_i), by its epigraph over tangents of the convex 1 / sqrt(x).
+        h = (ds[:-1] + ds[1:]) / 2
+        xr = x_ref[1:-1, None] * TANGENTS[None, :]
+        slope = -0.5 * h[:, None] * xr**-1.5
+        icpt = h[:, None] * xr**-0.5 - slope * xr
+        k = len(TANGENTS)
+        rows.add([np.repeat(X[1:-1], k), np.repeat(T, k)], [slope.ravel(), -1.0], -icpt.ravel())
+        nc = 3 * n + 1
+        cost = np.zeros(nc)
+        cost[T] = 1.0
+        lo = np.concatenate([np.zeros(n + 1), y_lo, np.zeros(n - 1)])
+        hi = np.concatenate([x_ref, y_hi, np.full(n - 1, np.inf)])
+        lo[X[[0, n]]] = hi[X[[0, n]]] = 0.0
+        A_ub, b_ub = rows.matrix(nc)
+        A_eq, b_eq = eq.matrix(nc)
+        res = linprog(
+            cost, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=np.column_stack([lo, hi]), method="highs"
+        )
+        if res.status != 0 or res.x is None:
+            raise RetimingFailed(
+                f"no time law satisfies the drive limits along the path (HiGHS: {res.message})",
+                stage=self.name,
+            )
+        z = np.asarray(res.x)
         return np.maximum(z[X], 0.0), z[Y]
 
-    def _box_reference(self, path: JointPath, s: Array, x: Array, share: float) -> Array:
+    def _box_reference(self, path: JointPath, s: Array, x: Array, window: float) -> Array:
         """sd^2 at the grid of the acceleration-limited law averaged over one acceleration ramp time.
 
         On a straight line that cruises, this box filter of the time law is the time-optimal jerk-limited
         law (Biagiotti & Melchiorri 2008, sec. 4.2.3); it is the jerk LP's reference speed.
         """
-        lim = self.robot.limits
-        assert lim.j_max is not None
         sd = np.sqrt(x)
         dt_grid = 2.0 * np.diff(s) / np.maximum(sd[:-1] + sd[1:], 1e-12)
         base = ToppraTimedPath(path, s, sd, np.concatenate([[0.0], np.cumsum(dt_grid)]))
-        window = float(np.max(lim.a_max / (share * lim.j_max)))
         lag = 16
         dt = window / lag
         t = np.arange(0.0, base.duration + window + dt, dt)
@@ -542,42 +463,29 @@ class JerkLimitedStage:
         return np.asarray(np.interp(s, pos, sd_box**2))
 
     def _jerk_rows(
-        self, c: _Coefficients, ds: Array, sd_ref: Array, jm: Array, x_box: Array, y_best: Array, n: int
-    ) -> tuple[sp.csr_matrix, Array]:
-        """|u'_j (y_{i+1} - y_i) / ds_i + 3 u''_j y_k + u'''_j x_k| <= j_max / sd_ref_k at both ends k."""
+        self, rows: _Rows, c: _Coefficients, ds: Array, sd_ref: Array, jm: Array, x_box: Array, y_best: Array
+    ) -> None:
+        """|u'_j (y_{i+1} - y_i) / ds_i + 3 u''_j y_k + u'''_j x_k| <= j_max / sd_ref_k at both ends k.
+
+        Pruned: row j bounds |y'| by (bound + E) / |u'_j| and is implied where (bound - E) / |u'_j| lies
+        above the tightest such bound (E: the largest |3 u'' y + u''' x| within the bounds).
+        """
+        n = len(ds)
         iv = np.arange(1, n - 1)
         X, Y = np.arange(n + 1), n + 1 + np.arange(n + 1)
-        mats: list[sp.csr_matrix] = []
-        rhs: list[Array] = []
         for end in (0, 1):
             k = iv + end
             ddu = c.ddu[k] if end == 0 else c.ddu_left[k]
-            du = c.du[k]
+            du, dddu = c.du[k], c.dddu[end, iv]
             bound = jm[None, :] / np.maximum(sd_ref[k], 1e-9)[:, None]
-            # Prune: row j bounds |w| by (bound + E) / |u'|, and is implied where (bound - E) / |u'| is
-            # above the tightest such bound (E: the largest |3 u'' y + u''' x| within the bounds).
-            E = 3 * np.abs(ddu) * y_best[k, None] + np.abs(c.dddu[end, iv]) * x_box[k, None]
+            E = 3 * np.abs(ddu) * y_best[k, None] + np.abs(dddu) * x_box[k, None]
             dua = np.maximum(np.abs(du), 1e-300)
             w_best = np.min((bound + E) / dua, axis=1)
-            keep = dua * w_best[:, None] + E >= bound * (1 - 1e-9)
-            ii, jj = np.nonzero(keep)
-            nr = len(ii)
-            if nr == 0:
-                continue
-            rr = np.arange(nr)
-            i = iv[ii]
-            kk = k[ii]
-            rows = np.concatenate([rr, rr, rr, rr])
-            cols = np.concatenate([Y[i + 1], Y[i], Y[kk], X[kk]])
-            vals = np.concatenate(
-                [du[ii, jj] / ds[i], -du[ii, jj] / ds[i], 3 * ddu[ii, jj], c.dddu[end, i, jj]]
+            ii, jj = np.nonzero(dua * w_best[:, None] + E >= bound * (1 - 1e-9))
+            i, kk, w = iv[ii], k[ii], du[ii, jj] / ds[iv[ii]]
+            rows.add_pairs(
+                [Y[i + 1], Y[i], Y[kk], X[kk]], [w, -w, 3 * ddu[ii, jj], dddu[ii, jj]], bound[ii, jj], None
             )
-            M = sp.csr_matrix((vals, (rows, cols)), shape=(nr, 2 * (n + 1)))
-            mats += [M, -M]
-            rhs += [bound[ii, jj], bound[ii, jj]]
-        if not mats:
-            return sp.csr_matrix((0, 2 * (n + 1))), np.zeros(0)
-        return sp.vstack(mats, format="csr"), np.concatenate(rhs)
 
     def _sample(self, timed: JerkTimedPath) -> _Sampled:
         """The law sampled at the controller period, as the gate sees it (peak ratios to the limits)."""
@@ -610,33 +518,56 @@ class JerkLimitedStage:
         )
 
 
-def _rows(
-    xi: Any,
-    yi: Any,
-    cx: Array,
-    cy: Array,
-    off: Array | None,
-    bound: Array,
-    x_box: Array,
-    y_box: Array,
-    n: int,
-) -> tuple[sp.csr_matrix, Array]:
-    """Two-sided rows |cx x + cy y + off| <= bound per point and drive, those that can be active.
+class _Rows:
+    """Sparse LP rows sum_t coef_t z[col_t] <= rhs, collected as triplets (one matrix at the end)."""
 
-    A row whose largest value over x in [0, x_box], |y| <= y_box (bounds the other rows imply) stays below
-    its limit is dropped.
-    """
-    o = np.zeros_like(cx) if off is None else off
-    b = np.broadcast_to(bound, cx.shape)
-    peak = np.abs(cx) * x_box[:, None] + np.abs(cy) * np.minimum(y_box, 1e12)[:, None] + np.abs(o)
-    ii, jj = np.nonzero(peak >= b * (1 - 1e-9))
-    nr = len(ii)
-    rr = np.arange(nr)
-    M = sp.csr_matrix(
-        (
-            np.concatenate([cx[ii, jj], cy[ii, jj]]),
-            (np.concatenate([rr, rr]), np.concatenate([xi[ii], yi[ii]])),
-        ),
-        shape=(nr, 2 * (n + 1)),
-    )
-    return sp.vstack([M, -M], format="csr"), np.concatenate([b[ii, jj] - o[ii, jj], b[ii, jj] + o[ii, jj]])
+    def __init__(self) -> None:
+        self.r: list[Array] = []
+        self.c: list[Array] = []
+        self.v: list[Array] = []
+        self.b: list[Array] = []
+        self.n = 0
+
+    def add(self, cols: list[Any], coefs: list[Any], rhs: Array) -> None:
+        """Rows with one term per entry of ``cols`` (index arrays (k,)), coefficients (k,) or scalars."""
+        k = len(rhs)
+        if k == 0:
+            return
+        r = self.n + np.arange(k)
+        for col, coef in zip(cols, coefs, strict=True):
+            self.r.append(r)
+            self.c.append(np.asarray(col))
+            self.v.append(np.broadcast_to(np.asarray(coef, dtype=float), (k,)))
+        self.b.append(np.asarray(rhs, dtype=float))
+        self.n += k
+
+    def add_pairs(self, cols: list[Any], coefs: list[Any], bound: Array, offset: Array | None) -> None:
+        """Two-sided rows |sum coef z + offset| <= bound."""
+        o = np.zeros_like(bound) if offset is None else offset
+        self.add(cols, coefs, bound - o)
+        self.add(cols, [-np.asarray(cf) for cf in coefs], bound + o)
+
+    def two_sided(
+        self, cols: list[Any], coefs: list[Array], bound: Array, offset: Array | None, box: list[Array]
+    ) -> None:
+        """|sum_t coef_t z_t + offset| <= bound per point and drive (coefs (k, m)), the rows that can bind.
+
+        A row whose largest value with each |z_t| <= box_t (k,) (bounds the kept rows imply) stays below
+        its limit is dropped.
+        """
+        b = np.broadcast_to(bound, coefs[0].shape)
+        o = np.zeros_like(coefs[0]) if offset is None else offset
+        peak = np.abs(o) + sum(
+            np.abs(cf) * np.minimum(bx, 1e12)[:, None] for cf, bx in zip(coefs, box, strict=True)
+        )
+        ii, jj = np.nonzero(peak >= b * (1 - 1e-9))
+        self.add_pairs([col[ii] for col in cols], [cf[ii, jj] for cf in coefs], b[ii, jj], o[ii, jj])
+
+    def matrix(self, n_cols: int) -> tuple[sp.csc_matrix, Array]:
+        """The rows as one sparse matrix (n rows, n_cols) and their right-hand sides."""
+        if not self.b:
+            return sp.csc_matrix((0, n_cols)), np.zeros(0)
+        M = sp.coo_matrix(
+            (np.concatenate(self.v), (np.concatenate(self.r), np.concatenate(self.c))), shape=(self.n, n_cols)
+        )
+        return M.tocsc(), np.concatenate(self.b)
