@@ -52,6 +52,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
+try:  # HiGHS's bindings as scipy ships them (see _highs)
+    from scipy.optimize._highspy import _core
+except ImportError:  # pragma: no cover
+    _core = None
+
 from planner.core.exceptions import RetimingFailed
 from planner.core.types import Array
 from planner.dynamics.models import drive_dynamics
@@ -429,15 +434,13 @@ class JerkLimitedStage:
         lo[X[[0, n]]] = hi[X[[0, n]]] = 0.0
         A_ub, b_ub = rows.matrix(nc)
         A_eq, b_eq = eq.matrix(nc)
-        res = linprog(
-            cost, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=np.column_stack([lo, hi]), method="highs"
-        )
-        if res.status != 0 or res.x is None:
+        A = sp.vstack([A_ub, A_eq], format="csc")
+        row_lo = np.concatenate([np.full(len(b_ub), -np.inf), b_eq])
+        z, message = _highs(cost, A, row_lo, np.concatenate([b_ub, b_eq]), lo, hi)
+        if z is None:
             raise RetimingFailed(
-                f"no time law satisfies the drive limits along the path (HiGHS: {res.message})",
-                stage=self.name,
+                f"no time law satisfies the drive limits along the path (HiGHS: {message})", stage=self.name
             )
-        z = np.asarray(res.x)
         return np.maximum(z[X], 0.0), z[Y]
 
     def _box_reference(self, path: JointPath, s: Array, x: Array, window: float) -> Array:
@@ -522,8 +525,8 @@ class _Rows:
     """Sparse LP rows sum_t coef_t z[col_t] <= rhs, collected as triplets (one matrix at the end)."""
 
     def __init__(self) -> None:
-        self.r: list[Array] = []
-        self.c: list[Array] = []
+        self.r: list[Any] = []
+        self.c: list[Any] = []
         self.v: list[Array] = []
         self.b: list[Array] = []
         self.n = 0
@@ -571,3 +574,46 @@ class _Rows:
             (np.concatenate(self.v), (np.concatenate(self.r), np.concatenate(self.c))), shape=(self.n, n_cols)
         )
         return M.tocsc(), np.concatenate(self.b)
+
+
+def _highs(
+    cost: Array, A: sp.csc_matrix, row_lo: Array, row_hi: Array, col_lo: Array, col_hi: Array
+) -> tuple[Array | None, str]:
+    """Minimise cost . z subject to row_lo <= A z <= row_hi, col_lo <= z <= col_hi (HiGHS).
+
+    HiGHS is called through the bindings scipy ships (``scipy.optimize._highspy``, the ones behind
+    ``linprog(method="highs")``): ``linprog``'s input checks and its per-column Python loop over the
+    bound multipliers cost as much as the solve on these LPs. Without those bindings, ``linprog`` itself.
+
+    Returns:
+        The solution (None if the LP has none) and HiGHS's status message.
+    """
+    if _core is None:  # pragma: no cover - scipy without its HiGHS bindings module
+        eq = row_lo == row_hi
+        res = linprog(
+            cost,
+            A_ub=A[~eq],
+            b_ub=row_hi[~eq],
+            A_eq=A[eq],
+            b_eq=row_hi[eq],
+            bounds=np.column_stack([col_lo, col_hi]),
+            method="highs",
+        )
+        return (np.asarray(res.x) if res.status == 0 else None), str(res.message)
+    lp = _core.HighsLp()
+    lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
+    lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, col_lo, col_hi
+    lp.row_lower_, lp.row_upper_ = row_lo, row_hi
+    m = lp.a_matrix_
+    m.format_ = _core.MatrixFormat.kColwise
+    m.num_col_, m.num_row_ = A.shape[1], A.shape[0]
+    m.start_, m.index_, m.value_ = A.indptr, A.indices, A.data
+    highs = _core._Highs()
+    highs.setOptionValue("output_flag", False)
+    highs.passModel(lp)
+    highs.run()
+    status = highs.getModelStatus()
+    message = highs.modelStatusToString(status)
+    if status != _core.HighsModelStatus.kOptimal:
+        return None, message
+    return np.asarray(highs.getSolution().col_value), message
