@@ -83,7 +83,7 @@ END_RATIO = 0.5**0.5
 #: Sub-steps per grid interval of the time integral t(s) = int ds / sd (4-point Gauss-Legendre each).
 SUBSTEPS = 4
 #: Tangent points of the time objective, as fractions of the reference speed's x = sd^2.
-TANGENTS = np.array([1.0, 0.6, 0.35, 0.18, 0.08, 0.03])
+TANGENTS = np.array([1.0, 0.4, 0.1])
 
 
 @dataclass(frozen=True)
@@ -234,7 +234,7 @@ class JerkLimitedStage:
     payload: RigidPayload | None = None
     safety: tuple[float, float, float] = (0.995, 0.97, 0.97)
     sample_period_s: float = 0.004
-    grid_step: float = 0.12
+    grid_step: float = 0.15
     min_points: int = 24
     max_points: int = 3000
     name: str = "jerk_limited"
