@@ -154,11 +154,11 @@ def main() -> None:
         f"{run.max():.1f} ms (TOPP-RA alone: median {np.median(topp):.1f} ms); CPU time median "
         f"{np.median(cpu):.1f} ms (TOPP-RA {np.median(topp_cpu):.1f} ms)"
     )
-    print(f"load average at the end: {os.getloadavg()[0]:.2f} (1 min), {os.getloadavg()[1]:.2f} (5 min)")
     print(
         f"whole plan time, jerk / acceleration-limited: median x{np.median(growth):.3f} [<= 1.20], "
         f"max x{growth.max():.3f}"
     )
+    print(f"load average at the end: {os.getloadavg()[0]:.2f} (1 min), {os.getloadavg()[1]:.2f} (5 min)")
 
 
 if __name__ == "__main__":
