@@ -167,8 +167,8 @@ def test_a_start_inside_the_planning_margin_is_refused_at_once_with_the_reason()
 def test_tight_blends_pass_the_gate_at_the_first_timing() -> None:
     """A 3% corner blend (cluttered-bay-insert, seed 3) passes the gate at the first timing.
 
-    The path's curvature jumps where a line enters the blend; timed on a grid that sees both sides of every
-    piece boundary, no acceleration overshoots after it.
+    A tight blend turns fast (its curvature changes as 1 / lam^2 along it): the jerk-limited law, whose
+    LP sees the blend's middle and both its ends, crosses it within every limit at the first timing.
     """
     import dataclasses
 
