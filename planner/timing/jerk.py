@@ -386,10 +386,12 @@ class JerkLimitedStage:
             y_best = np.minimum(y_best, np.min((a_max + np.abs(ddu) * x_max[:, None]) / du_abs, axis=1))
 
         # Dynamics: x_{i+1} = x_i + (y_i + y_{i+1}) ds_i; the end phases x = 1.5 |y| ds.
-        eq = _Rows()
-        eq.add([X[iv + 1], X[iv], Y[iv], Y[iv + 1]], [1.0, -1.0, -ds[iv], -ds[iv]], np.zeros(len(iv)))
-        eq.add([X[[1, n - 1]], Y[[1, n - 1]]], [1.0, np.array([-1.5 * ds[0], 1.5 * ds[n - 1]])], np.zeros(2))
-        rows = _Rows()
+        rows = _Rows()  # the equalities first (row_lo = row_hi = 0), then the inequalities
+        rows.add([X[iv + 1], X[iv], Y[iv], Y[iv + 1]], [1.0, -1.0, -ds[iv], -ds[iv]], np.zeros(len(iv)))
+        rows.add(
+            [X[[1, n - 1]], Y[[1, n - 1]]], [1.0, np.array([-1.5 * ds[0], 1.5 * ds[n - 1]])], np.zeros(2)
+        )
+        n_eq = rows.n
         # Acceleration and force rows at the inner points (both sides of a boundary where u'' jumps).
         left = pts[np.any(jump[pts] > 0, axis=1)]
         for ddu, at in ((c.ddu, pts), (c.ddu_left, left)):
@@ -442,11 +444,10 @@ class JerkLimitedStage:
         lo = np.concatenate([np.zeros(n + 1), y_lo, np.zeros(n - 1)])
         hi = np.concatenate([x_ref, y_hi, np.full(n - 1, np.inf)])
         lo[X[[0, n]]] = hi[X[[0, n]]] = 0.0
-        A_ub, b_ub = rows.matrix(nc)
-        A_eq, b_eq = eq.matrix(nc)
-        A = sp.vstack([A_ub, A_eq], format="csc")
-        row_lo = np.concatenate([np.full(len(b_ub), -np.inf), b_eq])
-        z, message = _highs(cost, A, row_lo, np.concatenate([b_ub, b_eq]), lo, hi)
+        A, row_hi = rows.matrix(nc)
+        row_lo = np.full(len(row_hi), -np.inf)
+        row_lo[:n_eq] = row_hi[:n_eq]
+        z, message = _highs(cost, A, row_lo, row_hi, lo, hi)
         if z is None:
             raise RetimingFailed(
                 f"no time law satisfies the drive limits along the path (HiGHS: {message})", stage=self.name
