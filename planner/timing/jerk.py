@@ -76,6 +76,8 @@ log = logging.getLogger(__name__)
 
 #: Re-solves of one path after a sampled limit excess before the stage refuses it.
 MAX_ITERATIONS = 6
+#: A law longer than this many times the path's time at full speed (+ 1 s) stops inside the path: refused.
+MAX_SLOWDOWN = 100.0
 #: Fraction of one period's jerk budget a curvature jump of the path may take (paths that are not C2).
 JUMP_SHARE = 0.8
 #: Fractions of the jerk limits the LP aims at, and how far above it a sampled law is still accepted
@@ -269,6 +271,13 @@ class JerkLimitedStage:
         for _ in range(MAX_ITERATIONS):
             x, y = self._solve(path, s, coef, (frac[0], frac[1], frac[2], frac[3]))
             timed = JerkTimedPath.of(path, s, x, y)
+            if not np.isfinite(timed.duration) or timed.duration > MAX_SLOWDOWN * (path.length + 1.0):
+                # A law that (nearly) stops inside the path: the LP found no way through at speed.
+                raise RetimingFailed(
+                    f"the jerk-limited law would take {timed.duration:.3g} s for a path of "
+                    f"{path.length:.3g} s at full speed",
+                    stage=self.name,
+                )
             last = self._sample(timed)
             if log.isEnabledFor(logging.DEBUG):
                 log.debug(
