@@ -236,7 +236,7 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         store=store,
         runner=job_runner,
         metrics=service_metrics,
-        limiter=TenantRateLimiter(settings.rate_limit),
+        limiter=TenantRateLimiter(settings.rate_limit, settings.rate_limit_storage_uri),
     )
     service_metrics.registry.register(
         QueueCollector(

@@ -8,6 +8,8 @@ run) apart. Times are stored as UNIX seconds (float) so that both back ends agre
 
 from __future__ import annotations
 
+import hashlib
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -80,6 +82,20 @@ class Mesh(Base):
     created_at: Mapped[float] = mapped_column(Float)
 
 
+class MeshBlob(Base):
+    """The bytes of an uploaded mesh file, by SHA-256: every instance sharing the database can read them.
+
+    Each instance keeps the files it plans with in its own data directory as a cache
+    (:meth:`api.store.MeshStore.localize`), filled from here when another instance took the upload.
+    """
+
+    __tablename__ = "mesh_blobs"
+
+    sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    created_at: Mapped[float] = mapped_column(Float)
+
+
 class Job(Base):
     """A planning job: the scenario as submitted, its state, and (when done) its result and files."""
 
@@ -126,6 +142,15 @@ def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
     cur.execute("PRAGMA synchronous=FULL")
     cur.execute("PRAGMA busy_timeout=10000")
     cur.close()
+
+
+_TENANT_LOCKS: dict[str, threading.Lock] = {}
+_TENANT_LOCKS_GUARD = threading.Lock()
+
+
+def _process_tenant_lock(tenant: str) -> threading.Lock:
+    with _TENANT_LOCKS_GUARD:
+        return _TENANT_LOCKS.setdefault(tenant, threading.Lock())
 
 
 class Database:
@@ -199,6 +224,22 @@ class Database:
                 s.rollback()
                 raise
 
+    @contextmanager
+    def tenant_quota_session(self, tenant: str) -> Iterator[Session]:
+        """A session whose transaction holds ``tenant``'s quota lock: count the active jobs, then insert.
+
+        Two submissions of one tenant cannot both pass the quota between their count and their insert: a
+        lock per tenant in this process, and on PostgreSQL also a transaction-level advisory lock keyed by
+        the schema and the tenant, so the instances sharing the database take turns too (released at
+        commit or rollback). SQLite serves one instance (its file lives on that machine).
+        """
+        with _process_tenant_lock(tenant), self.session() as s:
+            if not self.is_sqlite:
+                digest = hashlib.sha256(f"quota:{self.schema or ''}:{tenant}".encode()).digest()
+                key = int.from_bytes(digest[:8], "big", signed=True)
+                s.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": key})
+            yield s
+
     def dispose(self) -> None:
         """Close every pooled connection."""
         self.engine.dispose()
@@ -213,5 +254,6 @@ __all__ = [
     "Database",
     "Job",
     "Mesh",
+    "MeshBlob",
     "now_s",
 ]

@@ -52,6 +52,7 @@ from api.db import TERMINAL_STATES, Database, Job, now_s
 from api.lifeline import SERVER_PID_ENV
 from api.metrics import ServiceMetrics
 from api.settings import Settings
+from api.store import local_mesh_file
 
 _LOG = logging.getLogger(__name__)
 
@@ -494,6 +495,14 @@ class ProcessJobRunner:
     def _launch(self, job: dict[str, Any]) -> None:
         from api.worker import run_job  # the child's entry point (preloaded by the forkserver)
 
+        try:  # the tenant's mesh files on this instance's disk (another instance may have taken them)
+            root = self.settings.mesh_dir
+            meshes = {k: str(local_mesh_file(self.db, root, v)) for k, v in job["meshes"].items()}
+        except Exception as exc:
+            _LOG.exception("job %s: a mesh file could not be made available", job["id"])
+            self._fail_unlaunched(job["id"], "mesh_unavailable", f"a cabin mesh is unavailable: {exc}")
+            return
+        job = {**job, "meshes": meshes}
         parent, child = self._ctx.Pipe(duplex=False)
         proc = self._ctx.Process(
             target=run_job, args=(job, child), name=f"cabinplan-job-{job['id']}", daemon=True
@@ -504,17 +513,8 @@ class ProcessJobRunner:
             _LOG.exception("job %s: the worker process did not start", job["id"])
             parent.close()
             child.close()
-            with self.db.session() as s:
-                s.execute(
-                    update(Job)
-                    .where(Job.id == job["id"], Job.status == "running", Job.owner == self.instance_id)
-                    .values(
-                        status="failed",
-                        reason="worker_start_failed",
-                        message=f"the worker process did not start: {type(exc).__name__}: {exc}",
-                        finished_at=now_s(),
-                    )
-                )
+            why = f"the worker process did not start: {type(exc).__name__}: {exc}"
+            self._fail_unlaunched(job["id"], "worker_start_failed", why)
             return
         child.close()
         started = time.monotonic()
@@ -522,6 +522,16 @@ class ProcessJobRunner:
         with self._lock:
             self._running[job["id"]] = _Running(job["id"], proc, parent, deadline, started)
         _LOG.info("job %s started (pid %s)", job["id"], proc.pid)
+
+    def _fail_unlaunched(self, job_id: str, reason: str, message: str) -> None:
+        """Fail a job this instance claimed but could not start (only over its own ``running``)."""
+        with self.db.session() as s:
+            s.execute(
+                update(Job)
+                .where(Job.id == job_id, Job.status == "running", Job.owner == self.instance_id)
+                .values(status="failed", reason=reason, message=message, finished_at=now_s())
+            )
+        self.metrics.job_outcomes.labels(status="failed", reason=reason).inc()
 
     def _drain(self, r: _Running) -> None:
         while not r.eof:

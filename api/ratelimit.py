@@ -1,19 +1,25 @@
-"""Per-tenant request rate limit (the `limits` library, moving window, in memory per instance).
+"""Per-tenant request rate limit (the `limits` library, moving window).
 
 Every authenticated request counts against its tenant's window (``Settings.rate_limit``, e.g. ``120 per
 10 seconds``); beyond it the answer is 429 ``rate_limited`` with ``Retry-After`` (whole seconds until the
-oldest request of the window leaves it). The window lives in this instance's memory: with N instances
-behind a balancer a tenant gets up to N times the rate.
+oldest request of the window leaves it). The windows live where ``Settings.rate_limit_storage_uri`` says:
+``memory://`` (default) in this instance's memory, so N instances behind a balancer give a tenant up to N
+times the rate; ``redis://...`` in a Redis every instance shares, so the limit holds for the deployment.
+A storage that does not answer lets the request through (logged and counted): the service stays up when
+only its limiter's store is down.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 
 from limits import RateLimitItem, parse
-from limits.storage import MemoryStorage
+from limits.storage import storage_from_string
 from limits.strategies import MovingWindowRateLimiter
+
+_LOG = logging.getLogger(__name__)
 
 
 class TenantRateLimiter:
@@ -21,17 +27,27 @@ class TenantRateLimiter:
 
     Args:
         rate: A rate in the `limits` notation (``"120 per 10 seconds"``).
+        storage_uri: Where the windows live: ``memory://`` or a Redis URI (``redis://host:6379/0``).
+        namespace: Prefix of the window keys in a shared store (one per deployment sharing a Redis).
     """
 
-    def __init__(self, rate: str) -> None:
+    def __init__(self, rate: str, storage_uri: str = "memory://", namespace: str = "cabinplan") -> None:
         self.item: RateLimitItem = parse(rate)
-        self.limiter = MovingWindowRateLimiter(MemoryStorage())
+        options = {} if storage_uri.startswith("memory") else {"key_prefix": f"{namespace}:ratelimit"}
+        self.storage = storage_from_string(storage_uri, **options)
+        self.limiter = MovingWindowRateLimiter(self.storage)
+        self.store_errors = 0
 
     def hit(self, tenant: str) -> float | None:
         """Count one request of ``tenant``: ``None`` when allowed, else the seconds until one is."""
-        if self.limiter.hit(self.item, tenant):
+        try:
+            if self.limiter.hit(self.item, tenant):
+                return None
+            stats = self.limiter.get_window_stats(self.item, tenant)
+        except Exception as exc:  # the store is down: let the request through rather than fail it
+            self.store_errors += 1
+            _LOG.warning("rate-limit store unavailable, request of %r let through: %s", tenant, exc)
             return None
-        stats = self.limiter.get_window_stats(self.item, tenant)
         return max(0.0, float(stats.reset_time) - time.time())
 
     def describe(self) -> str:

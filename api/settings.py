@@ -69,8 +69,14 @@ class Settings(BaseSettings):
     )
     rate_limit: str = Field(
         "120 per 10 seconds",
-        description="Authenticated requests allowed per tenant and instance (moving window, the `limits` "
-        "notation, e.g. '120 per 10 seconds'); beyond it 429 with Retry-After.",
+        description="Authenticated requests allowed per tenant (moving window, the `limits` notation, e.g. "
+        "'120 per 10 seconds'); beyond it 429 with Retry-After. Counted per instance unless "
+        "rate_limit_storage_uri names a shared store.",
+    )
+    rate_limit_storage_uri: str = Field(
+        "memory://",
+        description="Where the rate-limit windows live (a `limits` storage URI): 'memory://' counts per "
+        "instance; 'redis://host:6379/0' shares one window per tenant among every instance using it.",
     )
     body_timeout_s: float = Field(
         10.0, gt=0.0, le=600.0, description="Longest wait for the next chunk of a request body (408 beyond)."
@@ -86,6 +92,14 @@ class Settings(BaseSettings):
             parse(value)
         except ValueError as exc:
             raise ValueError(f"not a rate limit such as '120 per 10 seconds': {exc}") from None
+        return value
+
+    @field_validator("rate_limit_storage_uri")
+    @classmethod
+    def _check_storage(cls, value: str) -> str:
+        scheme = value.partition("://")[0]
+        if scheme not in ("memory", "redis", "rediss", "redis+unix"):
+            raise ValueError(f"not a storage URI such as 'memory://' or 'redis://host:6379/0': {value!r}")
         return value
 
     def resolved_database_url(self) -> str:

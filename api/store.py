@@ -1,22 +1,26 @@
 """The cabin mesh store: uploaded bytes on disk by content hash, metadata per tenant in the database.
 
-A mesh's id is the SHA-256 of its bytes. The file is written once (atomically, fsynced) as
-``<data_dir>/meshes/<sha256>.<ext>``, shared by tenants who upload the same bytes; each tenant has its
-own metadata row, so one tenant never sees another's meshes. Uploads are parsed and validated with
-:func:`planner.meshio.load_mesh` before anything is stored.
+A mesh's id is the SHA-256 of its bytes. The bytes are stored once in the database
+(:class:`~api.db.MeshBlob`), so every instance sharing it can plan with them, and written (atomically,
+fsynced) as ``<data_dir>/meshes/<sha256>.<ext>``, this instance's file of them (another instance writes
+its own on first use, :func:`local_mesh_file`). Tenants who upload the same bytes share them; each tenant
+has its own metadata row, so one tenant never sees another's meshes. Uploads are parsed and validated
+with :func:`planner.meshio.load_mesh` before anything is stored.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import tempfile
 from pathlib import Path
 from typing import Any, Literal
 
-from sqlalchemy import func, select
+from sqlalchemy import delete, func, select
+from sqlalchemy.exc import IntegrityError
 
-from api.db import ACTIVE_STATES, Database, Job, Mesh, now_s
+from api.db import ACTIVE_STATES, Database, Job, Mesh, MeshBlob, now_s
 from api.problems import Problem
 from meshes import reference_cabin_path
 from planner.core.exceptions import InvalidInput, InvalidMesh
@@ -44,6 +48,38 @@ def scenario_mesh_resolver(meshes: dict[str, str]) -> MeshResolver:
         raise InvalidInput(f"mesh {name!r}: not an uploaded mesh id of this tenant", field="cabin.mesh")
 
     return resolve
+
+
+def local_mesh_file(db: Database, root: Path, stored: str) -> Path:
+    """This instance's file of a stored mesh, fetched from the database when another instance stored it.
+
+    ``stored`` is the path a job or sweep recorded (``<sha256><ext>`` in the data directory of the
+    instance that took the upload). Instances sharing one database keep their own data directories: the
+    file is looked up under this instance's ``root`` by its name and, when missing, written there from
+    :class:`~api.db.MeshBlob` (atomically, after checking its SHA-256).
+
+    Raises:
+        FileNotFoundError: neither the file nor its bytes are stored (the mesh was deleted).
+    """
+    name = Path(stored).name
+    local = root / name
+    if local.is_file():
+        return local
+    sha256 = name.split(".", 1)[0]
+    with db.session() as s:
+        blob = s.get(MeshBlob, sha256)
+        data = blob.data if blob is not None else None
+    if data is None:
+        raise FileNotFoundError(f"mesh {sha256}: neither on this instance nor in the database")
+    if hashlib.sha256(data).hexdigest() != sha256:
+        raise FileNotFoundError(f"mesh {sha256}: the stored bytes do not match their hash")
+    root.mkdir(parents=True, exist_ok=True)
+    MeshStore.write_file(local, data)
+    return local
+
+
+def _file_names(meshes: dict[str, str] | None) -> set[str]:
+    return {Path(v).name for v in (meshes or {}).values()}
 
 
 def mesh_document(row: Mesh) -> dict[str, Any]:
@@ -89,8 +125,16 @@ class MeshStore:
         root.mkdir(parents=True, exist_ok=True)
 
     def path_of(self, row: Mesh) -> Path:
-        """File of a stored mesh."""
+        """File of a stored mesh (on this instance's disk or not yet: :meth:`local_path`)."""
         return self.root / f"{row.sha256}{Path(row.filename).suffix.lower()}"
+
+    def local_path(self, row: Mesh) -> Path:
+        """This instance's file of a stored mesh, fetched from the database if another instance took it."""
+        return local_mesh_file(self.db, self.root, str(self.path_of(row)))
+
+    def local_files(self, meshes: dict[str, str]) -> dict[str, str]:
+        """A job's ``{mesh id: stored path}`` as this instance's files (:func:`local_mesh_file`)."""
+        return {k: str(local_mesh_file(self.db, self.root, v)) for k, v in meshes.items()}
 
     def add(
         self, tenant: str, data: bytes, filename: str, units: Literal["m", "mm"], name: str
@@ -146,7 +190,13 @@ class MeshStore:
             report={k: _plain(v) for k, v in mesh.report.to_dict().items()},
             created_at=now_s(),
         )
-        self._write(self.path_of(row), data)
+        self.write_file(self.path_of(row), data)
+        try:  # the bytes for every instance sharing the database (once per content hash)
+            with self.db.session() as s:
+                if s.get(MeshBlob, mesh.sha256) is None:
+                    s.add(MeshBlob(sha256=mesh.sha256, data=data, created_at=now_s()))
+        except IntegrityError:  # another upload of the same bytes stored them first
+            pass
         with self.db.session() as s:
             s.add(row)
         return row, True
@@ -182,12 +232,15 @@ class MeshStore:
                 return False
             path = self.path_of(row)
             active = s.scalars(select(Job).where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))).all()
-            users = sorted(j.id for j in active if str(path) in {str(v) for v in (j.meshes or {}).values()})
+            # Jobs name the file by the path of the instance that took the upload: compare the names.
+            users = sorted(j.id for j in active if path.name in _file_names(j.meshes))
             if users:
                 raise MeshInUse(mesh_id, users)
             s.delete(row)
             s.flush()
             others = s.scalar(select(func.count()).select_from(Mesh).where(Mesh.sha256 == mesh_id)) or 0
+            if not others:
+                s.execute(delete(MeshBlob).where(MeshBlob.sha256 == mesh_id))
         if not others:
             try:
                 path.unlink()
@@ -196,7 +249,7 @@ class MeshStore:
         return True
 
     @staticmethod
-    def _write(path: Path, data: bytes) -> None:
+    def write_file(path: Path, data: bytes) -> None:
         """Write ``data`` to ``path`` atomically (temp file, fsync, rename), unless it already exists."""
         if path.is_file() and path.stat().st_size == len(data):
             return
@@ -223,4 +276,4 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
-__all__ = ["MeshStore", "mesh_document", "scenario_mesh_resolver"]
+__all__ = ["MeshStore", "local_mesh_file", "mesh_document", "scenario_mesh_resolver"]

@@ -120,23 +120,20 @@ class SweepFeeder:
 
     def feed(self) -> int:
         """One pass: queue what the quotas allow, finish the sweeps whose jobs all ended; jobs queued."""
-        from api.routes.plans import _tenant_lock as tenant_lock
-
         queued = 0
         with self.db.session() as s:
             sweeps = s.scalars(
                 select(Sweep).where(Sweep.status == "running").order_by(Sweep.created_at)
             ).all()
         for sweep in sweeps:
-            with tenant_lock(sweep.tenant):  # the lock POST /plans counts the quota under
-                queued += self._feed_one(sweep)
+            queued += self._feed_one(sweep)
             self._finish_if_done(sweep)
         if queued:
             self.runner.wake()
         return queued
 
     def _feed_one(self, sweep: Sweep) -> int:
-        with self.db.session() as s:
+        with self.db.tenant_quota_session(sweep.tenant) as s:  # the lock POST /plans counts the quota under
             active = s.scalar(
                 select(func.count())
                 .select_from(Job)

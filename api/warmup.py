@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import time
 
+from api.examples import aisle_bay_goal, docked
 from api.worker import plan_job
 
 _LOG = logging.getLogger(__name__)
@@ -27,25 +28,8 @@ WARMUP_SCENARIO = {
         "mass": 60,
         "grasp": {"position": [0, 0, 0.20], "orientation": {"w": 1, "x": 0, "y": 0, "z": 0}},
     },
-    "start": {
-        "drives": {
-            "d1": 1.0,
-            "x1": -0.46,
-            "x2": 0.46,
-            "x3": -0.09,
-            "theta3": 1.2,
-            "theta4": -0.8,
-            "d5": -0.25,
-            "theta6": 0.0,
-        }
-    },
-    "goal": {
-        "pose": {
-            "position": [0.885, 0.675, 2.7],
-            "orientation": {"w": 0.70710678, "x": 0, "y": 0.70710678, "z": 0},
-        },
-        "approach": {"direction": [1, 0, 0], "distance": 0.48},
-    },
+    "start": docked(),
+    "goal": aisle_bay_goal(),
     "options": {"seed": 1, "time_limit_s": 300},
 }
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -24,9 +26,10 @@ SCENARIOS = ("aisle-transfer", "aisle-bay-insert", "hatch-pass")
 TARGET_S = 1.5
 
 
-def _one(scenario: str, out: Path) -> tuple[float, float]:
-    """(wall time [s], the report's planning_time_s) of one CLI call in a new process."""
+def _one(scenario: str, out: Path) -> tuple[float, float, float]:
+    """(wall time [s], the report's planning_time_s, CPU time [s]) of one CLI call in a new process."""
     path = ROOT / "tests" / "scenarios" / f"{scenario}.yaml"
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(
         [sys.executable, "-m", "planner.cli", "plan", str(path), "-o", str(out)],
@@ -35,7 +38,9 @@ def _one(scenario: str, out: Path) -> tuple[float, float]:
         cwd=ROOT,
     )
     wall = time.perf_counter() - t0
-    return wall, float(json.loads(out.read_text())["report"]["planning_time_s"])
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, float(json.loads(out.read_text())["report"]["planning_time_s"]), cpu
 
 
 def _imports() -> list[tuple[float, str]]:
@@ -68,12 +73,17 @@ def main() -> None:
             f"cabinplan plan: wall time outside planning_time_s over {args.runs} fresh processes "
             f"[<= {TARGET_S} s]"
         )
-        print(f"{'scenario':<20} {'median s':>9} {'max s':>7} {'plan s (median)':>16}")
+        print(f"(load average {os.getloadavg()[0]:.1f}; CPU s = the process's user + system time, all of it)")
+        print(f"{'scenario':<20} {'median s':>9} {'max s':>7} {'plan s (median)':>16} {'CPU s (median)':>15}")
         for name in SCENARIOS:
             runs = [_one(name, out) for _ in range(args.runs)]
-            outside = [w - p for w, p in runs]
-            plan_s = statistics.median(p for _, p in runs)
-            print(f"{name:<20} {statistics.median(outside):>9.2f} {max(outside):>7.2f} {plan_s:>16.2f}")
+            outside = [w - p for w, p, _ in runs]
+            plan_s = statistics.median(p for _, p, _ in runs)
+            cpu_s = statistics.median(c for _, _, c in runs)
+            print(
+                f"{name:<20} {statistics.median(outside):>9.2f} {max(outside):>7.2f} {plan_s:>16.2f} "
+                f"{cpu_s:>15.2f}"
+            )
     print("\nimport time of a plan's modules (cumulative, s):")
     for seconds, name in _imports():
         print(f"  {seconds:6.2f}  {name}")

@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, ParamSpec, TypeVar
+from typing import Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
 
 import typer
 from pydantic import ValidationError
@@ -176,10 +176,10 @@ def stiffness(
     ``cabinplan stiffness calibrate MEASUREMENTS.csv -o calibrated.yaml`` instead fits the stiffness data
     to measured deflections and writes a description the planner can use (scenario ``robot_description``).
     """
-    from planner.dynamics.stiffness import stiffness_document
+    from planner.documents.stiffness import stiffness_document
 
     if robot == "calibrate":
-        from planner.dynamics.calibration import calibrate_file
+        from planner.documents.calibration import calibrate_file
 
         if measurements is None or output is None:
             _fail("stiffness calibrate: give MEASUREMENTS.csv and -o OUTPUT.yaml", EXIT_INVALID)
@@ -224,20 +224,12 @@ def _write(path: Path, data: str | bytes, what: str) -> None:
         _fail(f"{what}: cannot write {path} ({exc.strerror})", 1)
 
 
-class _Progress:
-    """Stage progress on stderr when it is a terminal (rich), silent otherwise."""
+class _Bar:
+    """A rich progress bar on stderr (``bar``), or nothing (None) when stderr is not a terminal."""
 
-    def __init__(self, enabled: bool) -> None:
-        self.bar: Any = None
-        if enabled:
-            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    bar: Any = None
 
-            self.bar = Progress(
-                TextColumn("{task.description:<12}"), BarColumn(), TimeElapsedColumn(), transient=True
-            )
-            self.task = self.bar.add_task("planning", total=1.0)
-
-    def __enter__(self) -> _Progress:
+    def __enter__(self) -> Self:
         if self.bar is not None:
             self.bar.start()
         return self
@@ -245,6 +237,19 @@ class _Progress:
     def __exit__(self, *exc: object) -> None:
         if self.bar is not None:
             self.bar.stop()
+
+
+class _Progress(_Bar):
+    """Stage progress on stderr when it is a terminal (rich), silent otherwise."""
+
+    def __init__(self, enabled: bool) -> None:
+        if enabled:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(
+                TextColumn("{task.description:<12}"), BarColumn(), TimeElapsedColumn(), transient=True
+            )
+            self.task = self.bar.add_task("planning", total=1.0)
 
     def __call__(self, stage: str, fraction: float) -> None:
         if self.bar is not None:
@@ -298,11 +303,10 @@ def plan(
     )
 
 
-class _SweepProgress:
+class _SweepProgress(_Bar):
     """Sweep progress on stderr when it is a terminal (rich: done / failed / running, ETA)."""
 
     def __init__(self, enabled: bool, total: int) -> None:
-        self.bar: Any = None
         if enabled:
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -317,15 +321,6 @@ class _SweepProgress:
                 TimeRemainingColumn(),
             )
             self.task = self.bar.add_task("sweep", total=total, ok=0, failed=0, running=0)
-
-    def __enter__(self) -> _SweepProgress:
-        if self.bar is not None:
-            self.bar.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self.bar is not None:
-            self.bar.stop()
 
     def __call__(self, counts: Any) -> None:
         if self.bar is not None:

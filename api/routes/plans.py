@@ -31,6 +31,7 @@ from api.bodies import parse_body
 from api.compact import unpack_document, unpack_text
 from api.context import AppContext
 from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
+from api.examples import docked
 from api.jobs import rows_matched
 from api.openapi import scenario_request_body
 from api.problems import Problem, problem_responses
@@ -55,30 +56,8 @@ _SCENARIO_DESCRIPTION = (
 _SCENARIO_EXAMPLE: dict[str, Any] = {
     "name": "transfer",
     "robot": "cabin8",
-    "start": {
-        "drives": {
-            "d1": 1.0,
-            "x1": -0.46,
-            "x2": 0.46,
-            "x3": -0.09,
-            "theta3": 1.2,
-            "theta4": -0.8,
-            "d5": -0.25,
-            "theta6": 0,
-        }
-    },
-    "goal": {
-        "drives": {
-            "d1": 2.0,
-            "x1": -0.46,
-            "x2": 0.46,
-            "x3": -0.09,
-            "theta3": 1.2,
-            "theta4": -0.8,
-            "d5": -0.25,
-            "theta6": 0,
-        }
-    },
+    "start": docked(d1=1.0),
+    "goal": docked(d1=2.0),
 }
 
 
@@ -154,7 +133,7 @@ def _mesh_map(ctx: AppContext, tenant: str, spec: Scenario) -> dict[str, str]:
                 f"the scenario says {units!r}",
                 errors=[{"field": units_field, "reason": f"must be {row.units!r} for this mesh"}],
             )
-        meshes[name] = str(ctx.store.path_of(row))
+        meshes[name] = str(ctx.store.local_path(row))
     return meshes
 
 
@@ -197,15 +176,6 @@ def _replay(
     return job_document(row)
 
 
-_TENANT_LOCKS: dict[str, threading.Lock] = {}
-_TENANT_LOCKS_GUARD = threading.Lock()
-
-
-def _tenant_lock(tenant: str) -> threading.Lock:
-    with _TENANT_LOCKS_GUARD:
-        return _TENANT_LOCKS.setdefault(tenant, threading.Lock())
-
-
 @router.post(
     "/plans",
     status_code=202,
@@ -245,50 +215,51 @@ def _submit(
     spec, resolved, meshes = _resolve(ctx, tenant, body)
     from planner.documents.output import provenance
 
-    # Count and insert under the tenant's lock, so concurrent submissions cannot pass the quota together
-    # (per instance: with several instances a tenant may briefly exceed its quota by one job each).
-    with _tenant_lock(tenant):
-        with ctx.db.session() as s:
-            active = s.scalar(
-                select(func.count())
-                .select_from(Job)
-                .where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
+    # Count and insert in one transaction under the tenant's quota lock (every instance sharing the
+    # database takes it), so concurrent submissions cannot pass the quota together.
+    row = Job(
+        id=uuid.uuid4().hex,
+        tenant=tenant,
+        status="queued",
+        progress=0.0,
+        scenario=spec.model_dump(mode="json"),
+        scenario_name=spec.name,
+        request_sha256=request_sha256,
+        idempotency_key=idempotency_key,
+        meshes=meshes,
+        provenance=provenance(resolved),
+        time_limit_s=float(spec.options.time_limit_s),
+        attempts=0,
+        created_at=now_s(),
+    )
+    limit = ctx.settings.tenant_max_active_jobs
+    try:
+        with ctx.db.tenant_quota_session(tenant) as s:
+            active = int(
+                s.scalar(
+                    select(func.count())
+                    .select_from(Job)
+                    .where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
+                )
+                or 0
             )
-        limit = ctx.settings.tenant_max_active_jobs
-        if (active or 0) >= limit:
-            raise Problem(
-                429,
-                "quota_exceeded",
-                f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
-                headers={"Retry-After": str(ctx.settings.retry_after_s)},
-                active_jobs=int(active or 0),
-                limit=limit,
-            )
-        row = Job(
-            id=uuid.uuid4().hex,
-            tenant=tenant,
-            status="queued",
-            progress=0.0,
-            scenario=spec.model_dump(mode="json"),
-            scenario_name=spec.name,
-            request_sha256=request_sha256,
-            idempotency_key=idempotency_key,
-            meshes=meshes,
-            provenance=provenance(resolved),
-            time_limit_s=float(spec.options.time_limit_s),
-            attempts=0,
-            created_at=now_s(),
-        )
-        try:
-            with ctx.db.session() as s:
-                s.add(row)
-        except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
-            if idempotency_key is None:
-                raise
-            replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
-            if replay is None:
-                raise
-            return replay
+            if active >= limit:
+                raise Problem(
+                    429,
+                    "quota_exceeded",
+                    f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
+                    headers={"Retry-After": str(ctx.settings.retry_after_s)},
+                    active_jobs=active,
+                    limit=limit,
+                )
+            s.add(row)
+    except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
+        if idempotency_key is None:
+            raise
+        replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
+        if replay is None:
+            raise
+        return replay
     ctx.runner.wake()
     response.headers["Location"] = f"/api/v1/plans/{row.id}"
     return job_document(row)

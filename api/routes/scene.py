@@ -94,7 +94,8 @@ def _resolved(ctx: AppContext, row: Job) -> ResolvedScenario:
     empty = ctx.settings.data_dir / "empty"
     empty.mkdir(parents=True, exist_ok=True)
     try:
-        return resolve_scenario(spec, base_dir=empty, mesh_resolver=scenario_mesh_resolver(dict(row.meshes)))
+        meshes = ctx.store.local_files(dict(row.meshes))  # the files may have come through another instance
+        return resolve_scenario(spec, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes))
     except (InvalidMesh, InvalidInput, OSError) as exc:
         raise Problem(
             409,

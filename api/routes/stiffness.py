@@ -3,7 +3,7 @@
 ``POST /stiffness``: a configuration (drives or joints), an optional payload and external wrench -> the
 6x6 stiffness K and compliance C at the tool or payload frame and the deflection under gravity (payload
 and links) and the wrench. The same document as ``cabinplan stiffness``
-(:func:`planner.dynamics.stiffness.stiffness_document`).
+(:func:`planner.documents.stiffness.stiffness_document`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from api.auth import CurrentPrincipal
 from planner.core.schemas import Finite
-from planner.dynamics.stiffness import PayloadInput, stiffness_document
+from planner.documents.stiffness import PayloadInput, stiffness_document
 
 router = APIRouter(tags=["stiffness"])
 

@@ -21,6 +21,7 @@ from sqlalchemy.orm import undefer
 from api.auth import CurrentPrincipal
 from api.context import AppContext
 from api.db import Job
+from api.examples import aisle_bay_goal, docked
 from api.problems import Problem
 from api.routes.deps import Ctx
 from api.routes.plans import _mesh_map, result_text
@@ -44,25 +45,8 @@ _SWEEP_BODY = Body(
                 "name": "bay",
                 "cabin": {"mesh": "cabin-aisle"},
                 "payload": {"box": [0.45, 0.35, 0.3], "mass": 60, "grasp": {"position": [0, 0, 0.2]}},
-                "start": {
-                    "drives": {
-                        "d1": 1.0,
-                        "x1": -0.46,
-                        "x2": 0.46,
-                        "x3": -0.09,
-                        "theta3": 1.2,
-                        "theta4": -0.8,
-                        "d5": -0.25,
-                        "theta6": 0,
-                    }
-                },
-                "goal": {
-                    "pose": {
-                        "position": [0.885, 0.675, 2.7],
-                        "orientation": {"w": 0.70710678, "x": 0, "y": 0.70710678, "z": 0},
-                    },
-                    "approach": {"direction": [1, 0, 0], "distance": 0.48},
-                },
+                "start": docked(),
+                "goal": aisle_bay_goal(),
             },
             "axes": {"goal": {"bays": "all"}, "payload_mass_kg": [60, 90]},
         }

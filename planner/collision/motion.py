@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.collision.bodies import BodySet, link_slope_bound
+from planner.collision.bodies import BodySet
 from planner.collision.kernels import walk
 from planner.collision.kernels.buffers import KernelData
 from planner.collision.probes import Probes
 from planner.collision.reports import BodyState, MotionReport, body_contact, limit_contacts
 from planner.core.types import Array
-from planner.kinematics import chain
-from planner.robots.cabin8 import Cabin8
+from planner.robots.geometry import CollisionModel
 
 #: Joint-space spacing [m or rad] at which limits and singularity margins are checked along a motion.
 LIMIT_STEP = 0.005
@@ -30,29 +29,18 @@ def limit_samples(dq: Array) -> int:
     return int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
 
 
-def slope_deviation(robot: Cabin8, q_a: Array, q_b: Array) -> float:
-    """How far the link-height ratios can exceed the larger endpoint value along the segment.
-
-    The ratios y_B/L1, y_C/L3, y_E/L4 are affine in y and in sin(gamma); along the segment they exceed the
-    larger endpoint value by at most (L2/2) dgamma^2 / 8 over the shortest length (the sine's deviation
-    from its chord), which bounds the links' slopes.
-    """
-    g = robot.geometry
-    return 0.5 * g.L2 * (q_b[chain.GAMMA] - q_a[chain.GAMMA]) ** 2 / 8.0 / min(g.L1, g.L3, 2.0 * g.L4)
-
-
 class CertifiedMotion:
     """The compiled motion walk of one world, with its FCL probes.
 
     Args:
-        robot: The cabin8 model.
+        model: The robot's collision model (admissibility, slope of its slope-dependent bodies).
         bodies: The world's bodies.
         data: The world's kernel data.
         probes: The world's FCL probes.
     """
 
-    def __init__(self, robot: Cabin8, bodies: BodySet, data: KernelData, probes: Probes) -> None:
-        self.robot = robot
+    def __init__(self, model: CollisionModel, bodies: BodySet, data: KernelData, probes: Probes) -> None:
+        self.model = model
         self.bodies = bodies
         self.data = data
         self.probes = probes
@@ -79,15 +67,16 @@ class CertifiedMotion:
         bad = walk.first_inadmissible(q_a, dq, n_fine, d.fbuf, d.ibuf)
         if bad >= 0:
             t = bad * (1.0 / n_fine) if bad < n_fine else 1.0  # numpy.linspace's samples
-            return MotionReport(False, n_fine + 1, 0, t, tuple(limit_contacts(self.robot, q_a + t * dq)))
+            contacts = limit_contacts(self.model.admissibility, q_a + t * dq)
+            return MotionReport(False, n_fine + 1, 0, t, tuple(contacts))
         end = walk.end_ratio(q_a, q_b, d.fbuf, d.ibuf)
         if ratio is not None:
             end = max(end, ratio)
         reach, pair_reach = walk.segment_reach(
             self.bodies.rho,
             d.link_mask,
-            link_slope_bound(end + slope_deviation(self.robot, q_a, q_b)),
-            0.5 * self.robot.geometry.L2,
+            self.model.slope_bound(end + self.model.slope_deviation(q_a, q_b)),
+            self.model.slope_half_width,
             d.pair_a,
             d.pair_b,
             self.bodies.pair_rigid,

@@ -1,11 +1,11 @@
 """The reference route of the collision world: the tests' oracle and the benchmark's baseline.
 
 :class:`ReferenceWorld` answers every question of :class:`~planner.collision.world.CollisionWorld` by the
-original, independent routes -- poses from the CasADi model (:mod:`.pose_model`), the certified motion
-walk in plain Python with the original always-probe policy, the lower bounds also vectorised in numpy
-(:meth:`ReferenceWorld.cabin_lower_bounds`, :meth:`ReferenceWorld.pair_lower_bounds`) -- and must give the
-compiled route's verdicts and reports exactly (tests/collision/test_kernels.py). It is not used by the
-planner.
+original, independent routes -- poses from the robot model's CasADi function
+(``CollisionModel.pose_functions``), the certified motion walk in plain Python with the original always-probe
+policy, the lower bounds also vectorised in numpy (:meth:`ReferenceWorld.cabin_lower_bounds`,
+:meth:`ReferenceWorld.pair_lower_bounds`) -- and must give the compiled route's verdicts and reports exactly
+(tests/collision/test_kernels.py). It is not used by the planner.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from planner.collision.bodies import segment_reach_bounds
 from planner.collision.kernels.bounds import state_bounds
-from planner.collision.motion import limit_samples, slope_deviation
+from planner.collision.motion import limit_samples
 from planner.collision.reports import BodyState, MotionReport, StateReport, body_contact, limit_contacts
 from planner.collision.world import DEFAULT_CLEARANCE_M, CollisionWorld
 from planner.core.types import Array, IntArray
@@ -74,8 +74,8 @@ class ReferenceWorld(CollisionWorld):
     def cabin_lower_bounds(self, fine_centres: Array, d1: Array) -> Array:
         """(N, B) certified lower bound of each body's distance to the cabin (inf without a cabin).
 
-        From the fine sphere cover and the clearance grid; for the carriage, which moves with d1 only, also
-        from its exact clearance table along the rail (whichever bound is larger).
+        From the fine sphere cover and the clearance grid; for the rail body (cabin8: the carriage), which
+        moves with d1 only, also from its exact clearance table along the rail (whichever bound is larger).
         """
         n = fine_centres.shape[0]
         if self._grid is None:
@@ -88,7 +88,7 @@ class ReferenceWorld(CollisionWorld):
             z0, dz, table = self._carriage_table
             k = np.clip(np.rint((d1 - z0) / dz).astype(int), 0, len(table) - 1)
             exact = table[k] - np.abs(d1 - (z0 + k * dz))
-            carriage = self.names.index("carriage")
+            carriage = self.names.index(self.model.rail_body)  # the table exists only for a rail body
             current = out[:, carriage]
             out[:, carriage] = np.where(np.isinf(current), exact, np.maximum(current, exact))
         return out
@@ -122,7 +122,7 @@ class ReferenceWorld(CollisionWorld):
     # --------------------------------------------------------------- checks
     def _screen(self, q: Array, clearance: float) -> StateReport | BodyState:
         if not np.all(np.isfinite(q)):
-            return StateReport(False, tuple(limit_contacts(self.robot, q)))
+            return StateReport(False, tuple(limit_contacts(self.model.admissibility, q)))
         return self._state(q, self.self_clearance)
 
     def is_valid(self, q: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
@@ -142,12 +142,14 @@ class ReferenceWorld(CollisionWorld):
         return float(table[k0 : k1 + 1].min()) - 0.5 * dz
 
     def _segment_reach(self, q_a: Array, q_b: Array, ratio: float | None = None) -> tuple[Array, Array]:
-        """Reach bounds valid along the straight segment q_a -> q_b (see ``motion.slope_deviation``)."""
-        c = self.robot.constraint_values_batch(np.stack([q_a, q_b]))
-        end = float(np.nanmax(c[:, -3:])) if np.all(np.isfinite(c[:, -3:])) else 1.0
+        """Reach bounds valid along the straight segment q_a -> q_b (``CollisionModel.slope_deviation``)."""
+        model = self.model
+        rows = list(model.ratio_rows)
+        c = model.admissibility.constraint_values_batch(np.stack([q_a, q_b]))[:, rows]
+        end = (float(np.nanmax(c)) if np.all(np.isfinite(c)) else 1.0) if rows else -np.inf
         if ratio is not None:
             end = max(end, ratio)
-        return segment_reach_bounds(self.robot, self.bodies, end + slope_deviation(self.robot, q_a, q_b))
+        return segment_reach_bounds(model, self.bodies, end + model.slope_deviation(q_a, q_b))
 
     def _walk(
         self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
@@ -159,10 +161,10 @@ class ReferenceWorld(CollisionWorld):
         n_fine = limit_samples(dq)
         t_fine = np.linspace(0.0, 1.0, n_fine + 1)
         qs = q_a[None, :] + t_fine[:, None] * dq[None, :]
-        bad = ~self.robot.admissible_batch(qs)
+        bad = ~self.model.admissibility.admissible_batch(qs)
         if bad.any():
             i = int(np.argmax(bad))
-            contacts = tuple(limit_contacts(self.robot, qs[i]))
+            contacts = tuple(limit_contacts(self.model.admissibility, qs[i]))
             return MotionReport(False, n_fine + 1, 0, float(t_fine[i]), contacts)
         probes = self._probes
         before = probes.queries
@@ -194,7 +196,8 @@ class ReferenceWorld(CollisionWorld):
         def spare(st: BodyState, is_cabin: bool, idx: int, base: float) -> float:
             return float((st.cabin_lb[idx] if is_cabin else st.pair_lb[idx]) - base)
 
-        carriage = self.names.index("carriage")
+        rail = self.model.rail_body
+        carriage = self.names.index(rail) if rail is not None else -1
         # Both end states: a task whose spare clearance at the two ends covers the segment from both sides
         # (free_0 / D + free_1 / D >= 1) needs nothing in between.
         s0, s1 = state(0), state(n)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from planner.core.types import Array
-from planner.robots.cabin8 import Cabin8
+from planner.robots.geometry import Admissibility
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ class BodyState:
         return float(self.flat[b, 12])
 
 
-def limit_contacts(robot: Cabin8, q: Array) -> list[Contact]:
+def limit_contacts(robot: Admissibility, q: Array) -> list[Contact]:
     """One ``limit`` contact per violated limit or margin of the robot at q."""
     return [
         Contact(

@@ -19,10 +19,14 @@ Every decision that something is *clear* is certified; nothing is sampled at a f
   where a number is needed (reports), pruned by the same lower bounds (branch and bound).
 
 The rooms of ``planner/collision/``: this module (the state and path API), :mod:`.motion` (the certified
-motion walk), :mod:`.probes` (FCL), :mod:`.reports` (the values returned), :mod:`.bodies` (shapes, sphere
-covers, reach bounds), :mod:`.clearance_grid` (the cabin's distance lower bounds), :mod:`.pose_model` (the
-CasADi body poses), :mod:`.kernels` (the compiled hot path) and :mod:`.reference` (the pure-Python
-reference route, kept as the tests' oracle).
+motion walk), :mod:`.probes` (FCL), :mod:`.reports` (the values returned), :mod:`.bodies` (the robot's
+bodies plus the payload: sphere covers, reach bounds), :mod:`.clearance_grid` (the cabin's distance lower
+bounds), :mod:`.kernels` (the compiled hot path) and :mod:`.reference` (the pure-Python reference route,
+kept as the tests' oracle).
+
+No robot is named here: the robot model supplies its bodies, shapes, adjacency, reach bounds, pose
+functions and kernel, and its admissibility constraints through its
+:class:`~planner.robots.geometry.CollisionModel` (``robot.collision_model()``).
 """
 
 from __future__ import annotations
@@ -30,16 +34,15 @@ from __future__ import annotations
 import hashlib
 import math
 from functools import cache
+from typing import Generic, TypeVar
 
 import numpy as np
 
-from planner.collision.bodies import BodySet, PayloadGeometry, cabin8_bodies, segment_reach_bounds
+from planner.collision.bodies import BodySet, PayloadGeometry, robot_bodies, segment_reach_bounds
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
 from planner.collision.kernels import buffers, state, walk
 from planner.collision.kernels.bounds import cover_centres_batch
-from planner.collision.kernels.poses import N_CONSTRAINTS
 from planner.collision.motion import CertifiedMotion
-from planner.collision.pose_model import pose_functions
 from planner.collision.probes import Probes, cabin_bvh
 from planner.collision.reports import (
     VALID,
@@ -54,12 +57,15 @@ from planner.collision.reports import (
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array
 from planner.meshio import LoadedMesh
-from planner.robots.cabin8 import Cabin8
+from planner.robots.base import RobotModel
 
 DEFAULT_CLEARANCE_M = 0.01
 DEFAULT_MOTION_MARGIN_M = 0.005
 DEFAULT_SELF_CLEARANCE_M = 0.005
 MIN_MOTION_MARGIN_M = 1e-4
+
+#: The world's robot model type (``world.robot`` keeps it: cabin8's world gives a Cabin8).
+RobotT = TypeVar("RobotT", bound=RobotModel)
 
 
 @cache
@@ -84,11 +90,11 @@ def cabin_key(cabin: LoadedMesh) -> tuple[str, bytes, bytes]:
     )
 
 
-class CollisionWorld:
+class CollisionWorld(Generic[RobotT]):
     """Robot (+ payload) and cabin, with exact, certified state and motion checks.
 
     Args:
-        robot: The cabin8 model.
+        robot: The robot model (it supplies its collision geometry: ``robot.collision_model()``).
         cabin: The cabin mesh in the base frame (``None``: free space, self-collision only).
         payload: The carried payload (``None``: none).
         grid_step_m: Node spacing of the clearance lower-bound grid [m].
@@ -104,7 +110,7 @@ class CollisionWorld:
 
     def __init__(
         self,
-        robot: Cabin8,
+        robot: RobotT,
         cabin: LoadedMesh | None = None,
         payload: PayloadGeometry | None = None,
         grid_step_m: float = 0.03,
@@ -115,9 +121,10 @@ class CollisionWorld:
         self.robot = robot
         self.cabin = cabin
         self.payload = payload
-        self.bodies: BodySet = cabin8_bodies(robot, payload)
+        self.model = robot.collision_model()
+        self.bodies: BodySet = robot_bodies(self.model, payload)
         self.names = self.bodies.names
-        self._pose_fn, self._pose_fast = pose_functions(robot.kin, self.bodies.names)
+        self._pose_fn, self._pose_fast = self.model.pose_functions(self.bodies.names)
         self._T_tool_box = payload.T_tool_box if payload is not None else np.eye(4)
         self._n_bodies = len(self.names)
         self._grid: ClearanceGrid | None = None
@@ -126,25 +133,30 @@ class CollisionWorld:
         self._probes = Probes(self.bodies, cabin_bvh(*key) if key is not None else None)
         if key is not None:
             self._grid = _cabin_grid(*key, grid_step_m)
-            self._carriage_table = self._carriage_table_of(key)
-        self._kernel = buffers.build(robot, self.bodies, self._T_tool_box, self._grid, self._carriage_table)
-        self._motion = CertifiedMotion(robot, self.bodies, self._kernel, self._probes)
+            if self.model.rail_body is not None:
+                self._carriage_table = self._carriage_table_of(key)
+        self._kernel = buffers.build(
+            self.model, self.bodies, self._T_tool_box, self._grid, self._carriage_table
+        )
+        self._motion = CertifiedMotion(self.model, self.bodies, self._kernel, self._probes)
         #: Fine-cover sphere radii (S,), grouped by body (the spheres of :meth:`cover_centres`).
         self._fine_r = self._kernel.fine.radii
 
     def _carriage_table_of(self, key: tuple[str, bytes, bytes]) -> tuple[float, float, Array]:
-        """The carriage's clearance table along the rail, built once per cabin, carriage shape and rail.
+        """The rail body's clearance table along the rail, built once per cabin, body shape and rail.
 
-        It depends on the cabin's geometry (the vertices as loaded, in the base frame: the file hash alone
-        would not tell units apart), the carriage's shape and the rail.
+        The rail body (cabin8: the carriage) moves with joint 0 alone. Its table depends on the cabin's
+        geometry (the vertices as loaded, in the base frame: the file hash alone would not tell units
+        apart), the body's shape and the rail.
         """
-        carriage = self.names.index("carriage")
-        lo, hi = float(self.robot.limits.lower[0]), float(self.robot.limits.upper[0])
+        assert self.model.rail_body is not None
+        carriage = self.names.index(self.model.rail_body)
+        lo, hi = self.model.rail_range
         table_key = (
             key[0] + hashlib.sha256(key[1] + key[2]).hexdigest(),
             repr(self.bodies.shapes[carriage]),
-            self.robot.limits.lower[0],
-            self.robot.limits.upper[0],
+            lo,
+            hi,
         )
         table = _CARRIAGE_TABLES.get(table_key)
         if table is None:
@@ -155,14 +167,14 @@ class CollisionWorld:
 
     # ------------------------------------------------------------------ poses
     def _evaluate(self, q: Array) -> tuple[Array, Array]:
-        """Flat body poses (N, B, 13) and admissibility values c(q) (N, m) for (N, 8) or (8,) joints."""
+        """Flat body poses (N, B, 13) and admissibility values c(q) (N, m) for (N, n) or (n,) joints."""
         q2 = np.atleast_2d(np.asarray(q, dtype=float))
         n = q2.shape[0]
         if n == 1:
             flat, c = (x[None, :] for x in self._pose_fast(q2[0], self._T_tool_box))
             return np.ascontiguousarray(flat.reshape(n, self._n_bodies, 13)), c
         # The closed-form kernel, ~100x faster than CasADi's batch call.
-        poses, c = np.empty((n, self._n_bodies, 13)), np.empty((n, N_CONSTRAINTS))
+        poses, c = np.empty((n, self._n_bodies, 13)), np.empty((n, len(self._kernel.c_lo)))
         state.packed_poses(np.ascontiguousarray(q2), self._kernel.fbuf, self._kernel.ibuf, poses, c)
         return poses, c
 
@@ -195,11 +207,11 @@ class CollisionWorld:
             all_contacts: Collect every contact instead of stopping at the first.
         """
         _check_clearance(clearance)
-        q = _joints(q)
+        q = _joints(q, self.model.n_joints)
         screened = self._screen(q, clearance)
         if isinstance(screened, StateReport):
             return screened
-        contacts = [] if screened.admissible else limit_contacts(self.robot, q)
+        contacts = [] if screened.admissible else limit_contacts(self.model.admissibility, q)
         if contacts and not all_contacts:
             return StateReport(False, tuple(contacts))
         own = self.self_clearance
@@ -220,7 +232,7 @@ class CollisionWorld:
         if code == state.CLEAR:  # the bounds prove everything: no FCL query
             return VALID
         if code == state.NOT_FINITE:
-            return StateReport(False, tuple(limit_contacts(self.robot, q)))
+            return StateReport(False, tuple(limit_contacts(self.model.admissibility, q)))
         return BodyState(flat, cabin, pairs, code != state.INADMISSIBLE)
 
     def is_valid(self, q: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
@@ -230,7 +242,7 @@ class CollisionWorld:
         only for what the bounds cannot prove clear.
         """
         _check_clearance(clearance)
-        q = _joints(q)
+        q = _joints(q, self.model.n_joints)
         own = self.self_clearance
         d = self._kernel
         code, flat, cabin, pairs = state.packed_check(
@@ -289,7 +301,8 @@ class CollisionWorld:
                 f"motion_margin: must be in [{MIN_MOTION_MARGIN_M}, 0.1] m, got {motion_margin}",
                 field="motion_margin",
             )
-        return self._walk(_joints(q_a), _joints(q_b), clearance, motion_margin, own, reach_ratio)
+        n = self.model.n_joints
+        return self._walk(_joints(q_a, n), _joints(q_b, n), clearance, motion_margin, own, reach_ratio)
 
     def _walk(
         self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
@@ -323,9 +336,9 @@ class CollisionWorld:
         if n == 1:
             rep = self.check_state(qs[0], clearance)
             return PathReport(rep.valid, 0, 0, None if rep.valid else 0, rep.contacts)
-        ratios = self.robot.constraint_values_batch(qs)[:, -3:]
-        ratio = float(np.nanmax(ratios)) if np.all(np.isfinite(ratios)) else 1.0
-        rho_all = segment_reach_bounds(self.robot, self.bodies, min(ratio + 0.02, 0.999))[0]
+        ratios = self.model.admissibility.constraint_values_batch(qs)[:, list(self.model.ratio_rows)]
+        ratio = _largest_ratio(ratios)
+        rho_all = segment_reach_bounds(self.model, self.bodies, min(ratio + 0.02, 0.999))[0]
         rho_joint = np.max(rho_all, axis=0)  # per joint, the largest reach of any body
         qs = np.ascontiguousarray(qs)
         rho_joint = np.ascontiguousarray(rho_joint, dtype=float)
@@ -357,7 +370,7 @@ class CollisionWorld:
         Distances are exact FCL queries on the un-grown shapes; candidates whose certified lower bound
         already exceeds the best distance found are skipped (branch and bound). Penetration gives <= 0.
         """
-        st = self._state(_joints(q))
+        st = self._state(_joints(q, self.model.n_joints))
         candidates: list[tuple[float, bool, int]] = []
         if self._probes.cabin_obj is not None:
             candidates += [(float(lb), True, b) for b, lb in enumerate(st.cabin_lb)]
@@ -379,16 +392,23 @@ class CollisionWorld:
         return np.array([self.min_distance(q, include_self).distance_m for q in np.atleast_2d(qs)])
 
 
-def _joints(q: Array) -> Array:
-    """A joint vector as the kernels need it: contiguous, writeable float64 of shape (8,).
+def _largest_ratio(ratios: Array) -> float:
+    """The largest slope ratio of a path's samples (N, rows): 1 where one is not finite, 0 without rows."""
+    if ratios.shape[1] == 0:
+        return 0.0
+    return float(np.nanmax(ratios)) if np.all(np.isfinite(ratios)) else 1.0
+
+
+def _joints(q: Array, n: int) -> Array:
+    """A joint vector as the kernels need it: contiguous, writeable float64 of shape (n,).
 
     (A read-only array would be another type to the compiled kernels: a new compilation, not a new result.)
     """
     q = np.ascontiguousarray(q, dtype=float)
     if not q.flags.writeable:
         q = q.copy()
-    if q.shape != (8,):
-        raise InvalidInput(f"q: a joint vector of 8 values expected, got shape {q.shape}", field="q")
+    if q.shape != (n,):
+        raise InvalidInput(f"q: a joint vector of {n} values expected, got shape {q.shape}", field="q")
     return q
 
 

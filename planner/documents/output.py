@@ -25,6 +25,7 @@ from planner.core.provenance import code_version
 if TYPE_CHECKING:
     from planner.plan.pipeline import PlanResult
     from planner.scenario.resolve import ResolvedScenario
+    from planner.timing.profile import DriveProfile
 
 
 def provenance(sc: ResolvedScenario) -> dict[str, Any]:
@@ -65,18 +66,40 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def _samples(profile: DriveProfile) -> dict[str, Any]:
+    """The profile's fields; its sample arrays go out as ``tolist()`` made them when all are finite.
+
+    ``tolist`` gives Python floats already: walking the ~10^5 samples of a plan again through
+    :func:`_jsonable` cost a CLI call 0.1-0.4 s (measured with cProfile), for nothing to change.
+    """
+    arrays = (
+        profile.t,
+        profile.position,
+        profile.velocity,
+        profile.acceleration,
+        profile.jerk,
+        profile.joints,
+    )
+    extra = () if profile.effort is None else (profile.effort,)
+    doc = profile.to_dict()
+    if all(np.isfinite(a).all() for a in (*arrays, *extra)):
+        return doc
+    return _jsonable(doc)  # a non-finite sample becomes null (the gate refuses such a profile anyway)
+
+
 def result_document(sc: ResolvedScenario, result: PlanResult) -> dict[str, Any]:
     """The success document of a validated plan."""
-    doc: dict[str, Any] = {
+    head = {
         "robot": sc.robot.name,
         "scenario": {"name": sc.spec.name, "sha256": sc.scenario_sha256},
         "status": "succeeded",
     }
-    doc.update(result.profile.to_dict())
-    doc["min_clearance_m"] = result.gate.min_clearance_m
-    doc["report"] = {**result.report, "gate": result.gate.to_dict()}
-    doc["provenance"] = provenance(sc)
-    return _jsonable(doc)
+    tail = {
+        "min_clearance_m": result.gate.min_clearance_m,
+        "report": {**result.report, "gate": result.gate.to_dict()},
+        "provenance": provenance(sc),
+    }
+    return {**_jsonable(head), **_samples(result.profile), **_jsonable(tail)}
 
 
 def refusal_document(

@@ -1,4 +1,4 @@
-"""Stiffness calibration from measured deflections (issue 15): ``cabinplan stiffness calibrate``.
+"""Stiffness calibration from measured deflections (issue 15): the fit of ``cabinplan stiffness calibrate``.
 
 A cell measures, at several configurations, the tool's pose offset under a known load (a laser tracker
 before and after hanging a weight or pulling with a force gauge). The model predicts that offset as
@@ -26,7 +26,9 @@ Newton); since theta is a log, its standard deviation is the parameter's *relati
 * a parameter's relative standard deviation is above :data:`MAX_RELATIVE_STD`: the data do not determine
   it (the message names it; leave it out with ``--parameters`` or measure loads that excite it).
 
-The file format is :data:`CSV_COLUMNS` (one row per measurement, SI units in the column names).
+The file format is :data:`CSV_COLUMNS` (one row per measurement, SI units in the column names). Reading
+the measurement file and writing the calibrated description (the CLI's use case) is
+:mod:`planner.documents.calibration`; this module parses and fits.
 """
 
 from __future__ import annotations
@@ -36,17 +38,14 @@ import io
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
-from numpy.typing import NDArray
-from pydantic import ValidationError
 from scipy.optimize import least_squares
 
-from planner.core.description import HYBRID8_DRIVES, Hybrid8Description, StiffnessSpec
-from planner.core.exceptions import CalibrationIllPosed, InvalidInput, InvalidRobotDescription
+from planner.core.description import HYBRID8_DRIVES, StiffnessSpec
+from planner.core.exceptions import CalibrationIllPosed, InvalidInput
+from planner.core.types import Array
 from planner.dynamics.stiffness import StiffnessModel
 from planner.dynamics.stiffness_params import (
     PARAMETERS,
@@ -54,11 +53,8 @@ from planner.dynamics.stiffness_params import (
     check_names,
     parameter_unit,
     reference_values,
-    stiffness_yaml_block,
 )
 from planner.robots.cabin8 import Cabin8
-
-Array = NDArray[np.float64]
 
 _UNITS = {"d1": "m", "x1": "m", "x2": "m", "x3": "m", "theta3": "rad", "theta4": "rad", "d5": "m"}
 DRIVE_COLUMNS = tuple(f"{d}_{_UNITS.get(d, 'rad')}" for d in HYBRID8_DRIVES)
@@ -382,62 +378,6 @@ def calibrate(
     )
 
 
-def calibrated_description(base_path: Path, calibration: Calibration) -> str:
-    """The base description file's text with its stiffness section replaced by the calibrated one."""
-    from planner.dynamics.paper_fit import replace_stiffness_block
-
-    block = stiffness_yaml_block(
-        calibration.spec,
-        [
-            "Calibrated (issue 15) by `cabinplan stiffness calibrate`: see note and uncertainty.",
-            "Sections are rectangles b x h [m] (b along the link's local z axis), drives N/m or N m/rad.",
-        ],
-    )
-    return replace_stiffness_block(base_path.read_text(encoding="utf-8"), block)
-
-
-def calibrate_file(
-    measurements: Path,
-    output: Path,
-    description: Path | None = None,
-    parameters: Sequence[str] | None = None,
-    sigma_m: float = 1e-5,
-    sigma_rad: float = 1e-5,
-) -> dict[str, Any]:
-    """``cabinplan stiffness calibrate``: read the CSV, fit, write the calibrated description, report.
-
-    Raises:
-        InvalidInput: unreadable files, bad data (see :func:`parse_measurements`, :func:`calibrate`).
-        CalibrationIllPosed: see :func:`calibrate`.
-    """
-    from planner.core.description import load_description
-    from planner.robots.cabin8 import default_description_path
-
-    base_path = (description or default_description_path()).resolve()
-    robot = Cabin8(base_path)
-    try:
-        text = measurements.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InvalidInput(f"measurements: cannot read {measurements} ({exc})", field="measurements") from exc
-    data = parse_measurements(text, robot.desc.gravity_m_s2, source="measurements")
-    cal = calibrate(robot, data, parameters or DEFAULT_PARAMETERS, sigma_m, sigma_rad)
-    out_text = calibrated_description(base_path, cal)
-    try:
-        Hybrid8Description.model_validate(yaml.safe_load(out_text))  # valid before anything is written
-    except (ValidationError, yaml.YAMLError) as exc:
-        raise InvalidRobotDescription(
-            f"calibration: the calibrated description would not be valid ({exc}); check {base_path}",
-            path=str(base_path),
-        ) from exc
-    try:
-        output.parent.mkdir(parents=True, exist_ok=True)
-        output.write_text(out_text, encoding="utf-8")
-    except OSError as exc:
-        raise InvalidInput(f"--output: cannot write {output} ({exc.strerror})", field="output") from exc
-    load_description(output)  # what the planner will read back
-    return {"robot": robot.name, "description": str(output), "source": "calibrated", **cal.to_dict()}
-
-
 __all__ = [
     "CSV_COLUMNS",
     "DEFAULT_PARAMETERS",
@@ -446,8 +386,6 @@ __all__ = [
     "Calibration",
     "Measurements",
     "calibrate",
-    "calibrate_file",
-    "calibrated_description",
     "measurements_csv",
     "parse_measurements",
 ]

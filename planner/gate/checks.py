@@ -41,7 +41,7 @@ from planner.collision.world import CollisionWorld
 from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
 from planner.core.types import Array, IntArray
-from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.models import DriveDynamics, drive_dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.dynamics.stiffness import (
     COMPENSATION_TOL_M,
@@ -73,7 +73,7 @@ def validate_profile(
     robot: Cabin8,
     world: CollisionWorld,
     req: GateRequirements,
-    dynamics: Cabin8Dynamics | None = None,
+    dynamics: DriveDynamics | None = None,
 ) -> GateReport:
     """Run every check of the gate on a sampled profile (see the module docstring)."""
     checks, peaks = drive_checks(profile, robot, req.start_u, req.sample_period_s, req.jerk_limited)
@@ -90,10 +90,11 @@ def validate_profile(
     except OutsideWorkspace as exc:
         checks.append(Check("workspace", False, exc.message, None, exc.details.get("index")))
     if q is not None:
-        bad = ~robot.admissible_batch(q)
+        admissibility = world.model.admissibility  # the robot's constraints, as the world checks them
+        bad = ~admissibility.admissible_batch(q)
         if bad.any():
             i = int(np.argmax(bad))
-            names = ", ".join(v["name"] for v in robot.violations(q[i]))
+            names = ", ".join(v["name"] for v in admissibility.violations(q[i]))
             checks.append(Check("workspace", False, f"sample {i} violates {names}", None, i))
         else:
             checks.append(
@@ -119,7 +120,8 @@ def validate_profile(
             checks.append(Check(name, False, "not evaluated: the parallel stage does not assemble"))
         return GateReport(tuple(checks), n, float("nan"), peaks)
     # Efforts: recomputed independently from the joint motion implied by the drive motion.
-    dyn = dynamics or Cabin8Dynamics.of(robot)
+    dyn = dynamics or drive_dynamics(robot)
+    assert dyn is not None, "this gate needs the robot's force model"
     # q_dot = G^-1 u_dot, q_ddot = G^-1 (u_ddot - G_dot q_dot), exact (CasADi AD of the drive map).
     qd, qdd = dyn.joint_rates_batch(q, ud, udd)
     tau = dyn.drive_forces_batch(q, qd, qdd, req.payload)

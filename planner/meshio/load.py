@@ -32,16 +32,23 @@ this module, the public entry :func:`load_mesh`.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.metadata
 import logging
+import os
+import tempfile
 import threading
 from collections import OrderedDict
 from collections.abc import Hashable
 from pathlib import Path
-from typing import get_args
+from typing import Any, get_args
 
+import numpy as np
 from numpy.typing import ArrayLike
 
+from planner.core.cache import cache_dir
+from planner.core.types import Array, IntArray
 from planner.meshio.build import validate_and_build, validate_pose
 from planner.meshio.parse import concatenate, parse_obj, parse_with_trimesh
 from planner.meshio.sniff import format_of, read_bytes, sniff
@@ -100,10 +107,7 @@ def load_mesh(
         return cached
 
     kind = sniff(label, fmt, data, limits)
-    if kind == "obj":
-        parts, n_ignored = [parse_obj(label, data, limits)], 0
-    else:
-        parts, n_ignored = parse_with_trimesh(label, fmt, data, limits)
+    parts, n_ignored = _parse(label, kind, fmt, data, sha256, limits)
 
     mesh_vertices, faces, n_faces_read = concatenate(parts)
     if n_ignored:
@@ -129,6 +133,82 @@ def load_mesh(
     )
     _cache_put(key, loaded)
     return loaded
+
+
+def _parse(
+    label: str, kind: str, fmt: str, data: bytes, sha256: str, limits: MeshLimits
+) -> tuple[list[tuple[Array, IntArray]], int]:
+    """Step 4 through the on-disk parse cache: a file whose bytes were parsed before is read back.
+
+    A CLI call then never imports trimesh (0.2-1 s of its start-up).
+
+    The cache holds the parser's raw output only (before units, validation and pose), keyed by the
+    content hash, the format, the parser's version and the caps the parse enforced; every later step runs
+    as on a fresh parse. A missing, unreadable or foreign entry is parsed anew.
+    """
+    path = _parse_cache_path(kind, fmt, sha256, limits)
+    if path is not None:
+        cached = _read_parts(path)
+        if cached is not None:
+            return cached
+    if kind == "obj":
+        parts, n_ignored = [parse_obj(label, data, limits)], 0
+    else:
+        parts, n_ignored = parse_with_trimesh(label, fmt, data, limits)
+    if path is not None:
+        _write_parts(path, parts, n_ignored)
+    return parts, n_ignored
+
+
+#: Version of the layout of a parse-cache entry (bump when :func:`_write_parts` changes).
+PARSE_CACHE_LAYOUT = 1
+
+
+def _parse_cache_path(kind: str, fmt: str, sha256: str, limits: MeshLimits) -> Path | None:
+    root = cache_dir()
+    if root is None:
+        return None
+    parser = "obj" if kind == "obj" else f"trimesh-{_trimesh_version()}"
+    tag = f"{PARSE_CACHE_LAYOUT}-{parser}-{limits.max_faces}-{limits.max_vertices}"
+    return root / "meshes" / f"{sha256}-{fmt}-{hashlib.sha256(tag.encode()).hexdigest()[:16]}.npz"
+
+
+@functools.cache
+def _trimesh_version() -> str:
+    try:
+        return importlib.metadata.version("trimesh")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _read_parts(path: Path) -> tuple[list[tuple[Array, IntArray]], int] | None:
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            n_parts = int(npz["n_parts"])
+            parts = [
+                (np.asarray(npz[f"v{i}"], dtype=np.float64), np.asarray(npz[f"f{i}"], dtype=np.int64))
+                for i in range(n_parts)
+            ]
+            return parts, int(npz["n_ignored"])
+    except FileNotFoundError:
+        return None
+    except Exception as exc:  # a truncated or foreign file: parse again (and overwrite it)
+        _LOG.warning("mesh parse cache %s unreadable (%s): parsing again", path, exc)
+        return None
+
+
+def _write_parts(path: Path, parts: list[tuple[Array, IntArray]], n_ignored: int) -> None:
+    arrays: dict[str, Any] = {"n_parts": np.array(len(parts)), "n_ignored": np.array(n_ignored)}
+    for i, (vertices, faces) in enumerate(parts):
+        arrays[f"v{i}"] = vertices
+        arrays[f"f{i}"] = faces
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as tmp:
+            np.savez(tmp, **arrays)
+        os.replace(tmp.name, path)  # atomic: a reader sees the old entry or the whole new one
+    except OSError as exc:  # a read-only or full cache folder only costs the next call a parse
+        _LOG.warning("mesh parse cache %s not written: %s", path, exc)
 
 
 #: Parsed meshes by content hash (and format, units, name, pose, limits): a service resolving many

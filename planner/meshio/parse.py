@@ -14,7 +14,6 @@ import warnings
 from array import array
 
 import numpy as np
-import trimesh
 
 from planner.core.exceptions import InvalidMesh
 from planner.core.types import Array, IntArray
@@ -80,6 +79,8 @@ def parse_with_trimesh(
     label: str, fmt: str, data: bytes, limits: MeshLimits
 ) -> tuple[list[tuple[Array, IntArray]], int]:
     """Parse with trimesh and flatten the scene graph: one (vertices, faces) per geometry instance."""
+    import trimesh  # imported on first parse only (0.2-1 s); a cached parse needs none (planner.meshio.load)
+
     try:
         # Bad numbers (inf, nan) are found and refused below with the file's name; trimesh's own numpy
         # warnings about them would only add lines to a one-line error.

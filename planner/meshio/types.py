@@ -11,13 +11,15 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any, Literal, NoReturn
+from typing import TYPE_CHECKING, Any, Literal, NoReturn
 
 import numpy as np
-import trimesh
 
 from planner.core.exceptions import InvalidInput, InvalidMesh
 from planner.core.types import Array, IntArray
+
+if TYPE_CHECKING:
+    import trimesh
 
 Units = Literal["m", "mm"]
 #: Metres per declared unit.
@@ -180,6 +182,8 @@ class LoadedMesh:
 
     def to_trimesh(self) -> trimesh.Trimesh:
         """A fresh :class:`trimesh.Trimesh` copy (no processing, so faces keep their order)."""
+        import trimesh  # only here: trimesh costs a CLI call 0.2-1 s of imports
+
         return trimesh.Trimesh(vertices=self.vertices.copy(), faces=self.faces.copy(), process=False)
 
 

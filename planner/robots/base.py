@@ -1,8 +1,10 @@
 """The generic robot-model interface every mechanism implements.
 
 The planner, the CLI and the service talk to robots only through :class:`RobotModel`: drive names and
-limits, the drive <-> joint maps, and a summary. Mechanism-specific capabilities (a tool frame for a
-serial-parallel arm, a platform pose for a parallel platform) live on the concrete classes.
+limits, the drive <-> joint maps, a summary, and the collision geometry with the admissibility constraints
+(:meth:`RobotModel.collision_model`, the protocol of :mod:`planner.robots.geometry`). Mechanism-specific
+capabilities (a tool frame for a serial-parallel arm, a platform pose for a parallel platform) live on the
+concrete classes.
 """
 
 from __future__ import annotations
@@ -10,11 +12,14 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from planner.core.types import Array
+
+if TYPE_CHECKING:
+    from planner.robots.geometry import CollisionModel
 
 
 @dataclass(frozen=True)
@@ -84,6 +89,16 @@ class RobotModel(ABC):
     @abstractmethod
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable description: drives, units, limits, geometry."""
+
+    def collision_model(self) -> CollisionModel:
+        """The robot's collision geometry and admissibility (:mod:`planner.robots.geometry`).
+
+        Raises:
+            InvalidInput: the robot has no collision geometry (it cannot be checked against a cabin).
+        """
+        from planner.core.exceptions import InvalidInput
+
+        raise InvalidInput(f"robot {self.name!r} has no collision geometry", field="robot", robot=self.name)
 
     def drives_dict(self, u: Array) -> dict[str, float]:
         """Name -> value mapping of one drive vector."""

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from functools import cache, cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
@@ -35,6 +35,9 @@ from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
 from planner.kinematics.native import native
 from planner.robots.base import DriveLimits, RobotModel
+
+if TYPE_CHECKING:
+    from planner.robots.cabin8_geometry import Cabin8CollisionModel
 
 #: Indices of the stage coordinates in q (x, y, gamma) and in u (x1, x2, x3).
 STAGE = slice(1, 4)
@@ -312,6 +315,17 @@ class Cabin8(RobotModel):
                 for b in bad
             )
             raise LimitViolation(f"configuration violates {names}", violations=bad)
+
+    # ------------------------------------------------------------- collision
+    def collision_model(self) -> Cabin8CollisionModel:
+        """cabin8's bodies, shapes, reach bounds and pose kernels (:mod:`planner.robots.cabin8_geometry`)."""
+        return self._collision_model
+
+    @cached_property
+    def _collision_model(self) -> Cabin8CollisionModel:
+        from planner.robots.cabin8_geometry import Cabin8CollisionModel
+
+        return Cabin8CollisionModel(self)
 
     # --------------------------------------------------------------- summary
     @cached_property

@@ -85,63 +85,78 @@ def load_scenario_file(path: Path) -> Scenario:
             :func:`scenario_from_dict`). ``details['field']`` is ``"scenario"`` for file-level problems.
     """
     path = Path(path)
+    return scenario_from_dict(read_document(path), source=str(path))
+
+
+def read_document(path: Path, what: str = "scenario") -> object:
+    """The parsed content of a YAML or JSON input file (a scenario, a sweep description), not yet validated.
+
+    Args:
+        path: The file (``.yaml``/``.yml`` or ``.json``, at most 1 MiB, UTF-8).
+        what: What the file holds: the prefix of every message and ``details['field']``.
+
+    Raises:
+        InvalidInput: wrong extension, missing/unreadable/oversized file, not UTF-8, a syntax error (the
+            message gives line and column) or a duplicate key.
+    """
+    path = Path(path)
     ext = path.suffix.lower()
     if ext not in SCENARIO_EXTENSIONS:
         raise InvalidInput(
-            f"scenario: unsupported file extension {ext or '(none)'!r} of {path.name!r}; "
+            f"{what}: unsupported file extension {ext or '(none)'!r} of {path.name!r}; "
             f"expected one of {', '.join(SCENARIO_EXTENSIONS)}",
-            field="scenario",
+            field=what,
             file=str(path),
         )
-    text = read_text(path)
-    data: object
+    text = read_text(path, what)
     try:
         if ext == ".json":
-            data = json.loads(text, object_pairs_hook=unique_json_object)
-        else:
-            data = yaml.load(text, Loader=ScenarioYamlLoader)  # a SafeLoader subclass
+            return json.loads(text, object_pairs_hook=unique_json_object)
+        return yaml.load(text, Loader=ScenarioYamlLoader)  # a SafeLoader subclass
     except json.JSONDecodeError as exc:
-        raise _file_error(path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+        why = f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
+        raise _file_error(path, why, what) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         why = " ".join(str(exc.problem or exc.context or "syntax error").split())
-        raise _file_error(path, f"invalid YAML{where}: {why}") from None
+        raise _file_error(path, f"invalid YAML{where}: {why}", what) from None
     except yaml.YAMLError as exc:
-        raise _file_error(path, f"invalid YAML: {' '.join(str(exc).split())}") from None
+        raise _file_error(path, f"invalid YAML: {' '.join(str(exc).split())}", what) from None
     except RecursionError:
-        raise _file_error(path, "the document is nested too deeply") from None
+        raise _file_error(path, "the document is nested too deeply", what) from None
     except ValueError as exc:  # duplicate JSON key
-        raise _file_error(path, f"invalid JSON: {exc}") from None
-    return scenario_from_dict(data, source=str(path))
+        raise _file_error(path, f"invalid JSON: {exc}", what) from None
 
 
-def _file_error(path: Path, why: str) -> InvalidInput:
-    return InvalidInput(f"scenario: {path.name}: {why}", field="scenario", file=str(path))
+def _file_error(path: Path, why: str, what: str = "scenario") -> InvalidInput:
+    return InvalidInput(f"{what}: {path.name}: {why}", field=what, file=str(path))
 
 
-def read_text(path: Path) -> str:
-    """The file's text (UTF-8), refusing missing, non-regular and oversized files before reading."""
+def read_text(path: Path, what: str = "scenario") -> str:
+    """The file's text (UTF-8), refusing missing, non-regular and oversized files before reading.
+
+    ``what`` (the file's kind) prefixes the messages and is ``details['field']``.
+    """
     try:
         info = path.stat()
     except FileNotFoundError:
-        raise _file_error(path, f"file not found ({path})") from None
+        raise _file_error(path, f"file not found ({path})", what) from None
     except OSError as exc:
-        raise _file_error(path, f"cannot read the file: {exc.strerror or exc}") from None
+        raise _file_error(path, f"cannot read the file: {exc.strerror or exc}", what) from None
     if not stat.S_ISREG(info.st_mode):
-        raise _file_error(path, "not a regular file")
+        raise _file_error(path, "not a regular file", what)
     if info.st_size > MAX_SCENARIO_BYTES:
-        raise _file_error(
-            path, f"{info.st_size} bytes exceeds the scenario size cap of {MAX_SCENARIO_BYTES} bytes (1 MiB)"
-        )
+        cap = f"{info.st_size} bytes exceeds the {what} size cap of {MAX_SCENARIO_BYTES} bytes (1 MiB)"
+        raise _file_error(path, cap, what)
     try:
         with path.open("rb") as fh:
             raw = fh.read(MAX_SCENARIO_BYTES + 1)
     except OSError as exc:
-        raise _file_error(path, f"cannot read the file: {exc.strerror or exc}") from None
+        raise _file_error(path, f"cannot read the file: {exc.strerror or exc}", what) from None
     if len(raw) > MAX_SCENARIO_BYTES:  # the file grew between stat and read
-        raise _file_error(path, f"more than {MAX_SCENARIO_BYTES} bytes (1 MiB)")
+        raise _file_error(path, f"more than {MAX_SCENARIO_BYTES} bytes (1 MiB)", what)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise _file_error(path, f"not UTF-8 text (invalid byte at offset {exc.start})") from None
+        raise _file_error(path, f"not UTF-8 text (invalid byte at offset {exc.start})", what) from None

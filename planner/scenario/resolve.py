@@ -329,28 +329,24 @@ def _configuration(
     if drives is not None:
         where = f"{prefix}.drives"
         u = robot.drives_from_dict(dict(drives), field=where)
-        try:
-            q = robot.joints_from_drives(u)
-        except OutsideWorkspace as exc:
-            raise _outside(where, exc, "the stage sliders do not assemble") from exc
-        return u, q
+        return u, _in_workspace(robot.joints_from_drives, u, where, "the stage sliders do not assemble")
     assert joints is not None  # the schema guarantees exactly one of drives and joints
     where = f"{prefix}.joints"
     q = robot.joints_from_dict(dict(joints), field=where)
-    try:
-        u = robot.drives_from_joints(q)
-    except OutsideWorkspace as exc:
-        raise _outside(where, exc, "no slider positions reach this platform pose") from exc
+    u = _in_workspace(robot.drives_from_joints, q, where, "no slider positions reach this platform pose")
     return u, q
 
 
-def _outside(where: str, exc: OutsideWorkspace, what: str) -> InvalidInput:
-    condition = exc.details.get("condition")
-    return InvalidInput(
-        f"{where}: outside the parallel stage's workspace, {what}: {exc.message}",
-        field=where,
-        condition=condition,
-    )
+def _in_workspace(to_other: Callable[[Array], Array], x: Array, where: str, what: str) -> Array:
+    """``to_other(x)`` (drives <-> joints); outside the stage's workspace, InvalidInput naming ``where``."""
+    try:
+        return to_other(x)
+    except OutsideWorkspace as exc:
+        raise InvalidInput(
+            f"{where}: outside the parallel stage's workspace, {what}: {exc.message}",
+            field=where,
+            condition=exc.details.get("condition"),
+        ) from exc
 
 
 def _rigid_inverse(T: Array) -> Array:

@@ -150,9 +150,7 @@ class ConfigurationSpec(BaseModel):
 
     @model_validator(mode="after")
     def _exactly_one(self) -> ConfigurationSpec:
-        given = [n for n in ("drives", "joints") if getattr(self, n) is not None]
-        if len(given) != 1:
-            raise ValueError(f"exactly one of drives or joints is required, got {_got(given)}")
+        _exactly_one_of(self, ("drives", "joints"))
         return self
 
 
@@ -206,9 +204,7 @@ class GoalSpec(BaseModel):
 
     @model_validator(mode="after")
     def _exactly_one(self) -> GoalSpec:
-        given = [n for n in ("drives", "joints", "pose") if getattr(self, n) is not None]
-        if len(given) != 1:
-            raise ValueError(f"exactly one of drives, joints or pose is required, got {_got(given)}")
+        _exactly_one_of(self, ("drives", "joints", "pose"))
         return self
 
 
@@ -303,8 +299,13 @@ class Scenario(BaseModel):
     options: PlanOptions = Field(default_factory=PlanOptions, description="Planning options.")
 
 
-def _got(given: list[str]) -> str:
-    return "none" if not given else " and ".join(given)
+def _exactly_one_of(model: BaseModel, names: tuple[str, ...]) -> None:
+    """Raise ValueError unless exactly one of the named fields is given (the message names them)."""
+    given = [n for n in names if getattr(model, n) is not None]
+    if len(given) != 1:
+        choices = f"{', '.join(names[:-1])} or {names[-1]}"
+        got = "none" if not given else " and ".join(given)
+        raise ValueError(f"exactly one of {choices} is required, got {got}")
 
 
 def _check_inertia(inertia: Array) -> None:

@@ -19,22 +19,14 @@ naming the field (``axes.payload_mass_kg[1]: Input should be greater than or equ
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Pose, Quaternion
-from planner.scenario.files import (
-    MAX_SCENARIO_BYTES,
-    SCENARIO_EXTENSIONS,
-    ScenarioYamlLoader,
-    read_text,
-    unique_json_object,
-)
+from planner.scenario.files import MAX_SCENARIO_BYTES, read_document
 from planner.scenario.schema import ConfigurationSpec, Number, PositiveNumber, describe_error
 
 _CONFIG = ConfigDict(extra="forbid", frozen=True)
@@ -259,34 +251,7 @@ def load_sweep_file(path: Path) -> SweepSpec:
             column), a duplicate key, or a schema violation.
     """
     path = Path(path)
-    ext = path.suffix.lower()
-    if ext not in SCENARIO_EXTENSIONS:
-        raise InvalidInput(
-            f"sweep: unsupported file extension {ext or '(none)'!r} of {path.name!r}; "
-            f"expected one of {', '.join(SCENARIO_EXTENSIONS)}",
-            field="sweep",
-        )
-    try:
-        text = read_text(path)
-    except InvalidInput as exc:
-        raise InvalidInput(exc.message.replace("scenario:", "sweep:", 1), field="sweep") from None
-    try:
-        if ext == ".json":
-            data = json.loads(text, object_pairs_hook=unique_json_object)
-        else:
-            data = yaml.load(text, Loader=ScenarioYamlLoader)  # a SafeLoader subclass
-    except json.JSONDecodeError as exc:
-        raise InvalidInput(
-            f"sweep: {path.name}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}",
-            field="sweep",
-        ) from None
-    except yaml.YAMLError as exc:
-        raise InvalidInput(
-            f"sweep: {path.name}: invalid YAML: {' '.join(str(exc).split())}", field="sweep"
-        ) from None
-    except ValueError as exc:  # duplicate JSON key
-        raise InvalidInput(f"sweep: {path.name}: invalid JSON: {exc}", field="sweep") from None
-    return sweep_from_dict(data, source=str(path))
+    return sweep_from_dict(read_document(path, "sweep"), source=str(path))
 
 
 __all__ = [

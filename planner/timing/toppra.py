@@ -28,7 +28,8 @@ import numpy as np
 
 from planner.core.lazy import defer
 
-defer("matplotlib.pyplot")  # toppra imports pyplot eagerly, for plotting helpers the planner never calls
+# toppra imports pyplot eagerly, for plotting helpers the planner never calls.
+defer("matplotlib", "matplotlib.pyplot")
 import toppra  # noqa: E402
 import toppra.algorithm  # noqa: E402
 import toppra.constraint  # noqa: E402

@@ -18,9 +18,9 @@ import httpx
 import pytest
 
 from api.db import Database
-from tests.api.conftest import free_transfer, scenario, stuck
+from tests.api.conftest import Server, free_transfer, scenario, stuck
 from tests.api.test_postgres import PG_URL, _reachable
-from tests.api.test_restart import Server, _poll
+from tests.api.test_restart import _poll
 
 FINISHED = {"succeeded", "failed", "cancelled"}
 

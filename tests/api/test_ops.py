@@ -27,6 +27,7 @@ from api.settings import Settings
 from tests.api.conftest import (
     ADMIN_KEY,
     SCENARIOS,
+    Server,
     Service,
     free_transfer,
     make_settings,
@@ -36,7 +37,6 @@ from tests.api.conftest import (
     stuck,
     wait_for,
 )
-from tests.api.test_restart import Server
 
 PROBLEM = "application/problem+json"
 
@@ -117,9 +117,10 @@ def test_warm_up_ready_progress_metrics_access_log_and_body_timeout(tmp_path: Pa
         ended_by = {"no_path_within_time_limit": "time_limit", "no_path_within_budget": "work_budget"}
         assert d["status"] == "failed" and d["reason"] in ended_by, d
         assert d["result"]["details"]["ended_by"] == ended_by[d["reason"]]
-        # Progress never goes back. (That it moves during a search is seen when this test runs alone; in the
-        # full suite's worker it stayed at 0.15 once: open in the closing note of session 4.)
+        # Progress never goes back, and it moves while the search runs (ticks at least twice a second
+        # from the search's checks): seen for 2 s or more (8 polls), it took more than one value.
         assert seen and seen == sorted(seen) and min(seen) >= 0.15, seen
+        assert len(seen) < 8 or len(set(seen)) >= 3, seen
         assert httpx.get(f"{srv.url}/api/v1/plans/{first.json()['id']}", headers=h).json()["status"] == (
             "succeeded"
         )

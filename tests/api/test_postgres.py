@@ -70,3 +70,67 @@ def test_jobs_keys_and_meshes_live_in_postgres(pg: tuple[Service, str]) -> None:
     assert status == "succeeded"
     assert recover_jobs(db) == {"requeued": 0, "failed": 0}
     db.dispose()
+
+
+def test_tenant_quota_lock_is_shared_by_every_instance_on_the_database(pg: tuple[Service, str]) -> None:
+    """Another process (another instance) holding a tenant's quota lock makes this one wait for it.
+
+    The count and the insert of a submission run under the lock, so two instances cannot both pass a
+    tenant's quota; another tenant's lock is independent.
+    """
+    import subprocess
+    import sys
+    import time
+
+    _, schema = pg
+    hold_s = 1.5
+    code = (
+        "import sys, time\n"
+        "from api.db import Database\n"
+        f"db = Database({PG_URL!r}, {schema!r})\n"
+        "with db.tenant_quota_session('alpha'):\n"
+        "    print('locked', flush=True)\n"
+        f"    time.sleep({hold_s})\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    other = subprocess.Popen([sys.executable, "-c", code], cwd=root, stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout is not None and other.stdout.readline().strip() == "locked"
+        db = Database(PG_URL, schema)
+        try:
+            t0 = time.monotonic()
+            with db.tenant_quota_session("beta"):  # another tenant: no wait
+                pass
+            assert time.monotonic() - t0 < 0.5 * hold_s
+            with db.tenant_quota_session("alpha"):
+                waited = time.monotonic() - t0
+            assert waited > 0.5 * hold_s, waited
+        finally:
+            db.dispose()
+    finally:
+        assert other.wait(timeout=30) == 0
+
+
+def test_a_mesh_uploaded_on_one_instance_plans_on_another(pg: tuple[Service, str], tmp_path: Path) -> None:
+    """Instances keep their own data directories; the mesh bytes travel through the shared database."""
+    from api.store import MeshStore
+    from planner.meshio import MeshLimits
+
+    _, schema = pg
+    db = Database(PG_URL, schema)
+    try:
+        here, there = MeshStore(db, tmp_path / "a", MeshLimits()), MeshStore(db, tmp_path / "b", MeshLimits())
+        data = box_stl((2.0, 3.0, 7.0))  # bytes no other test of the module stores
+        row, created = here.add("gamma", data, "box.stl", "m", "box")
+        assert created and here.path_of(row).read_bytes() == data
+        assert not there.path_of(row).exists()
+        job_meshes = {row.sha256: str(here.path_of(row))}  # what a job submitted to "here" records
+        local = there.local_files(job_meshes)[row.sha256]
+        assert Path(local).parent == tmp_path / "b" and Path(local).read_bytes() == data
+        assert there.local_path(row) == Path(local)  # now from its own disk
+        assert here.delete("gamma", row.sha256)  # the last reference: the bytes go from the database too
+        Path(local).unlink()
+        with pytest.raises(FileNotFoundError, match="neither on this instance nor in the database"):
+            there.local_files(job_meshes)
+    finally:
+        db.dispose()

@@ -2,12 +2,7 @@
 
 from __future__ import annotations
 
-import os
-import signal
-import socket
 import sqlite3
-import subprocess
-import sys
 import time
 import uuid
 from collections.abc import Iterator
@@ -19,72 +14,9 @@ import pytest
 
 from api.db import Database, Job, now_s
 from api.jobs import MAX_ATTEMPTS, recover_jobs
-from tests.api.conftest import ADMIN_KEY, free_transfer, scenario
+from tests.api.conftest import Server, free_transfer, scenario
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class Server:
-    """``python -m api`` in its own session (process group), on a free loopback port."""
-
-    def __init__(self, data_dir: Path, **env: str) -> None:
-        self.data_dir = data_dir
-        self.env = env
-        self.port = _free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        self.proc: subprocess.Popen[bytes] | None = None
-        self.log = data_dir / "server.log"
-
-    def start(self, wait: str = "ready") -> None:
-        """Start the server; return once ``/api/v1/<wait>`` answers 200 (``ready`` or ``health``)."""
-        env = {
-            **os.environ,
-            "CABINPLAN_DATA_DIR": str(self.data_dir),
-            "CABINPLAN_PORT": str(self.port),
-            "CABINPLAN_ADMIN_KEY": ADMIN_KEY,
-            "CABINPLAN_WORKERS": "1",
-            **self.env,
-        }
-        self.data_dir.mkdir(parents=True, exist_ok=True)
-        with self.log.open("ab") as log:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "api"],
-                cwd=ROOT,
-                env=env,
-                stdout=log,
-                stderr=log,
-                start_new_session=True,
-            )
-        deadline = time.monotonic() + 300  # /ready waits for the forkserver's warm-up
-        while time.monotonic() < deadline:
-            assert self.proc.poll() is None, self.log.read_text()
-            try:
-                if httpx.get(f"{self.url}/api/v1/{wait}", timeout=1.0).status_code == 200:
-                    return
-            except httpx.HTTPError:
-                pass
-            time.sleep(0.1)
-        raise AssertionError(f"server did not start: {self.log.read_text()}")
-
-    def kill(self) -> None:
-        """SIGKILL the server and everything it started (its process group): a crash, no shutdown."""
-        assert self.proc is not None
-        os.killpg(self.proc.pid, signal.SIGKILL)
-        self.proc.wait(timeout=10)
-
-    def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.kill()
-
-    def ready(self) -> dict[str, Any]:
-        doc: dict[str, Any] = httpx.get(f"{self.url}/api/v1/ready", timeout=10).json()
-        return doc
 
 
 @pytest.fixture

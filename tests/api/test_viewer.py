@@ -15,9 +15,7 @@ import io
 import os
 import shutil
 import signal
-import socket
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -31,7 +29,7 @@ from planner.collision.world import CollisionWorld
 from planner.gate.checks import clearance_probe_indices
 from planner.scenario import load_scenario
 from planner.timing.profile import DriveProfile
-from tests.api.conftest import ADMIN_KEY, scenario
+from tests.api.conftest import Server, scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = os.environ.get("CABINPLAN_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
@@ -55,48 +53,12 @@ if not Path(CHROMIUM).is_file():
     )
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class LiveServer:
-    """``python -m api`` on a free loopback port with a data folder of its own, and its local key."""
+class LiveServer(Server):
+    """``python -m api`` as ``make serve`` runs it (loopback, two workers), with the local key it prints."""
 
     def __init__(self, data_dir: Path) -> None:
-        self.data_dir = data_dir
-        self.port = _free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        self.log = data_dir / "server.log"
-        data_dir.mkdir(parents=True, exist_ok=True)
-        env = {
-            **os.environ,
-            "CABINPLAN_HOST": "127.0.0.1",
-            "CABINPLAN_PORT": str(self.port),
-            "CABINPLAN_DATA_DIR": str(data_dir),
-            "CABINPLAN_ADMIN_KEY": ADMIN_KEY,
-            "CABINPLAN_WORKERS": "2",
-        }
-        with self.log.open("ab") as log:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "api"],
-                cwd=ROOT,
-                env=env,
-                stdout=log,
-                stderr=log,
-                start_new_session=True,
-            )
-        deadline = time.monotonic() + 90
-        while True:
-            assert self.proc.poll() is None, self.log.read_text()
-            try:
-                if httpx.get(f"{self.url}/api/v1/ready", timeout=1.0).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            assert time.monotonic() < deadline, f"server did not start: {self.log.read_text()}"
-            time.sleep(0.1)
+        super().__init__(data_dir, CABINPLAN_HOST="127.0.0.1", CABINPLAN_WORKERS="2")
+        self.start(timeout_s=90)
         self.key = (data_dir / "local-api-key").read_text().strip()
         assert self.key in self.log.read_text()  # printed at start-up, as make serve shows it
         assert f"{self.url}/viewer/" in self.log.read_text()
@@ -122,7 +84,8 @@ class LiveServer:
             time.sleep(0.2)
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
+        """SIGTERM (a clean shutdown), then SIGKILL if it has not stopped within 20 s."""
+        if self.proc is not None and self.proc.poll() is None:
             os.killpg(self.proc.pid, signal.SIGTERM)
             try:
                 self.proc.wait(timeout=20)

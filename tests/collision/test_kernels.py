@@ -14,12 +14,12 @@ import pytest
 
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.kernels import bounds, buffers, state, walk
-from planner.collision.kernels.poses import N_CONSTRAINTS, body_poses
 from planner.collision.reference import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
 from planner.meshio import load_mesh
 from planner.robots.cabin8 import Cabin8
+from planner.robots.kernels import body_poses
 from tests.conftest import admissible_joints
 
 MESHES = Path(__file__).resolve().parents[2] / "meshes"
@@ -53,8 +53,8 @@ def test_closed_form_poses_equal_the_casadi_model(robot: Cabin8, worlds: tuple[C
     u = buffers.unpack(world._kernel.fbuf, world._kernel.ibuf)
     for q in np.vstack([qs, wild]):
         ref_poses, ref_c = world._evaluate(q)
-        poses, c = np.empty((len(world.names), 13)), np.empty(N_CONSTRAINTS)
-        body_poses(q, u.T_tool_box, u.mdh, u.stage, u.kinds, poses, c)
+        poses, c = np.empty((len(world.names), 13)), np.empty(len(u.c_lo))
+        body_poses(u.kernel, q, u.T_tool_box, u.params, u.kinds, poses, c)
         finite = np.isfinite(ref_c[0])
         np.testing.assert_array_equal(np.isfinite(c), finite)  # NaN exactly where a link cannot close
         np.testing.assert_allclose(c[finite], ref_c[0][finite], rtol=0, atol=1e-12)

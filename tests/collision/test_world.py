@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from planner.collision.bodies import ADJACENT, PayloadGeometry
+from planner.collision.bodies import PayloadGeometry
 from planner.collision.clearance_grid import ClearanceGrid, surface_samples
 from planner.collision.reference import ReferenceWorld
 from planner.collision.world import CollisionWorld
@@ -19,6 +19,7 @@ from planner.core.exceptions import InvalidInput
 from planner.meshio import LoadedMesh, load_mesh
 from planner.redundancy.ik import IKOptions, family_candidates
 from planner.robots.cabin8 import Cabin8
+from planner.robots.cabin8_geometry import ADJACENT
 from tests.conftest import admissible_joints
 
 MESHES = Path(__file__).resolve().parents[2] / "meshes"

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from planner.cli import app
 from planner.core.exceptions import InvalidInput
-from planner.dynamics.stiffness import stiffness_document
+from planner.documents.stiffness import stiffness_document
 from planner.robots.cabin8 import Cabin8
 
 runner = CliRunner()

@@ -4,7 +4,9 @@ By concern, each module importing only those above it:
 
 
 * :mod:`.distances` -- exact segment, capsule-capsule and capsule-box distances;
-* :mod:`.poses` -- body poses and the admissibility vector c(q) in closed form (paper eq. 4, MDH eq. 10-12);
+* :mod:`.poses` -- body poses and the admissibility vector c(q) by the robot's own compiled kernel (its
+  model's code and parameters, dispatched by :mod:`planner.robots.kernels`; cabin8's is closed form,
+  paper eq. 4, MDH eq. 10-12), and the admissibility test;
 * :mod:`.buffers` -- a world's constant data, built once (:func:`~.buffers.build`), packed into two flat
   buffers and read back by name (:class:`~.buffers.Packed`);
 * :mod:`.bounds` -- certified lower bounds from sphere covers (all at once or one by one) and certain
@@ -14,6 +16,6 @@ By concern, each module importing only those above it:
 
 Every kernel is compiled with ``cache=True`` (numba's on-disk cache next to these files). Numba checks a
 cached function against its own file only: after editing one of these modules, delete
-``planner/collision/kernels/__pycache__`` so that the kernels of the other modules that call into it are
-compiled again.
+``planner/collision/kernels/__pycache__`` (and ``planner/robots/__pycache__`` after editing a robot's
+kernel) so that the kernels of the other modules that call into it are compiled again.
 """

@@ -219,14 +219,15 @@ def bounds_of_state(
     pairs = pair_bounds(coarse, coarse_r, coarse_bounds, pair_a, pair_b, threshold)
     capsule_pair_distances(poses, radius, pair_a, pair_b, capsule_pair, pairs, threshold)
     capsule_box_distances(poses, radius, half, pair_a, pair_b, capsule_box, pairs, threshold)
-    cabin[carriage] = carriage_bound(cabin[carriage], poses[carriage, 11], table, z0, dz)
+    if carriage >= 0:
+        cabin[carriage] = carriage_bound(cabin[carriage], poses[carriage, 11], table, z0, dz)
     return cabin, pairs, admissible(c, c_lo, c_hi)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def state_bounds(
     poses: np.ndarray,  # (B, 13)
-    c: np.ndarray,  # (16,) admissibility values at this state
+    c: np.ndarray,  # (m,) admissibility values at this state
     fbuf: np.ndarray,
     ibuf: np.ndarray,
     grid: np.ndarray,

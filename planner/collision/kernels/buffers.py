@@ -7,12 +7,14 @@ them (no copies) back into a :class:`Packed`, whose fields the kernels read by n
 
 What the buffers hold, per body b (B bodies), sphere s and checked pair k:
 
-* the payload box frame ``T_tool_box``, the MDH table and the stage lengths (closed-form poses);
+* the payload box frame ``T_tool_box``, the robot's pose-kernel code and parameters (the robot model's
+  :class:`~planner.robots.geometry.CollisionModel`: ``kernel``, ``kernel_params``, its body kind codes);
 * the fine sphere cover (cabin bounds on the grid) and the coarse one (self bounds): sphere body, local
   centre, capsule-length fraction, radius, and the first sphere of each body;
 * pairs (a_k, b_k), capsule radii and box half sizes (exact capsule-capsule / capsule-box distances);
-* the carriage's exact clearance table along the rail (empty: no cabin);
-* the admissibility bounds c_lo, c_hi (already widened by 1e-9).
+* the rail body's exact clearance table along the rail (cabin8: the carriage; empty: no cabin or none);
+* the admissibility bounds c_lo, c_hi (already widened by 1e-9) and the rows of c(q) whose largest value
+  bounds the slope of slope-dependent bodies (``ratio_rows``).
 """
 
 from __future__ import annotations
@@ -25,24 +27,21 @@ from numba import njit
 
 from planner.collision.bodies import BodySet, Shape
 from planner.collision.clearance_grid import ClearanceGrid
-from planner.collision.kernels.poses import KIND_CODES, N_CONSTRAINTS
-from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, BoolArray, IntArray
-from planner.kinematics import chain
-from planner.robots.cabin8 import Cabin8
+from planner.robots.geometry import CollisionModel
 
 #: Integers before the int64 arrays: counts (bodies, fine spheres, coarse spheres, pairs, table length),
-#: has_grid, carriage, grid shape (3).
-_HEADER = 10
+#: has_grid, carriage, grid shape (3), then kernel code, counts (kernel parameters, constraints, ratio rows).
+_HEADER = 14
 
 
 class Packed(NamedTuple):
     """A world's kernel data by name (arrays as views of the packed buffers inside the kernels)."""
 
     T_tool_box: Array  # (4, 4) payload box frame in the tool frame
-    mdh: Array  # (4, 6) per MDH link: alpha, a, theta offset, d offset, joint index, revolute (1/0)
-    stage: Array  # (4,) L1, L2, L3, L4
-    kinds: IntArray  # (B,) body kind codes (KIND_CODES)
+    kernel: int  # the robot's pose-kernel code (planner.robots.kernels)
+    params: Array  # the robot's kernel parameters
+    kinds: IntArray  # (B,) body kind codes of the robot's pose kernel
     fine_body: IntArray  # (S,) body of each fine sphere
     fine_local: Array  # (S, 3) centre in the body frame (boxes)
     fine_frac: Array  # (S,) fraction of the capsule length along the body z axis (capsules)
@@ -63,12 +62,13 @@ class Packed(NamedTuple):
     capsule_pair: IntArray  # (P,) 1: both bodies are capsules
     half: Array  # (B, 3) box half sizes (zeros for capsules)
     capsule_box: IntArray  # (P,) 0 none, 1 a is the capsule, 2 b is the capsule
-    carriage: int  # index of the carriage body
-    table: Array  # exact carriage clearance along the rail (empty: none)
+    carriage: int  # index of the rail body (cabin8: the carriage; -1: none)
+    table: Array  # exact rail-body clearance along the rail (empty: none)
     table_z0: float
     table_dz: float
-    c_lo: Array  # (16,) admissibility bounds
+    c_lo: Array  # (m,) admissibility bounds
     c_hi: Array
+    ratio_rows: IntArray  # rows of c(q) bounding the slope of slope-dependent bodies
 
 
 def pack(data: Packed) -> tuple[Array, IntArray]:
@@ -76,10 +76,11 @@ def pack(data: Packed) -> tuple[Array, IntArray]:
     d = data
     counts = [len(d.kinds), len(d.fine_r), len(d.coarse_r), len(d.pair_a), len(d.table)]
     header = [*counts, int(d.has_grid), int(d.carriage), *(int(x) for x in d.shape)]
+    header += [int(d.kernel), len(d.params), len(d.c_lo), len(d.ratio_rows)]
     ints = [np.array(header + [0] * (_HEADER - len(header)))]
     ints += [d.kinds, d.fine_body, d.fine_bounds, d.coarse_body, d.coarse_bounds, d.pair_a, d.pair_b]
-    ints += [d.capsule_pair, d.capsule_box]
-    floats = [d.T_tool_box, d.mdh, d.stage, d.fine_local, d.fine_frac, d.fine_r, d.origin, [d.inv_step]]
+    ints += [d.capsule_pair, d.capsule_box, d.ratio_rows]
+    floats = [d.T_tool_box, d.params, d.fine_local, d.fine_frac, d.fine_r, d.origin, [d.inv_step]]
     floats += [d.coarse_local, d.coarse_frac, d.coarse_r, d.radius, d.half, d.table]
     floats += [[d.table_z0, d.table_dz], d.c_lo, d.c_hi]
     fbuf = np.ascontiguousarray(np.concatenate([np.asarray(f, dtype=np.float64).ravel() for f in floats]))
@@ -108,6 +109,7 @@ def _cover_floats(fbuf: np.ndarray, f: int, n: int) -> tuple[np.ndarray, np.ndar
 def unpack(fbuf: np.ndarray, ibuf: np.ndarray) -> Packed:
     """Views of the packed world data (:func:`pack`'s layout), by name."""
     n_b, n_s, n_c, n_p, n_t = ibuf[0], ibuf[1], ibuf[2], ibuf[3], ibuf[4]
+    n_par, n_con, n_rat = ibuf[11], ibuf[12], ibuf[13]
     kinds = ibuf[_HEADER : _HEADER + n_b]
     fine_body, fine_bounds, o = _cover_ints(ibuf, _HEADER + n_b, n_s, n_b)
     coarse_body, coarse_bounds, o = _cover_ints(ibuf, o, n_c, n_b)
@@ -115,8 +117,9 @@ def unpack(fbuf: np.ndarray, ibuf: np.ndarray) -> Packed:
     pair_b = ibuf[o + n_p : o + 2 * n_p]
     capsule_pair = ibuf[o + 2 * n_p : o + 3 * n_p]
     capsule_box = ibuf[o + 3 * n_p : o + 4 * n_p]
-    # Floats: T_tool_box (16), mdh (24), stage (4), fine cover, grid origin (3) and 1 / step, coarse cover.
-    fine_local, fine_frac, fine_r, f = _cover_floats(fbuf, 44, n_s)
+    ratio_rows = ibuf[o + 4 * n_p : o + 4 * n_p + n_rat]
+    # Floats: T_tool_box (16), kernel parameters, fine cover, grid origin (3) and 1 / step, coarse cover.
+    fine_local, fine_frac, fine_r, f = _cover_floats(fbuf, 16 + n_par, n_s)
     origin, inv_step = fbuf[f : f + 3], fbuf[f + 3]
     coarse_local, coarse_frac, coarse_r, f = _cover_floats(fbuf, f + 4, n_c)
     radius = fbuf[f : f + n_b]
@@ -125,8 +128,8 @@ def unpack(fbuf: np.ndarray, ibuf: np.ndarray) -> Packed:
     f += 4 * n_b + n_t
     return Packed(
         fbuf[0:16].reshape((4, 4)),
-        fbuf[16:40].reshape((4, 6)),
-        fbuf[40:44],
+        ibuf[10],
+        fbuf[16 : 16 + n_par],
         kinds,
         fine_body,
         fine_local,
@@ -152,8 +155,9 @@ def unpack(fbuf: np.ndarray, ibuf: np.ndarray) -> Packed:
         table,
         fbuf[f],
         fbuf[f + 1],
-        fbuf[f + 2 : f + 2 + N_CONSTRAINTS],
-        fbuf[f + 2 + N_CONSTRAINTS : f + 2 + 2 * N_CONSTRAINTS],
+        fbuf[f + 2 : f + 2 + n_con],
+        fbuf[f + 2 + n_con : f + 2 + 2 * n_con],
+        ratio_rows,
     )
 
 
@@ -221,13 +225,13 @@ class KernelData:
     pair_a: IntArray
     pair_b: IntArray
     exact_pair: BoolArray  # (P,) the pair bound is the exact distance (capsule-capsule, capsule-box)
-    link_mask: BoolArray  # (B,) the stage links (their reach bounds depend on the slope)
+    link_mask: BoolArray  # (B,) slope-dependent bodies (cabin8: the stage links; ``slope_bodies``)
     c_lo: Array
     c_hi: Array
 
 
 def build(
-    robot: Cabin8,
+    model: CollisionModel,
     bodies: BodySet,
     T_tool_box: Array,
     grid: ClearanceGrid | None,
@@ -235,18 +239,13 @@ def build(
 ) -> KernelData:
     """The kernel data of a world: covers, pair tables, closed-form pose data, packed.
 
-    With a cabin (``grid`` given) the carriage's cabin bound comes from its exact clearance table
+    With a cabin (``grid`` given) the rail body's cabin bound comes from its exact clearance table
     ``carriage_table`` = (z0, dz, distances) along the rail, so its fine cover is left empty.
     """
-    if len(robot.c_lower) != N_CONSTRAINTS:
-        raise InvalidInput(
-            f"robot: {len(robot.c_lower)} admissibility values, the collision kernels expect {N_CONSTRAINTS}",
-            field="robot",
-        )
     names, shapes = bodies.names, bodies.shapes
-    carriage = names.index("carriage")
+    carriage = names.index(model.rail_body) if model.rail_body is not None else -1
     fine_centres, fine_radii = list(bodies.sphere_centres), list(bodies.sphere_radii)
-    if grid is not None:
+    if grid is not None and carriage >= 0:
         fine_centres[carriage], fine_radii[carriage] = np.zeros((0, 3)), np.zeros(0)
     fine = cover(shapes, tuple(fine_centres), tuple(fine_radii))
     coarse = cover(shapes, bodies.coarse_centres, bodies.coarse_radii)
@@ -257,21 +256,14 @@ def build(
     capsule_box = np.array(
         [1 if k == ("capsule", "box") else 2 if k == ("box", "capsule") else 0 for k in kinds], dtype=np.int64
     )
-    mdh = np.array(
-        [
-            [link.alpha, link.a, link.theta, link.d, float(j), 1.0 if revolute else 0.0]
-            for link, (j, revolute) in zip(robot.desc.serial_chain, chain.LINK_VARIABLES, strict=True)
-        ]
-    )
-    geo = robot.geometry
     z0, dz, table = carriage_table if carriage_table is not None else (0.0, 1.0, np.zeros(0))
-    c_lo, c_hi = robot.c_lower - 1e-9, robot.c_upper + 1e-9
+    c_lo, c_hi = model.admissibility.c_lower - 1e-9, model.admissibility.c_upper + 1e-9
     fbuf, ibuf = pack(
         Packed(
             T_tool_box=np.ascontiguousarray(T_tool_box, dtype=float),
-            mdh=mdh,
-            stage=np.array([geo.L1, geo.L2, geo.L3, geo.L4]),
-            kinds=np.array([KIND_CODES[n] for n in names], dtype=np.int64),
+            kernel=model.kernel,
+            params=np.asarray(model.kernel_params, dtype=float),
+            kinds=np.array([model.kind_code(n) for n in names], dtype=np.int64),
             fine_body=fine.body,
             fine_local=fine.local,
             fine_frac=fine.frac,
@@ -298,6 +290,7 @@ def build(
             table_dz=dz,
             c_lo=c_lo,
             c_hi=c_hi,
+            ratio_rows=np.array(model.ratio_rows, dtype=np.int64),
         )
     )
     flat_grid = grid.lower_bound.reshape(-1) if grid is not None else np.zeros(1)
@@ -311,7 +304,7 @@ def build(
         pair_a=pair_a,
         pair_b=pair_b,
         exact_pair=capsule_pair | (capsule_box > 0),
-        link_mask=np.array([n in ("link_ab", "link_cd", "link_ef") for n in names]),
+        link_mask=np.array([n in model.slope_bodies for n in names], dtype=bool),
         c_lo=c_lo,
         c_hi=c_hi,
     )

@@ -13,16 +13,10 @@ from numba import njit
 
 from planner.collision.kernels.bounds import bounds_of_state, certain_cabin_contact
 from planner.collision.kernels.buffers import Packed, unpack
-from planner.collision.kernels.poses import N_CONSTRAINTS, body_poses
+from planner.collision.kernels.poses import poses_at
 
 #: Codes of :func:`packed_check`.
 CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def poses_at(q: np.ndarray, u: Packed, poses: np.ndarray, c: np.ndarray) -> None:
-    """:func:`~.poses.body_poses` at q (8,) into ``poses`` (B, 13) and ``c`` (16,), on unpacked data."""
-    body_poses(q, u.T_tool_box, u.mdh, u.stage, u.kinds, poses, c)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -30,7 +24,7 @@ def _packed_state(
     q: np.ndarray, u: Packed, grid: np.ndarray, threshold: float, poses: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """Poses into ``poses`` and (cabin bounds, pair bounds, admissible) at q."""
-    c = np.empty(N_CONSTRAINTS)
+    c = np.empty(u.c_lo.shape[0])
     poses_at(q, u, poses, c)
     return bounds_of_state(poses, u, grid, c, threshold)
 
@@ -49,7 +43,7 @@ def packed_state(
 def packed_poses(
     qs: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray, poses: np.ndarray, c: np.ndarray
 ) -> None:
-    """:func:`~.poses.body_poses` at every row of ``qs`` (N, 8) into ``poses`` (N, B, 13), ``c`` (N, 16)."""
+    """:func:`~.poses.poses_at` at every row of ``qs`` (N, n) into ``poses`` (N, B, 13), ``c`` (N, m)."""
     u = unpack(fbuf, ibuf)
     for i in range(qs.shape[0]):
         poses_at(qs[i], u, poses[i], c[i])

@@ -16,8 +16,7 @@ from numba import njit
 
 from planner.collision.kernels.bounds import cabin_bound, pair_bound, pair_scratch
 from planner.collision.kernels.buffers import Packed, unpack
-from planner.collision.kernels.poses import N_CONSTRAINTS, admissible, constraints
-from planner.collision.kernels.state import poses_at
+from planner.collision.kernels.poses import admissible, constraints_at, poses_at
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -26,15 +25,15 @@ def first_inadmissible(
 ) -> int:
     """First of the samples t_i = i / n_fine (as ``numpy.linspace``) where c(q) fails; -1: none."""
     u = unpack(fbuf, ibuf)
-    stage, c_lo, c_hi = u.stage, u.c_lo, u.c_hi
-    c = np.empty(N_CONSTRAINTS)
+    c_lo, c_hi = u.c_lo, u.c_hi
+    c = np.empty(c_lo.shape[0])
     q = np.empty(q_a.shape[0])
     step = 1.0 / n_fine
     for i in range(n_fine + 1):
         t = i * step if i < n_fine else 1.0
         for j in range(q.shape[0]):
             q[j] = q_a[j] + t * dq[j]
-        constraints(q, stage, c)
+        constraints_at(q, u, c)
         if not admissible(c, c_lo, c_hi):
             return i
     return -1
@@ -42,13 +41,16 @@ def first_inadmissible(
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def end_ratio(q_a: np.ndarray, q_b: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarray) -> float:
-    """Largest link-height ratio (y_B/L1, y_C/L3, y_E/L4) at the two ends; 1 if one is not finite."""
-    stage = unpack(fbuf, ibuf).stage
-    c = np.empty(N_CONSTRAINTS)
+    """Largest slope ratio at the two ends; 1 if one is not finite.
+
+    The ratio is c(q) at the model's ``ratio_rows`` (cabin8: the link heights y_B/L1, y_C/L3, y_E/L4).
+    """
+    u = unpack(fbuf, ibuf)
+    c = np.empty(u.c_lo.shape[0])
     out = -math.inf
     for end in range(2):
-        constraints(q_a if end == 0 else q_b, stage, c)
-        for i in range(N_CONSTRAINTS - 3, N_CONSTRAINTS):
+        constraints_at(q_a if end == 0 else q_b, u, c)
+        for i in u.ratio_rows:
             if not math.isfinite(c[i]):
                 return 1.0
             out = max(out, c[i])
@@ -57,14 +59,14 @@ def end_ratio(q_a: np.ndarray, q_b: np.ndarray, fbuf: np.ndarray, ibuf: np.ndarr
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def segment_reach(
-    rho: np.ndarray,  # (B, 8) static reach bounds
-    link: np.ndarray,  # (B,) bool: a stage link (its y and gamma bounds depend on the slope)
+    rho: np.ndarray,  # (B, n_joints) static reach bounds
+    link: np.ndarray,  # (B,) bool: slope-dependent (cabin8's stage links: y and gamma bounds grow with k)
     k: float,  # slope bound of the links along the segment
     h: float,  # L2 / 2
     pair_a: np.ndarray,
     pair_b: np.ndarray,
-    rigid: np.ndarray,  # (P, 8) bool: joint j moves both bodies of pair p rigidly
-    adq: np.ndarray,  # (8,) |q_b - q_a|
+    rigid: np.ndarray,  # (P, n_joints) bool: joint j moves both bodies of pair p rigidly
+    adq: np.ndarray,  # (n_joints,) |q_b - q_a|
 ) -> tuple[np.ndarray, np.ndarray]:
     """Displacement bounds over the segment: bodies rho . |dq|, pairs (rho_a + rho_b, rigid joints 0) . |dq|.
 
@@ -78,12 +80,12 @@ def segment_reach(
             r[b, 3] = h * (1.0 + k)  # gamma
     reach = np.zeros(n_b)
     for b in range(n_b):
-        for j in range(8):
+        for j in range(adq.shape[0]):
             reach[b] += r[b, j] * adq[j]
     n_p = pair_a.shape[0]
     pair = np.zeros(n_p)
     for p in range(n_p):
-        for j in range(8):
+        for j in range(adq.shape[0]):
             if not rigid[p, j]:
                 pair[p] += (r[pair_a[p], j] + r[pair_b[p], j]) * adq[j]
     return reach, pair
@@ -148,7 +150,7 @@ def _walk_state(
     q = np.empty(q_a.shape[0])
     for j in range(q.shape[0]):
         q[j] = q_a[j] + t * dq[j]
-    poses_at(q, u, poses[s], np.empty(N_CONSTRAINTS))
+    poses_at(q, u, poses[s], np.empty(u.c_lo.shape[0]))
     cabin[s, :] = math.nan  # bounds are evaluated on demand (:func:`_walk_bound`)
     pairs[s, :] = math.nan
     slot_of[i] = s
