@@ -173,8 +173,8 @@ def timing_of(sc: ResolvedScenario) -> str:
 
     Without jerk limits in the robot description the default is acceleration-limited (TOPP-RA alone).
 
-    On the reference suite the jerk-limited law lasts 1.02-1.08 times the acceleration-limited one (median
-    1.04, ``bench.timing``): the planner's corner blends are curvature-continuous (C2), so the jerk
+    On the reference suite the jerk-limited law lasts 1.02-1.07 times the acceleration-limited one (median
+    1.045, ``bench.timing``): the planner's corner blends are curvature-continuous (C2), so the jerk
     limits cost only the acceleration ramps.
 
     Raises:
