@@ -146,11 +146,12 @@ def _grid(path: JointPath, step: float, min_points: int, max_points: int) -> Arr
     """Uniform grid over the lines, every piece boundary, its own finer grid inside blends and splines.
 
     A boundary also gets a point just inside each neighbouring piece: where the path's second derivative
-    jumps (a spline meeting a line), a constraint evaluated at the boundary alone sees only one side. Inside
-    a curved piece only its own evenly spaced points are used, and no uniform point lies within 0.1 step of
-    a boundary: a uniform point falling next to another one made an interval a few hundredths of the others, on which TOPP-RA's constant path acceleration swung
-    (-0.12 to 0.69 to -0.06 within 4 ms on a quintic blend) between two samples, so the sampled velocities
-    no longer integrated the sampled accelerations (the gate's consistency check, hatch-bay-insert seed 6).
+    jumps (a spline meeting a line), a constraint evaluated at the boundary alone sees only one side.
+    Inside a curved piece only its own evenly spaced points are used, and no uniform point lies within
+    0.1 step of a boundary: a uniform point next to another one made an interval a few hundredths of the
+    others, on which TOPP-RA's constant path acceleration swung (-0.12 to 0.69 to -0.06 within 4 ms on a
+    quintic blend) between two samples, so the sampled velocities no longer integrated the sampled
+    accelerations (the gate's consistency check; hatch-bay-insert seed 6, acceleration-limited).
     """
     length = path.length
     n = int(np.clip(np.ceil(length / step), min_points, max_points))
