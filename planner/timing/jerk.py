@@ -322,11 +322,16 @@ class JerkLimitedStage:
         """Uniform grid with every piece boundary, curved pieces refined, each end refined geometrically."""
         length = path.length
         n = int(np.clip(np.ceil(length / self.grid_step), self.min_points, self.max_points))
-        pts = [np.linspace(0.0, length, n + 1), path.breaks]
+        uniform = np.linspace(0.0, length, n + 1)
+        keep = np.ones(len(uniform), dtype=bool)
+        pts = [path.breaks]
         for k, piece in enumerate(path.pieces):
-            if not isinstance(piece, LinePiece):
+            if not isinstance(piece, LinePiece):  # its own evenly spaced points only (no sliver intervals)
+                a = path.breaks[k]
+                keep &= ~((uniform > a) & (uniform < path.breaks[k + 1]))
                 m = int(np.clip(np.ceil(piece.length / (0.5 * self.grid_step)), 8, 400))
-                pts.append(path.breaks[k] + np.linspace(0.0, piece.length, m + 1))
+                pts.append(a + np.linspace(0.0, piece.length, m + 1))
+        pts.append(uniform[keep])
         end = min(self.grid_step, 0.25 * length) * np.power(END_RATIO, np.arange(1.0, END_LEVELS + 1))
         pts += [end, length - end]
         grid = np.unique(np.clip(np.concatenate(pts), 0.0, length))
