@@ -25,8 +25,9 @@ from api.settings import Settings
 
 _LOG = logging.getLogger(__name__)
 
-#: Sweep states: ``running`` while plans wait for a job or a job has not ended, then ``finished``.
-SWEEP_STATES: tuple[str, ...] = ("running", "finished")
+#: Sweep states: ``running`` while plans wait for a job or a job has not ended, then ``finished``;
+#: ``cancelled`` by ``DELETE /sweeps/{id}`` (its plans without a job are never fed).
+SWEEP_STATES: tuple[str, ...] = ("running", "finished", "cancelled")
 
 
 class Sweep(Base):
@@ -134,6 +135,8 @@ class SweepFeeder:
 
     def _feed_one(self, sweep: Sweep) -> int:
         with self.db.tenant_quota_session(sweep.tenant) as s:  # the lock POST /plans counts the quota under
+            if s.scalar(select(Sweep.status).where(Sweep.id == sweep.id)) != "running":
+                return 0  # cancelled (under this tenant's lock) since the pass listed it
             active = s.scalar(
                 select(func.count())
                 .select_from(Job)

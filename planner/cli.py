@@ -352,13 +352,15 @@ def sweep(
         int | None, typer.Option("--max-in-flight", min=1, help="Ray: most tasks submitted at a time")
     ] = None,
     plans_per_process: Annotated[
-        int,
+        int | None,
         typer.Option(
             "--plans-per-process",
-            min=1,
-            help="embedded: plans one process runs before it exits (1: isolated)",
+            min=0,
+            help="embedded: plans one worker process runs before it is replaced "
+            "(default 200; 0: no limit; 1: a fresh process per plan). A plan past its limit is killed "
+            "either way.",
         ),
-    ] = 1,
+    ] = None,
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the summary plots")] = True,
 ) -> None:
     """Run a feasibility sweep: every plan of SPEC, results.csv / results.parquet, plots and profiles.
@@ -368,7 +370,14 @@ def sweep(
     from planner.sweep.expand import expand_sweep
     from planner.sweep.plots import write_plots
     from planner.sweep.results import Journal, write_tables
-    from planner.sweep.run import EmbeddedExecutor, RayExecutor, run_sweep, sweep_meshes, warm_task
+    from planner.sweep.run import (
+        DEFAULT_PLANS_PER_PROCESS,
+        EmbeddedExecutor,
+        RayExecutor,
+        run_sweep,
+        sweep_meshes,
+        warm_task,
+    )
     from planner.sweep.spec import load_sweep_file
 
     sw = load_sweep_file(spec)
@@ -382,7 +391,8 @@ def sweep(
             if ray:
                 executor = RayExecutor(ray_address, workers, max_in_flight, sweep_meshes(todo), warm)
             else:
-                executor = EmbeddedExecutor(workers, warm, plans_per_process)
+                ppp = DEFAULT_PLANS_PER_PROCESS if plans_per_process is None else plans_per_process
+                executor = EmbeddedExecutor(workers, warm, ppp)
             with _SweepProgress(sys.stderr.isatty(), len(plans)) as progress:
                 run_sweep(plans, output, executor, sw.limits, progress=progress)
         else:  # every plan has a row (e.g. killed after the last one): the tables are written anyway

@@ -6,25 +6,29 @@ reference manifest). It expands and validates every plan (the service's time lim
 before answering 202; the plans then run as ordinary planning jobs, fed into the queue by
 :class:`api.sweeps.SweepFeeder` under the tenant's quota. ``GET /sweeps/{id}`` gives the counts and the
 summary; ``results.csv`` and ``results.parquet`` the table (one row a plan, as the CLI writes it; the
-``profile_file`` column links each plan's job).
+``profile_file`` column links each plan's job). ``DELETE /sweeps/{id}`` cancels a running sweep (its plans
+without a job are never fed, its queued jobs are cancelled and its running ones killed) and deletes an
+ended one with its jobs, as ``DELETE /plans/{id}`` does for one plan.
 """
 
 from __future__ import annotations
 
+import json
+import time
 from collections import Counter
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Response
-from sqlalchemy import select
+from sqlalchemy import delete, select, update
 from sqlalchemy.orm import undefer
 
 from api.auth import CurrentPrincipal
 from api.context import AppContext
-from api.db import Job
+from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
 from api.examples import aisle_bay_goal, docked
-from api.problems import Problem
+from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
-from api.routes.plans import _mesh_map, result_text
+from api.routes.plans import _forget_result, _mesh_map, result_text
 from api.store import scenario_mesh_resolver
 from api.sweeps import Sweep, SweepJob, new_sweep
 from planner.core.exceptions import InvalidInput
@@ -159,6 +163,88 @@ def submit_sweep(
 def get_sweep(sweep_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str, Any]:
     """Counts of the plans waiting for a job, queued, running and ended, and the outcome summary."""
     return _sweep_document(ctx, _tenant_sweep(ctx, principal.tenant, sweep_id))
+
+
+def _job_ids(ctx: AppContext, sweep_id: str) -> list[str]:
+    with ctx.db.session() as s:
+        return list(s.scalars(select(SweepJob.job_id).where(SweepJob.sweep_id == sweep_id)).all())
+
+
+def _cancel_jobs(ctx: AppContext, job_ids: list[str]) -> list[str]:
+    """Cancel the queued jobs, ask the owners of the running ones to kill them; the running ones' ids."""
+    if not job_ids:
+        return []
+    with ctx.db.session() as s:
+        s.execute(
+            update(Job)
+            .where(Job.id.in_(job_ids), Job.status == "queued")
+            .values(
+                status="cancelled",
+                reason="cancelled",
+                message="cancelled by the client (its sweep was cancelled)",
+                finished_at=now_s(),
+            )
+        )
+        running = list(s.scalars(select(Job.id).where(Job.id.in_(job_ids), Job.status == "running")).all())
+        if running:  # their owner (this instance or another) kills them at its next heartbeat
+            s.execute(
+                update(Job).where(Job.id.in_(running), Job.status == "running").values(cancel_requested=True)
+            )
+    for job_id in running:
+        ctx.runner.cancel(job_id)
+    return running
+
+
+def _active(ctx: AppContext, job_ids: list[str]) -> int:
+    if not job_ids:
+        return 0
+    with ctx.db.session() as s:
+        return len(s.scalars(select(Job.id).where(Job.id.in_(job_ids), Job.status.in_(ACTIVE_STATES))).all())
+
+
+@router.delete(
+    "/sweeps/{sweep_id}",
+    summary="Cancel a running sweep; delete an ended one",
+    responses={
+        202: {"description": "Cancelled, the kill of some running plans still pending"},
+        204: {"description": "Deleted"},
+        **problem_responses(404),
+    },
+)
+def delete_sweep(sweep_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
+    """Running -> cancelled: plans without a job are never fed, queued jobs cancelled, running ones killed.
+
+    200 with the cancelled sweep's document; 202 when a kill is still pending after 10 s (DELETE again
+    later). An ended sweep (finished or cancelled, every job ended) is deleted with its plans' jobs and
+    results: 204.
+    """
+    row = _tenant_sweep(ctx, principal.tenant, sweep_id)
+    job_ids = _job_ids(ctx, row.id)
+    if row.status != "running" and not _active(ctx, job_ids):
+        with ctx.db.session() as s:
+            s.execute(delete(SweepJob).where(SweepJob.sweep_id == row.id))
+            if job_ids:
+                s.execute(delete(Job).where(Job.id.in_(job_ids), Job.status.in_(TERMINAL_STATES)))
+            s.execute(delete(Sweep).where(Sweep.id == row.id))
+        for job_id in job_ids:
+            _forget_result(job_id)
+        return Response(status_code=204)
+    # Under the tenant's lock the feeder holds while it queues a sweep's jobs: no job is queued after this.
+    with ctx.db.tenant_quota_session(row.tenant) as s:
+        s.execute(
+            update(Sweep)
+            .where(Sweep.id == row.id, Sweep.status == "running")
+            .values(status="cancelled", finished_at=now_s())
+        )
+    job_ids = _job_ids(ctx, row.id)
+    running = _cancel_jobs(ctx, job_ids)
+    deadline = time.monotonic() + 10.0
+    while running and _active(ctx, running) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    status = 202 if _active(ctx, job_ids) else 200
+    doc = _sweep_document(ctx, _tenant_sweep(ctx, principal.tenant, sweep_id))
+    body = json.dumps(doc, allow_nan=False, separators=(",", ":"))
+    return Response(body, status_code=status, media_type="application/json")
 
 
 def _rows(ctx: AppContext, row: Sweep) -> list[dict[str, Any]]:

@@ -110,7 +110,8 @@ def make_row(plan: SweepPlan, outcome: dict[str, Any], wall_time_s: float, attem
         row[key] = outcome.get(key)
     row["wall_time_s"] = wall_time_s
     row["attempts"] = attempts
-    row["profile_file"] = f"profiles/{plan.name}.json" if outcome.get("document") else None
+    written = outcome.get("document") or outcome.get("profile_written")
+    row["profile_file"] = f"profiles/{plan.name}.json" if written else None
     return {name: row.get(name) for name in COLUMN_NAMES}
 
 
@@ -146,7 +147,8 @@ def outcome_from_document(
     return out
 
 
-def _atomic_write(path: Path, text: str | bytes) -> None:
+def atomic_write(path: Path, text: str | bytes) -> None:
+    """Write the file through a temporary one, fsynced, then renamed over it (never a half file)."""
     tmp = path.with_name(f".{path.name}.tmp")
     with open(tmp, "wb") as fh:
         fh.write(text.encode("utf-8") if isinstance(text, str) else text)
@@ -192,20 +194,28 @@ class Journal:
         """A row of this scenario hash is recorded."""
         return sha256 in self.rows
 
+    def profile_path(self, plan: SweepPlan) -> Path:
+        """Where the plan's profile (or refusal document) goes: ``profiles/NAME.json``."""
+        return self.out_dir / "profiles" / f"{plan.name}.json"
+
     def write_scenario(self, plan: SweepPlan) -> None:
         """The plan as an ordinary scenario file (``scenarios/NAME.json``)."""
-        _atomic_write(
+        atomic_write(
             self.out_dir / "scenarios" / f"{plan.name}.json",
             json.dumps(plan.scenario.model_dump(mode="json"), indent=1) + "\n",
         )
 
     def record(self, plan: SweepPlan, row: dict[str, Any], document: str | None) -> bool:
-        """Write the profile (or refusal) file, then append the row; False if the plan has a row already."""
+        """Write the profile (or refusal) file, then append the row; False if the plan has a row already.
+
+        ``document`` is ``None`` when there is none or the plan's process wrote it to
+        :meth:`profile_path` itself (before it reported the outcome, so the row still follows the file).
+        """
         if plan.sha256 in self.rows:
             _LOG.info("plan %s finished again; its first row is kept", plan.name)
             return False
         if document is not None:
-            _atomic_write(self.out_dir / "profiles" / f"{plan.name}.json", document + "\n")
+            atomic_write(self.profile_path(plan), document + "\n")
         line = json.dumps(row, allow_nan=False, separators=(",", ":")) + "\n"
         with self.path.open("a", encoding="utf-8") as fh:
             fh.write(line)
@@ -249,8 +259,8 @@ def parquet_bytes(rows: list[dict[str, Any]]) -> bytes:
 
 def write_tables(out_dir: Path, rows: list[dict[str, Any]]) -> None:
     """``results.csv`` and ``results.parquet`` of the rows (atomic replace)."""
-    _atomic_write(Path(out_dir) / CSV_FILE, csv_text(rows))
-    _atomic_write(Path(out_dir) / PARQUET_FILE, parquet_bytes(rows))
+    atomic_write(Path(out_dir) / CSV_FILE, csv_text(rows))
+    atomic_write(Path(out_dir) / PARQUET_FILE, parquet_bytes(rows))
 
 
 def read_parquet(path: Path) -> list[dict[str, Any]]:
@@ -268,6 +278,7 @@ __all__ = [
     "MACHINE_COLUMNS",
     "PARQUET_FILE",
     "Journal",
+    "atomic_write",
     "csv_text",
     "make_row",
     "outcome_from_document",

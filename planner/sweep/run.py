@@ -4,10 +4,10 @@ Both executors run :func:`planner.sweep.task.plan_outcome`, one plan per task, w
 limit per plan (``time_limit_s + limits.grace_s``, or ``limits.wall_time_limit_s`` when smaller) counted
 from the moment the plan starts:
 
-* :class:`EmbeddedExecutor` (default): every plan runs in a fresh process on this machine, forked from a
-  forkserver that imported and warmed up the planner once (the isolation of the HTTP service's jobs,
-  :mod:`api.jobs`). A plan past its limit has its process killed (outcome ``time_limit_exceeded``); the
-  other plans go on.
+* :class:`EmbeddedExecutor` (default): plans run in warm worker processes on this machine (one per slot),
+  forked from a forkserver that imported and warmed up the planner once. A worker past its plan's limit
+  is killed (outcome ``time_limit_exceeded``) and replaced, the other plans go on: the isolation of the
+  HTTP service's jobs (:mod:`api.jobs`) without paying a process start per plan.
 * :class:`RayExecutor`: each plan is a Ray task (a streaming generator that first reports its start, then
   its outcome) on a local Ray started on demand (bound to 127.0.0.1) or on the cluster at ``address`` /
   ``RAY_ADDRESS``. At most ``max_in_flight`` tasks are submitted at a time; ``ray.wait`` with a timeout
@@ -25,6 +25,7 @@ import json
 import logging
 import multiprocessing
 import os
+import sys
 import tempfile
 import threading
 import time
@@ -114,16 +115,18 @@ class Executor(Protocol):
         """Stop every process this executor started."""
 
 
-def _serve_plan(conn: Connection, plans: int) -> None:
-    """Body of one embedded plan process: plan up to ``plans`` tasks from the pipe, then exit."""
-    for _ in range(plans):
+def _serve_plans(conn: Connection, plans: int) -> None:
+    """Body of one embedded worker process: plan tasks from the pipe, ``plans`` of them (0: no limit)."""
+    done = 0
+    while plans <= 0 or done < plans:
         try:
             task = conn.recv()
-        except (EOFError, OSError):  # the sweep ended before this process was needed
+        except (EOFError, OSError):  # the sweep ended (or the driver died): nothing more to plan
             return
         if task is None:
             return
         conn.send(plan_outcome(task))
+        done += 1
     conn.close()
 
 
@@ -131,29 +134,50 @@ def _serve_plan(conn: Connection, plans: int) -> None:
 class _Proc:
     process: BaseProcess
     conn: Connection
-    remaining: int
+    #: Plans this process may still take (``None``: no limit).
+    remaining: int | None
+
+
+#: Plans a reused embedded worker runs before it is replaced by a fresh one (bounds slow leaks).
+DEFAULT_PLANS_PER_PROCESS = 200
 
 
 class EmbeddedExecutor:
-    """Plans in processes forked from a warm forkserver; by default one process per plan (as the service).
+    """Plans in warm worker processes forked from a forkserver; one process per slot, hard-killed at a limit.
 
-    Each slot keeps a *spare* process forked ahead of time (by a background thread) and waiting on its
-    pipe, so that a plan starts the moment it is submitted; the process plans its task, sends the outcome
-    and exits (or, with ``plans_per_process`` > 1, waits for the next task). A process past its plan's
-    hard limit is killed; the other processes go on.
+    The forkserver imports the planner and plans one warm-up plan before the first fork, so every worker
+    starts with the imports, the compiled kernels and the cabin's clearance grid in place. A worker plans
+    one task at a time and writes the plan's profile file itself (see :func:`plan_outcome`), then takes
+    the next task: it is reused for up to ``plans_per_process`` plans, then replaced. Reuse keeps what a
+    plan builds from content (parsed meshes, collision geometry: caches keyed by content hash) and never
+    changes a result: each plan seeds its own random generators.
+
+    Isolation is the service's: a worker whose plan runs past its hard limit is killed (SIGKILL) and its
+    plan recorded ``time_limit_exceeded``; a worker that dies without an outcome has its plan submitted
+    again (see :data:`MAX_ATTEMPTS`). Either way a replacement, forked ahead by a background thread,
+    takes the slot; the other workers go on. ``plans_per_process=1`` gives a fresh process per plan.
 
     Args:
         workers: Plans running at the same time (one process each).
         warm_task: Task planned once in the forkserver before the first fork (e.g. the first plan).
-        plans_per_process: Plans one process runs before it exits (1: a fresh process per plan).
+        plans_per_process: Plans one worker runs before it exits (0: no limit; 1: a fresh process per
+            plan, the strictest isolation, at a few hundred ms per plan).
     """
 
+    #: The workers write each plan's profile file themselves (run_sweep passes ``profile_path``).
+    writes_profiles = True
+
     def __init__(
-        self, workers: int = 2, warm_task: dict[str, Any] | None = None, plans_per_process: int = 1
+        self,
+        workers: int = 2,
+        warm_task: dict[str, Any] | None = None,
+        plans_per_process: int = DEFAULT_PLANS_PER_PROCESS,
     ) -> None:
         self.workers = int(workers)
         self.max_in_flight = self.workers
-        self.plans_per_process = max(1, int(plans_per_process))
+        self.plans_per_process = max(0, int(plans_per_process))
+        #: Scenario hash -> process id of the worker planning it now.
+        self.started: dict[str, int] = {}
         for name, value in SINGLE_THREAD_ENV.items():
             os.environ.setdefault(name, value)
         self._warm_file: str | None = None
@@ -165,62 +189,77 @@ class EmbeddedExecutor:
             os.environ["CABINPLAN_SWEEP_WARMUP"] = self._warm_file
         self._ctx = multiprocessing.get_context("forkserver")
         self._ctx.set_forkserver_preload(["planner.sweep._preload"])
-        self._spares: deque[_Proc] = deque()
+        self._idle: deque[_Proc] = deque()
         self._running: dict[int, _Proc] = {}
         self._lock = threading.Lock()
         self._want = threading.Event()
         self._stopping = threading.Event()
-        for _ in range(self.workers):  # blocks until the forkserver has warmed up
-            self._spares.append(self._fork())
+        for _ in range(self._target()):  # blocks until the forkserver has warmed up
+            self._idle.append(self._fork())
         self._filler = threading.Thread(target=self._fill, name="cabinplan-sweep-fork", daemon=True)
         self._filler.start()
+
+    def _target(self) -> int:
+        """Processes to keep idle.
+
+        Without reuse a fresh one per slot; with reuse one per slot in all (running ones included) plus
+        one spare, so that a killed worker is replaced at once.
+        """
+        if self.plans_per_process == 1:
+            return self.workers
+        return max(1, self.workers + 1 - len(self._running))
 
     def _fork(self) -> _Proc:
         parent, child = self._ctx.Pipe(duplex=True)
         proc = self._ctx.Process(
-            target=_serve_plan,
+            target=_serve_plans,
             args=(child, self.plans_per_process),
             name="cabinplan-sweep-plan",
             daemon=True,
         )
         proc.start()
         child.close()
-        return _Proc(proc, parent, self.plans_per_process)
+        return _Proc(proc, parent, self.plans_per_process or None)
 
     def _fill(self) -> None:
-        """Background thread: keep ``workers`` spare processes forked and waiting."""
+        """Background thread: keep :meth:`_target` processes forked and waiting."""
         while not self._stopping.is_set():
             self._want.wait(0.5)
             self._want.clear()
             while not self._stopping.is_set():
                 with self._lock:
-                    if len(self._spares) >= self.workers:
+                    if len(self._idle) >= self._target():
                         break
                 proc = self._fork()
                 with self._lock:
                     if self._stopping.is_set():
                         proc.process.kill()
-                    self._spares.append(proc)
+                    self._idle.append(proc)
 
-    def _take_spare(self) -> _Proc:
+    def _take(self) -> _Proc:
         with self._lock:
-            proc = self._spares.popleft() if self._spares else None
+            proc = self._idle.popleft() if self._idle else None
         self._want.set()
         return proc if proc is not None else self._fork()
 
     def submit(self, job: Job) -> None:
-        """Hand the plan to a waiting process (forked now if none waits)."""
-        proc = self._take_spare()
+        """Hand the plan to an idle worker (forked now if none waits)."""
+        proc = self._take()
         try:
             proc.conn.send(job.task)
-        except (BrokenPipeError, OSError):  # the spare died while waiting: use a fresh one
+        except (BrokenPipeError, OSError):  # the worker died while idle: use a fresh one
             self._reap(proc, kill=True)
             proc = self._fork()
             proc.conn.send(job.task)
-        proc.remaining -= 1
+        if proc.remaining is not None:
+            proc.remaining -= 1
         job.started_at = time.monotonic()
         job.handle = id(proc)
-        self._running[id(proc)] = proc
+        job.pid = proc.process.pid
+        with self._lock:
+            self._running[id(proc)] = proc
+        if job.pid is not None:
+            self.started[job.plan.sha256] = job.pid
 
     def _reap(self, proc: _Proc, kill: bool = False) -> None:
         if kill and proc.process.is_alive():
@@ -228,8 +267,15 @@ class EmbeddedExecutor:
         proc.process.join(timeout=5.0)
         proc.conn.close()
 
+    def _release(self, job: Job) -> _Proc | None:
+        self.started.pop(job.plan.sha256, None)
+        with self._lock:
+            proc = self._running.pop(job.handle, None)
+        self._want.set()
+        return proc
+
     def poll(self, jobs: Sequence[Job], timeout_s: float) -> list[tuple[Job, dict[str, Any]]]:
-        """Outcomes received within ``timeout_s``; processes dead without one; plans past their limit."""
+        """Outcomes received within ``timeout_s``; workers dead without one; plans past their limit."""
         by_handle = {j.handle: j for j in jobs}
         procs = [self._running[h] for h in by_handle]
         now = time.monotonic()
@@ -246,19 +292,19 @@ class EmbeddedExecutor:
             except (EOFError, OSError):
                 pass
             if outcome is not None:
-                self._running.pop(id(proc), None)
-                if proc.remaining > 0:
+                self._release(job)
+                if proc.remaining is None or proc.remaining > 0:
                     with self._lock:
-                        self._spares.appendleft(proc)
+                        self._idle.appendleft(proc)  # warm: reused first
                 else:
                     self._reap(proc)
             elif not proc.process.is_alive():
-                self._running.pop(id(proc), None)
+                self._release(job)
                 self._reap(proc)
                 code = proc.process.exitcode
                 outcome = _failed(CRASHED, f"the plan process died without an outcome (exit code {code})")
             elif time.monotonic() > (job.started_at or now) + job.hard_limit_s:
-                self._running.pop(id(proc), None)
+                self._release(job)
                 self._reap(proc, kill=True)
                 outcome = killed_outcome(job)
             if outcome is not None:
@@ -266,14 +312,14 @@ class EmbeddedExecutor:
         return out
 
     def close(self) -> None:
-        """Kill every plan and spare process."""
+        """Kill every worker process."""
         self._stopping.set()
         self._want.set()
         self._filler.join(timeout=10.0)
         with self._lock:
-            procs = [*self._running.values(), *self._spares]
+            procs = [*self._running.values(), *self._idle]
             self._running.clear()
-            self._spares.clear()
+            self._idle.clear()
         for proc in procs:
             if proc.process.is_alive():
                 proc.process.kill()
@@ -286,13 +332,49 @@ class EmbeddedExecutor:
                 del os.environ["CABINPLAN_SWEEP_WARMUP"]
 
 
-def _ray() -> Any:
+#: Read by Ray when it is imported. Off (its value here), Ray takes 127.0.0.1 as this node's address and
+#: every server of a local Ray binds to loopback: GCS, raylet, object manager, the workers' and the
+#: driver's gRPC servers, the dashboard and runtime-env agents (checked with ``ss -ltnup``, Ray 2.60).
+#: Without it Ray replaces ``_node_ip_address="127.0.0.1"`` by the machine's address
+#: (``ray._private.services.resolve_ip_for_localhost``) and binds its servers to all interfaces.
+#: Meant for Windows and macOS; on Linux it only changes that address choice. Never set for a cluster.
+RAY_LOOPBACK_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+def _ray(local: bool = False) -> Any:
+    """Import Ray; ``local``: set :data:`RAY_LOOPBACK_ENV` first (a Ray started here binds loopback only)."""
+    if local:
+        os.environ.setdefault(RAY_LOOPBACK_ENV, "0")
     try:
         import ray
     except ImportError:
         raise InvalidInput(
             "--ray: Ray is not installed; install the extra: pip install 'cabinplan[ray]'", field="ray"
         ) from None
+    return ray
+
+
+def init_local_ray(num_cpus: int) -> Any:
+    """Start a local Ray with ``num_cpus`` CPUs bound to loopback only (no dashboard); the ray module.
+
+    Every server Ray starts listens on 127.0.0.1 (see :data:`RAY_LOOPBACK_ENV`); this needs the variable
+    set before Ray is imported, so a process that imported Ray earlier gets a warning and Ray's default
+    binding. Plan processes run single-threaded numerical libraries (:data:`SINGLE_THREAD_ENV`, inherited
+    by the raylet's workers).
+    """
+    late = "ray" in sys.modules and os.environ.get(RAY_LOOPBACK_ENV) != "0"
+    ray = _ray(local=True)
+    if late:
+        _LOG.warning("Ray was imported before %s=0: its servers bind to all interfaces", RAY_LOOPBACK_ENV)
+    for name, value in SINGLE_THREAD_ENV.items():
+        os.environ.setdefault(name, value)
+    ray.init(
+        num_cpus=int(num_cpus),
+        include_dashboard=False,
+        _node_ip_address="127.0.0.1",
+        log_to_driver=False,
+        configure_logging=False,
+    )
     return ray
 
 
@@ -348,21 +430,19 @@ class RayExecutor:
         meshes: dict[str, bytes] | None = None,
         warm_task: dict[str, Any] | None = None,
     ) -> None:
-        ray = self._ray = _ray()
+        address = address or os.environ.get("RAY_ADDRESS") or None
+        ray = self._ray = _ray(local=address is None)
         self._owns = False
         if not ray.is_initialized():
-            address = address or os.environ.get("RAY_ADDRESS") or None
             if address:
-                ray.init(address=address, log_to_driver=False, configure_logging=False)
-            else:
                 ray.init(
-                    num_cpus=int(workers),
-                    include_dashboard=False,
-                    _node_ip_address="127.0.0.1",
+                    address=address,
                     log_to_driver=False,
                     configure_logging=False,
                     runtime_env={"env_vars": dict(SINGLE_THREAD_ENV)},
                 )
+            else:
+                init_local_ray(workers)
                 self._owns = True
         cpus = int(ray.cluster_resources().get("CPU", workers))
         self.workers = max(1, cpus)
@@ -537,7 +617,10 @@ def run_sweep(
         if journal.done(plan.sha256):
             counts.skipped += 1
         else:
-            pending.append(Job(plan, _task(plan, base_dir), hard_limit_s(plan, limits)))
+            task = _task(plan, base_dir)
+            if getattr(executor, "writes_profiles", False):
+                task["profile_path"] = str(journal.profile_path(plan))
+            pending.append(Job(plan, task, hard_limit_s(plan, limits)))
     report = progress or (lambda c: None)
     running: list[Job] = []
     report(counts)
@@ -575,13 +658,16 @@ def run_sweep(
 
 __all__ = [
     "CRASHED",
+    "DEFAULT_PLANS_PER_PROCESS",
     "MAX_ATTEMPTS",
+    "RAY_LOOPBACK_ENV",
     "Counts",
     "EmbeddedExecutor",
     "Executor",
     "Job",
     "RayExecutor",
     "hard_limit_s",
+    "init_local_ray",
     "killed_outcome",
     "run_sweep",
     "sweep_meshes",

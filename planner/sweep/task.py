@@ -40,15 +40,19 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
     """Resolve and plan one scenario; the outcome of the plan, success or refusal.
 
     Args:
-        task: ``{"scenario": dict, "base_dir": str | None}`` (the scenario of one sweep plan).
+        task: ``{"scenario": dict, "base_dir": str | None}`` (the scenario of one sweep plan), and
+            optionally ``"profile_path"``: the document is then written there by this process (atomic,
+            fsynced) instead of being returned, so that megabytes of profile need not cross a pipe and the
+            driver's single thread does not serialise every plan's file write.
         meshes: Mesh name -> file path or file bytes, looked up before the default resolution.
 
     Returns:
         ``{"status": "succeeded" | "failed", "reason", "message", "evidence" (JSON text of the refusal
         details), "duration_s", "lower_bound_ratio", "min_clearance_m", "peak_force_ratio",
         "planning_time_s" (the planner's own clock), "task_time_s" (resolution + planning, this process),
-        "document" (JSON text of the profile or the refusal document), "pid"}``. Numbers are ``None``
-        where a refusal has none. An unexpected exception is an ``internal_error`` outcome, never raised.
+        "document" (JSON text of the profile or the refusal document; ``None`` once written to
+        ``profile_path``), "profile_written" (bool), "pid"}``. Numbers are ``None`` where a refusal has
+        none. An unexpected exception is an ``internal_error`` outcome, never raised.
     """
     from planner.documents.output import refusal_document, result_document
     from planner.plan.pipeline import Planner
@@ -67,6 +71,7 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         "planning_time_s": None,
         "task_time_s": None,
         "document": None,
+        "profile_written": False,
         "pid": os.getpid(),
     }
     sc: ResolvedScenario | None = None
@@ -82,7 +87,8 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         evidence = json.dumps(doc.get("details", {}), separators=(",", ":"))
         if len(evidence) > MAX_EVIDENCE_CHARS:
             evidence = evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
-        out.update(reason=exc.reason, message=exc.message, evidence=evidence, document=json.dumps(doc))
+        out.update(reason=exc.reason, message=exc.message, evidence=evidence)
+        _deliver(out, task, json.dumps(doc))
         out["task_time_s"] = time.perf_counter() - t0
         return out
     except Exception as exc:  # a bug: recorded as the plan's outcome, the sweep goes on
@@ -100,10 +106,27 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         min_clearance_m=float(result.gate.min_clearance_m),
         peak_force_ratio=float(result.gate.peak_ratios["effort"]),
         planning_time_s=float(report.get("planning_time_s", time.perf_counter() - t_plan)),
-        document=json.dumps(doc),
     )
+    _deliver(out, task, json.dumps(doc))
     out["task_time_s"] = time.perf_counter() - t0
     return out
+
+
+def _deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
+    """Write the document to the task's ``profile_path`` if it has one, else put it into the outcome."""
+    path = task.get("profile_path")
+    if not path:
+        out["document"] = document
+        return
+    from planner.sweep.results import atomic_write
+
+    try:
+        atomic_write(Path(path), document + "\n")
+    except OSError as exc:  # the driver writes it then (and reports a lasting error itself)
+        _LOG.warning("profile %s: cannot write (%s); handed to the driver", path, exc.strerror)
+        out["document"] = document
+        return
+    out["profile_written"] = True
 
 
 def warm_up(task: dict[str, Any] | None, meshes: dict[str, Any] | None = None) -> float:

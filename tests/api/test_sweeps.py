@@ -76,6 +76,34 @@ def test_a_sweep_runs_as_jobs_under_the_quota_and_gives_its_results(svc: Service
     ]
 
     assert svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h("beta")).status_code == 404
+    assert svc.client.delete(f"/api/v1/sweeps/{doc['id']}", headers=svc.h("beta")).status_code == 404
+
+    # An ended sweep is deleted with its plans' jobs.
+    assert svc.client.delete(f"/api/v1/sweeps/{doc['id']}", headers=svc.h()).status_code == 204
+    assert svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h()).status_code == 404
+    assert svc.client.get(table[0]["profile_file"], headers=svc.h()).status_code == 404
+
+
+def test_deleting_a_running_sweep_cancels_it_and_a_second_delete_removes_it(svc: Service):
+    body = sweep_body()
+    body["axes"] = {"payload_mass_kg": [100], "seed": list(range(1, 9))}  # 8 feasible plans, quota 2
+    doc = svc.client.post("/api/v1/sweeps", json=body, headers=svc.h()).json()
+    r = svc.client.delete(f"/api/v1/sweeps/{doc['id']}", headers=svc.h())
+    assert r.status_code in (200, 202), r.text
+    cancelled = r.json()
+    assert cancelled["status"] == "cancelled"
+    deadline = time.monotonic() + 60
+    while active_jobs(svc):  # queued jobs cancelled at once, running ones killed
+        assert time.monotonic() < deadline
+        time.sleep(0.1)
+    doc = svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h()).json()
+    progress = doc["progress"]
+    assert doc["status"] == "cancelled" and progress["queued"] == progress["running"] == 0
+    assert progress["waiting"] + progress["done"] == 8 and progress["waiting"] >= 8 - 2 * QUOTA
+    time.sleep(0.5)  # the feeder never queues a cancelled sweep's waiting plans
+    assert svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h()).json()["progress"] == progress
+    assert svc.client.delete(f"/api/v1/sweeps/{doc['id']}", headers=svc.h()).status_code == 204
+    assert svc.client.get(f"/api/v1/sweeps/{doc['id']}", headers=svc.h()).status_code == 404
 
 
 @pytest.mark.parametrize(

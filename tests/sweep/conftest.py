@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -10,6 +11,10 @@ import pytest
 import yaml
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+# Before anything imports Ray: a local Ray of these tests binds every server to 127.0.0.1
+# (planner.sweep.run.RAY_LOOPBACK_ENV).
+os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 
 def scenario(name: str) -> dict[str, Any]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import signal
 import threading
@@ -14,10 +15,10 @@ import pytest
 
 from planner.sweep.expand import expand_sweep
 from planner.sweep.results import MACHINE_COLUMNS, read_parquet
-from planner.sweep.run import RayExecutor, run_sweep, warm_task
+from planner.sweep.run import RayExecutor, init_local_ray, run_sweep, warm_task
 from planner.sweep.spec import sweep_from_dict
 from tests.sweep.conftest import bay_sweep, invoke, write_spec
-from tests.sweep.test_run import check_stuck_rows, stuck_sweep
+from tests.sweep.test_run import STUCK_LIMIT_S, check_stuck_rows, stuck_sweep
 
 ray = pytest.importorskip(
     "ray", reason="ray is not installed (the [ray] extra: pip install 'cabinplan[ray]')"
@@ -26,17 +27,83 @@ ray = pytest.importorskip(
 
 @pytest.fixture(scope="module")
 def local_ray() -> Iterator[Any]:
-    ray.init(
-        num_cpus=2,
-        include_dashboard=False,
-        _node_ip_address="127.0.0.1",
-        log_to_driver=False,
-        configure_logging=False,
-    )
+    init_local_ray(2)
     try:
         yield ray
     finally:
         ray.shutdown()
+
+
+def _descendants(root: int) -> set[int]:
+    """Process ids of ``root`` and every process below it (Ray's GCS, raylet, agents and workers)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            ppid = int(stat.rsplit(")", 1)[1].split()[1])
+            children.setdefault(ppid, []).append(int(entry.name))
+    out, todo = set(), [root]
+    while todo:
+        pid = todo.pop()
+        out.add(pid)
+        todo.extend(children.get(pid, []))
+    return out
+
+
+def _socket_inodes(pids: set[int]) -> dict[str, int]:
+    out = {}
+    for pid in pids:
+        try:
+            for fd in Path(f"/proc/{pid}/fd").iterdir():
+                target = os.readlink(fd)
+                if target.startswith("socket:["):
+                    out[target[8:-1]] = pid
+        except OSError:  # the process ended, or is not ours to read
+            continue
+    return out
+
+
+def _address(hex_ip: str) -> ipaddress.IPv4Address | ipaddress.IPv6Address:
+    raw = bytes.fromhex(hex_ip)
+    if len(raw) == 4:
+        return ipaddress.IPv4Address(raw[::-1])
+    words = b"".join(raw[k : k + 4][::-1] for k in range(0, 16, 4))  # four host-order 32-bit words
+    return ipaddress.IPv6Address(words)
+
+
+def _listening(inodes: dict[str, int]) -> list[tuple[str, int, str]]:
+    """(protocol, pid, local address) of every listening TCP and bound UDP socket of those inodes."""
+    found = []
+    for proto in ("tcp", "tcp6", "udp", "udp6"):
+        path = Path(f"/proc/net/{proto}")
+        if not path.exists():
+            continue
+        for line in path.read_text().splitlines()[1:]:
+            fields = line.split()
+            local, state, inode = fields[1], fields[3], fields[9]
+            if inode in inodes and (proto.startswith("udp") or state == "0A"):  # 0A: TCP LISTEN
+                found.append((proto, inodes[inode], local))
+    return found
+
+
+def test_a_local_ray_listens_on_loopback_only(local_ray):
+    @ray.remote
+    def pid() -> int:
+        return os.getpid()
+
+    workers = set(ray.get([pid.remote() for _ in range(2)]))
+    ours = _descendants(os.getpid())
+    assert workers <= ours  # the workers are below this process (Ray was started here)
+    sockets = _listening(_socket_inodes(ours))
+    assert len({p for _, p, _ in sockets}) >= 4  # GCS, raylet, the workers, this driver at least
+    for proto, owner, local in sockets:
+        ip = _address(local.split(":")[0])
+        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+            ip = ip.ipv4_mapped
+        assert ip.is_loopback, (proto, owner, str(ip), Path(f"/proc/{owner}/cmdline").read_bytes()[:80])
 
 
 def _plan_workers() -> list[int]:
@@ -68,9 +135,11 @@ def test_ray_gives_the_rows_the_embedded_run_gives(local_ray, embedded_run, tmp_
 
 
 def test_ray_kills_a_plan_at_its_limit_and_a_killed_worker_loses_no_row(local_ray, tmp_path: Path):
-    sweep = sweep_from_dict(stuck_sweep("ray-stuck", 15.0))
+    sweep = sweep_from_dict(stuck_sweep("ray-stuck", STUCK_LIMIT_S))
     plans = expand_sweep(sweep)
-    executor = RayExecutor(max_in_flight=2, warm_task=warm_task(plans))
+    # Warm workers on the quick feasible plan: a worker started after the kill warms up before the
+    # retried plan starts (the stuck plan as warm-up task would search for 5 s first).
+    executor = RayExecutor(max_in_flight=2, warm_task=warm_task(plans[2:]))
     outcome: dict[str, Any] = {}
 
     def run() -> None:
@@ -96,4 +165,4 @@ def test_ray_kills_a_plan_at_its_limit_and_a_killed_worker_loses_no_row(local_ra
     rows = read_parquet(tmp_path / "results.parquet")
     assert len({r["scenario_sha256"] for r in rows}) == 3
     assert [r["attempts"] for r in sorted(rows, key=lambda r: r["plan"])] == [2, 1, 1]
-    check_stuck_rows(rows, 15.0)
+    check_stuck_rows(rows, STUCK_LIMIT_S)
