@@ -46,8 +46,10 @@ def test_robot_summary_lists_drives_with_units_and_limits() -> None:
     assert jerk["d1"] == 2.0 and jerk["x2"] == 1.5 and jerk["d5"] == 1.5
     assert jerk["theta3"] == pytest.approx(np.radians(200))
     assert jerk["theta6"] == pytest.approx(np.radians(300))
+    assert out["default_timing"] == "jerk_limited"  # the default whenever the description has jerk limits
     code, out, _ = run("robot", "pprs6")
     assert code == 0 and out is not None and all(d["j_max"] > 0 for d in out["drives"])
+    assert out["default_timing"] == "jerk_limited"
 
 
 def test_fk_from_drives_and_from_joints_agree(robot: Cabin8) -> None:

@@ -152,10 +152,17 @@ def test_generated_scenario_plans_to_a_profile_with_the_gates_properties(index: 
     assert np.all(np.abs(udd) <= tol * lim.a_max)
     assert np.all(np.abs(np.diff(ud, axis=0)) / dt <= tol * lim.a_max)
     assert np.all(np.abs(prof.effort) <= tol * lim.effort_max)
+    # The default law is jerk-limited: the change of the sampled acceleration within j_max, every sample
+    # on the certified path.
+    assert res.report["timing"]["stage"] == "jerk_limited" and lim.j_max is not None
+    assert np.all(np.abs(np.diff(udd, axis=0)) / dt <= tol * lim.j_max)
+    on_path = next(c for c in res.gate.checks if c.name == "on_path")
+    assert on_path.passed and on_path.worst is not None and on_path.worst <= 1e-6
     q = robot.joints_from_drives(u)
     assert not any(robot.violations(qi) for qi in q[:: max(1, len(q) // 300)])
-    # At rest at both ends, starting exactly at the scenario's start.
+    # At rest at both ends with zero acceleration, starting exactly at the scenario's start.
     assert np.array_equal(ud[0], np.zeros(8)) and np.array_equal(ud[-1], np.zeros(8))
+    assert np.all(np.abs(udd[0]) <= 1e-9) and np.array_equal(udd[-1], np.zeros(8))
     assert np.max(np.abs(u[0] - sc.start_u)) <= 1e-9
     # The goal: the drives, or the payload pose (the commanded one when deflection is compensated).
     if sc.goal_u is not None:

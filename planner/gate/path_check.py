@@ -1,10 +1,11 @@
 """The gate's path check: every sampled configuration lies on the certified geometric path.
 
-The certified path is a C1 curve q(s) per leg (:class:`~planner.timing.path.JointPath`); a timing stage
-only chooses s(t), so each sample q_k must equal q(s) for some s. The distance of q_k from a leg is found
-leg by leg, by the nearest point of a dense evaluation (a k-d tree) refined by Newton's method
-on f(s) = |q(s) - q_k|^2 / 2 (f' = r . q', f'' = q' . q' + r . q'', r = q(s) - q_k), which converges in a
-few steps from the nearest dense point of a smooth piece.
+The certified path is a C1 (with the planner's blends C2) curve q(s) per leg
+(:class:`~planner.timing.path.JointPath`); a timing stage only chooses s(t), so each sample q_k must
+equal q(s) for some s. The distance of q_k from a leg is found leg by leg, by the nearest point of a
+dense evaluation (a k-d tree) refined by Newton's method on f(s) = |q(s) - q_k|^2 / 2
+(f' = r . q', f'' = q' . q' + r . q'', r = q(s) - q_k), which converges in a few steps from the nearest
+dense point of a smooth piece.
 """
 
 from __future__ import annotations

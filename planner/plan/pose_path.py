@@ -6,7 +6,7 @@ default). Each straight leg ``x(s) = x_a + s (x_b - x_a)``, s in [0, 1], is a on
 the robot model maps it to the drive path (:meth:`planner.robots.pprs6.Pprs6.drive_path`: closed-form IK,
 analytic Jacobian, its derivative along the leg by a central difference). Corners are sharp, so the
 platform stops at every waypoint: each leg is timed rest to rest by the shared jerk-limited stage
-(:class:`~planner.timing.jerk.JerkLimitedStage` over TOPP-RA, drive velocity, acceleration and jerk limits:
+(:class:`~planner.timing.jerk.JerkLimitedStage`, an LP over drive velocity, acceleration and jerk limits:
 pprs6 has no force model; TOPP-RA alone for a description without jerk limits) on a uniform grid of 300
 intervals, and the legs are sampled one after the other at the controller
 period by the shared sampler (:func:`~planner.timing.profile.sample_legs`).

@@ -1,4 +1,7 @@
-"""The smoothing stage: corners become certified quadratic blends; legs split where the robot must stop.
+"""The smoothing stage: corners become certified C2 blends; legs split where the robot must stop.
+
+The blends (:class:`~planner.timing.path.BlendPiece`, quintic Bezier) have zero curvature where they meet
+the straight segments, so the drive accelerations of a jerk-limited law do not step there.
 
 A corner's blend takes :data:`BLEND_FRACTIONS` of the shorter neighbouring segment, shrunk through the
 sequence (and left sharp, the robot stopping there, at 0) until the blend is admissible, holdable and

@@ -370,6 +370,7 @@ class Cabin8(RobotModel):
             "serial_chain_mdh": [link.model_dump() for link in self.desc.serial_chain],
             "masses_kg": self.desc.masses.model_dump(),
             "home_drives": self.drives_dict(self.home_drives),
+            "default_timing": "jerk_limited" if self.limits.j_max is not None else "acceleration_limited",
         }
 
     def summary(self) -> dict[str, Any]:

@@ -351,4 +351,5 @@ class Pprs6(RobotModel):
             "grubler": self.grubler(),
             "home": self.pose_dict(self.home_pose),
             "sample_period_s": self.sample_period_s,
+            "default_timing": "jerk_limited" if lim.j_max is not None else "acceleration_limited",
         }

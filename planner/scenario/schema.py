@@ -259,7 +259,7 @@ class PlanOptions(BaseModel):
         None,
         description="Time law of the drive profile: 'jerk_limited' (every drive's jerk within its limit, "
         "the path kept exactly) or 'acceleration_limited' (TOPP-RA alone: acceleration steps). Default "
-        "(null): acceleration_limited (the jerk-limited law costs 1.3x the duration on blended paths today).",
+        "(null): jerk_limited when the robot description has jerk limits, else acceleration_limited.",
     )
 
     @model_validator(mode="before")

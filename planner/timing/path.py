@@ -1,13 +1,15 @@
 """Geometric joint-space paths: straight segments, corner blends and interpolating splines.
 
-A path is a C1 curve q(s) in joint space over s in [0, length], built from pieces:
+A path is a C2 curve q(s) in joint space over s in [0, length] (C1 where a spline meets a line), built from
+pieces:
 
 - :class:`LinePiece`: the certified straight segments of the global planner;
-- :class:`BlendPiece`: a quadratic Bezier replacing the corner at a waypoint w between the points
-  a = w - lam * d_in and b = w + lam * d_out (d the segments' constant derivatives dq/ds). Its derivative
-  at its ends equals the neighbouring segments' derivatives, so the path is C1 there and a time-optimal
-  profile need not stop at the corner. The blend stays inside the triangle (a, w, b); it is certified by
-  the collision layer like every other motion before it is used;
+- :class:`BlendPiece`: a quintic Bezier replacing the corner at a waypoint w between the points
+  a = w - lam * d_in and b = w + lam * d_out (d the segments' constant derivatives dq/ds). Its first
+  derivative at its ends equals the neighbouring segments' derivatives and its second derivative is zero
+  there, so the path is C2 (curvature-continuous): a time-optimal profile need not stop at the corner, and
+  a jerk-limited one need not slow down where the blend begins and ends. The blend stays inside the
+  triangle (a, w, b); it is certified by the collision layer like every other motion before it is used;
 - :class:`SplinePiece`: a cubic spline through densely tracked configurations (the straight-line
   insertion), C2.
 
@@ -59,7 +61,17 @@ class LinePiece(Piece):
 
 @dataclass(frozen=True)
 class BlendPiece(Piece):
-    """Quadratic Bezier a -> b with control point w, over s in [0, length] (tau = s / length)."""
+    """Quintic Bezier corner blend a -> b at the corner w, over s in [0, length] (tau = s / length).
+
+    Control points a, a + 0.4 (w - a), a + 0.8 (w - a), b + 0.8 (w - b), b + 0.4 (w - b), b: all six lie on
+    the corner's two legs, so the curve stays inside the triangle (a, w, b), nearer the corner than a
+    quadratic blend between the same ends (its midpoint is w + 0.1875 lam delta, the quadratic's
+    w + 0.25 lam delta). With length = 2 lam (a = w - lam d_in, b = w + lam d_out, delta = d_out - d_in)
+    its first derivative at the ends is d_in and d_out (C1) and its second derivative is zero there (C2):
+    the path's curvature, hence every drive's acceleration at a continuous path speed, does not step
+    where a line enters or leaves the blend. In between, d2q/ds2 = 6 tau (1 - tau) delta / length: 1.5
+    times the quadratic blend's constant delta / length at its peak, the price of the zero ends.
+    """
 
     a: Array = field(repr=False)
     w: Array = field(repr=False)
@@ -67,12 +79,18 @@ class BlendPiece(Piece):
     length: float
 
     def evaluate(self, s: Array) -> tuple[Array, Array, Array]:
-        """Bezier point, tangent and (constant) curvature term."""
+        """Bezier point, tangent and curvature term (zero at both ends), in closed form.
+
+        q' = d_in + delta (3 tau^2 - 2 tau^3), q = a + length (d_in tau + delta (tau^3 - tau^4 / 2)).
+        """
         tau = (s / self.length)[:, None]
         a, w, b = self.a[None, :], self.w[None, :], self.b[None, :]
-        q = (1 - tau) ** 2 * a + 2 * tau * (1 - tau) * w + tau**2 * b
-        dq = (2 * (1 - tau) * (w - a) + 2 * tau * (b - w)) / self.length
-        ddq = np.broadcast_to(2 * (a - 2 * w + b) / self.length**2, q.shape).copy()
+        lam = 0.5 * self.length
+        d_in, d_out = (w - a) / lam, (b - w) / lam
+        delta = d_out - d_in
+        q = a + self.length * (d_in * tau + delta * (tau**3 - 0.5 * tau**4))
+        dq = d_in + delta * (3 * tau**2 - 2 * tau**3)
+        ddq = delta * (6 * tau * (1 - tau) / self.length)
         return q, dq, ddq
 
 
@@ -149,7 +167,7 @@ def segment_time_length(robot: Cabin8, q0: Array, q1: Array) -> float:
 def blended_polyline(
     robot: Cabin8, waypoints: Array, blend_fraction: Array | float = 0.4
 ) -> tuple[JointPath, list[int]]:
-    """A C1 path along a polyline with a quadratic blend at every interior waypoint.
+    """A C2 path along a polyline with a quintic blend (:class:`BlendPiece`) at every interior waypoint.
 
     Args:
         robot: The robot (for time-like segment lengths).

@@ -21,7 +21,6 @@ holds on every sample.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -114,21 +113,6 @@ class _DrivePathAdapter(toppra.interpolator.AbstractGeometricPath):
         return None
 
 
-class _CappedVelocityConstraint(toppra.constraint.JointVelocityConstraint):
-    """Drive velocity limits, and the path speed sd <= cap(s) where ``cap`` is finite (sd^2 bound)."""
-
-    def __init__(self, vlim: Array, cap: Callable[[Array], Array]) -> None:
-        super().__init__(vlim)
-        self.cap = cap
-
-    def compute_constraint_params(self, path: Any, gridpoints: Array) -> tuple[Any, ...]:
-        out = list(super().compute_constraint_params(path, gridpoints))
-        xbound = np.array(out[6], dtype=float)
-        xbound[:, 1] = np.minimum(xbound[:, 1], np.asarray(self.cap(np.asarray(gridpoints))) ** 2)
-        out[6] = xbound
-        return tuple(out)
-
-
 class _DriveForceConstraint(toppra.constraint.LinearConstraint):
     """|tau_u| <= F_max along the path, coefficients from the vectorised inverse dynamics."""
 
@@ -159,22 +143,33 @@ BREAK_OFFSET = 1e-7
 
 
 def _grid(path: JointPath, step: float, min_points: int, max_points: int) -> Array:
-    """Uniform grid with every piece boundary, refined inside blends and splines.
+    """Uniform grid over the lines, every piece boundary, its own finer grid inside blends and splines.
 
-    A boundary also gets a point just inside each neighbouring piece: the path's second derivative jumps
-    there (a line entering a blend), and a constraint evaluated at the boundary alone sees only one side,
-    letting the blend's curvature at the line's speed exceed the acceleration limits after it.
+    A boundary also gets a point just inside each neighbouring piece: where the path's second derivative
+    jumps (a spline meeting a line), a constraint evaluated at the boundary alone sees only one side.
+    Inside a curved piece only its own evenly spaced points are used, and no uniform point lies within
+    0.1 step of a boundary: a uniform point next to another one made an interval a few hundredths of the
+    others, on which TOPP-RA's constant path acceleration swung (-0.12 to 0.69 to -0.06 within 4 ms on a
+    quintic blend) between two samples, so the sampled velocities no longer integrated the sampled
+    accelerations (the gate's consistency check; hatch-bay-insert seed 6, acceleration-limited).
     """
     length = path.length
     n = int(np.clip(np.ceil(length / step), min_points, max_points))
-    inner = np.asarray(path.breaks, dtype=float)[1:-1]
+    breaks = np.asarray(path.breaks, dtype=float)
+    inner = breaks[1:-1]
     eps = BREAK_OFFSET * max(length, 1.0)
-    pts = [np.linspace(0.0, length, n + 1), path.breaks, inner - eps, inner + eps]
+    uniform = np.linspace(0.0, length, n + 1)
+    # Uniform points near a boundary go too (the boundary is a grid point; no sliver interval beside it).
+    near = np.abs(uniform[:, None] - breaks[None, :]).min(axis=1) < 0.1 * step
+    keep = ~near
+    keep[[0, -1]] = True
+    pts = [breaks, inner - eps, inner + eps]
     for k, piece in enumerate(path.pieces):
         if isinstance(piece, BlendPiece | SplinePiece):
-            a = path.breaks[k]
+            a, b = breaks[k], breaks[k + 1]
+            keep &= ~((uniform > a) & (uniform < b))
             pts.append(a + np.linspace(0.0, piece.length, int(np.clip(piece.length / (0.25 * step), 8, 400))))
-    grid = np.unique(np.concatenate(pts))
+    grid = np.unique(np.concatenate([uniform[keep], *pts]))
     return grid[np.concatenate([[True], np.diff(grid) > 1e-9])]
 
 
@@ -199,11 +194,6 @@ class ToppraStage:
     min_points: int = 60
     max_points: int = 3000
     name: str = "toppra"
-    #: Optional bound on the path speed, ``cap(s) -> sd_max`` at grid points (inf: none); the jerk-limited
-    #: stage (:mod:`planner.timing.jerk`) slows down with it where the path's curvature jumps.
-    path_speed_cap: Callable[[Array], Array] | None = None
-    #: Optional extra grid points (path parameters), e.g. the ends of the zones ``path_speed_cap`` bounds.
-    extra_points: Array | None = None
 
     def __post_init__(self) -> None:
         self.dynamics = drive_dynamics(self.robot)
@@ -215,9 +205,7 @@ class ToppraStage:
         adapter = _DrivePathAdapter(path, self.robot)
         vlim = np.column_stack([-sv * lim.v_max, sv * lim.v_max])
         constraints: list[toppra.constraint.Constraint] = [
-            toppra.constraint.JointVelocityConstraint(vlim)
-            if self.path_speed_cap is None
-            else _CappedVelocityConstraint(vlim, self.path_speed_cap),
+            toppra.constraint.JointVelocityConstraint(vlim),
             toppra.constraint.JointAccelerationConstraint(
                 np.column_stack([-sa * lim.a_max, sa * lim.a_max]),
                 discretization_scheme=toppra.constraint.DiscretizationType.Interpolation,
@@ -226,10 +214,6 @@ class ToppraStage:
         if self.dynamics is not None:
             constraints.append(_DriveForceConstraint(self.dynamics, self.payload, sf * lim.effort_max))
         grid = _grid(path, self.grid_step, self.min_points, self.max_points)
-        if self.extra_points is not None:
-            extra = np.clip(np.asarray(self.extra_points, dtype=float), 0.0, path.length)
-            grid = np.unique(np.concatenate([grid, extra]))
-            grid = grid[np.concatenate([[True], np.diff(grid) > 1e-9])]
         # A drive that cannot even hold the payload somewhere makes the problem infeasible at any speed
         # (and gives toppra's LP a row 0 * x <= negative, which it divides by): refuse it first, by name.
         overload = self._static_overload(path, grid) if self.dynamics is not None else None

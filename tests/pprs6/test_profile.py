@@ -61,7 +61,9 @@ def test_pose_path_followed_and_closed(robot: Pprs6, document: dict) -> None:
     wps = np.array(
         [[w[n] for n in ("x", "y", "z", "phi", "theta", "psi")] for w in document["path"]["waypoints"]]
     )
-    assert np.allclose(pose[0], wps[0], atol=1e-12) and np.allclose(pose[-1], wps[0], atol=1e-12)
+    # The poses are the FK (Newton, converged when the drives are reproduced within 1e-12 m) of the sampled
+    # drives: within 1e-11 of the waypoints (measured 1.1e-12 at the end of the jerk-limited law).
+    assert np.allclose(pose[0], wps[0], atol=1e-11) and np.allclose(pose[-1], wps[0], atol=1e-11)
     pos = np.array(document["position"])
     assert np.allclose(robot.ik(pose), pos, atol=1e-12)
     leg = np.array(document["leg"])

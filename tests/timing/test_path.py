@@ -1,10 +1,12 @@
-"""Geometric joint paths: derivatives by finite differences, C1 joins, blends inside their corner triangle.
+"""Geometric joint paths: derivatives by finite differences, C1/C2 joins, blends inside their corner triangle.
 
 Every derivative the pieces and the drive geometry report is checked against central finite differences
 of the values (STYLE habit 2), and the drive path against the robot's own closed-form drive map.
 """
 
 from __future__ import annotations
+
+from math import comb
 
 import numpy as np
 import pytest
@@ -78,6 +80,26 @@ def test_blend_piece_derivatives_match_finite_differences(waypoints: np.ndarray)
     assert np.allclose(dq[1], 2 * (waypoints[2] - waypoints[1]) / piece.length, rtol=0, atol=1e-12)
 
 
+def test_blend_piece_is_the_quintic_bezier_with_zero_curvature_at_both_ends(waypoints: np.ndarray) -> None:
+    """C2 blend: the Bezier of its six control points on the corner's legs, q'' = 0 at both ends."""
+    a, w, b = waypoints[0], waypoints[1], waypoints[2]
+    piece = BlendPiece(a, w, b, 1.7)
+    s = np.linspace(0.0, piece.length, 41)
+    q, _, ddq = piece.evaluate(s)
+    # Independent route: de Casteljau-free Bernstein sum of the control points.
+    ctrl = [a, a + 0.4 * (w - a), a + 0.8 * (w - a), b + 0.8 * (w - b), b + 0.4 * (w - b), b]
+    tau = (s / piece.length)[:, None]
+    bern = [comb(5, i) * tau**i * (1 - tau) ** (5 - i) for i in range(6)]
+    assert np.max(np.abs(sum(bi * ci[None, :] for bi, ci in zip(bern, ctrl, strict=True)) - q)) <= 1e-12
+    assert np.max(np.abs(ddq[[0, -1]])) <= 1e-12
+    # The curvature term is continuous inside and peaks at 1.5 times the quadratic blend's constant.
+    delta = 2 * (b - w) / piece.length - 2 * (w - a) / piece.length
+    assert np.max(np.abs(ddq[20] - 1.5 * delta / piece.length)) <= 1e-12
+    # Every point is a convex combination of a, w, b (inside the corner triangle).
+    coeffs = np.linalg.lstsq(np.column_stack([a - w, b - w]), (q - w).T, rcond=None)[0]
+    assert np.all(coeffs >= -1e-12) and np.all(coeffs.sum(axis=0) <= 1 + 1e-12)
+
+
 def test_spline_piece_derivatives_match_finite_differences(waypoints: np.ndarray) -> None:
     s_knots = np.array([3.0, 3.8, 5.1, 5.9, 7.2])  # not starting at 0: the piece re-bases it
     piece = SplinePiece.through(s_knots, waypoints)
@@ -120,7 +142,7 @@ def _piece_ends(path: JointPath) -> list[Ends]:
 
 
 @pytest.mark.parametrize("fraction", [0.1, 0.4, 0.5])
-def test_blended_polyline_is_c1_and_starts_and_ends_at_the_waypoints(
+def test_blended_polyline_is_c2_and_starts_and_ends_at_the_waypoints(
     robot: Cabin8, waypoints: np.ndarray, fraction: float
 ) -> None:
     path, blend_index = blended_polyline(robot, waypoints, fraction)
@@ -132,6 +154,11 @@ def test_blended_polyline_is_c1_and_starts_and_ends_at_the_waypoints(
     for (q0, dq0), (q1, dq1) in ends:
         assert np.max(np.abs(q0 - q1)) <= 1e-9
         assert np.max(np.abs(dq0 - dq1)) <= 1e-9
+    # C2: the curvature term is zero on both sides of every boundary (lines and the blends' ends).
+    for k, (p, nxt) in enumerate(zip(path.pieces[:-1], path.pieces[1:], strict=True)):
+        left = p.evaluate(np.array([p.length]))[2]
+        right = nxt.evaluate(np.array([0.0]))[2]
+        assert np.max(np.abs(left)) <= 1e-9 and np.max(np.abs(right)) <= 1e-9, k
     assert np.array_equal(path.start, waypoints[0])
     assert np.max(np.abs(path.end - waypoints[-1])) <= 1e-12
     # Cutting corners with blends does not change the time-like length: each blend of length 2 lam

@@ -30,15 +30,17 @@ def timed(sc: ResolvedScenario, timing: str | None) -> ResolvedScenario:
     return dataclasses.replace(sc, options=sc.options.model_copy(update={"timing": timing}))
 
 
-def test_default_is_acceleration_limited_and_jerk_limited_is_refused_without_limits(
+def test_default_is_jerk_limited_with_jerk_limits_and_acceleration_limited_without(
     scenario: ResolvedScenario, tmp_path: Path
 ) -> None:
-    assert timing_of(scenario) == "acceleration_limited"
-    assert timing_factory(scenario) is ToppraStage
-    jerky = timed(scenario, "jerk_limited")
-    assert timing_of(jerky) == "jerk_limited"
-    stage = timing_factory(jerky)(scenario.robot, None, (0.995, 0.97, 0.97))
+    assert scenario.options.timing is None and scenario.robot.limits.j_max is not None
+    assert timing_of(scenario) == "jerk_limited"
+    stage = timing_factory(scenario)(scenario.robot, None, (0.995, 0.97, 0.97))
     assert stage.name == "jerk_limited"
+    # The scenario option still chooses TOPP-RA alone.
+    accel = timed(scenario, "acceleration_limited")
+    assert timing_of(accel) == "acceleration_limited"
+    assert timing_factory(accel) is ToppraStage
     raw = yaml.safe_load(default_description_path().read_text())
     for d in raw["drives"]:
         d.pop("j_max")
