@@ -641,23 +641,15 @@ def _highs(
 
     HiGHS is called through the bindings scipy ships (``scipy.optimize._highspy``, the ones behind
     ``linprog(method="highs")``): ``linprog``'s input checks and its per-column Python loop over the
-    bound multipliers cost as much as the solve on these LPs. Without those bindings, ``linprog`` itself.
+    bound multipliers cost as much as the solve on these LPs. They are scipy's private module (scipy is
+    pinned exactly); without them, the same LP goes through the public ``linprog`` (:func:`_linprog`, the
+    same solutions, tested), so a scipy that moves them costs speed, never a wrong law.
 
     Returns:
         The solution (None if the LP has none) and HiGHS's status message.
     """
-    if _core is None:  # pragma: no cover - scipy without its HiGHS bindings module
-        eq = row_lo == row_hi
-        res = linprog(
-            cost,
-            A_ub=A[~eq],
-            b_ub=row_hi[~eq],
-            A_eq=A[eq],
-            b_eq=row_hi[eq],
-            bounds=np.column_stack([col_lo, col_hi]),
-            method="highs",
-        )
-        return (np.asarray(res.x) if res.status == 0 else None), str(res.message)
+    if _core is None:
+        return _linprog(cost, A, row_lo, row_hi, col_lo, col_hi)
     lp = _core.HighsLp()
     lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
     lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, col_lo, col_hi
@@ -675,3 +667,23 @@ def _highs(
     if status != _core.HighsModelStatus.kOptimal:
         return None, message
     return np.asarray(highs.getSolution().col_value), message
+
+
+def _linprog(
+    cost: Array, A: sp.csc_matrix, row_lo: Array, row_hi: Array, col_lo: Array, col_hi: Array
+) -> tuple[Array | None, str]:
+    """:func:`_highs` through the public ``linprog`` (slower): two-sided rows become two one-sided ones."""
+    A = sp.csr_matrix(A)
+    eq = row_lo == row_hi
+    upper = ~eq & np.isfinite(row_hi)
+    lower = ~eq & np.isfinite(row_lo)
+    res = linprog(
+        cost,
+        A_ub=sp.vstack([A[upper], -A[lower]]).tocsc(),
+        b_ub=np.concatenate([row_hi[upper], -row_lo[lower]]),
+        A_eq=A[eq] if eq.any() else None,
+        b_eq=row_hi[eq] if eq.any() else None,
+        bounds=np.column_stack([col_lo, col_hi]),
+        method="highs",
+    )
+    return (np.asarray(res.x) if res.status == 0 else None), str(res.message)

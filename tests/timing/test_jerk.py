@@ -193,3 +193,18 @@ def test_a_curvature_jump_is_crossed_within_the_jerk_limit(robot: Cabin8, home: 
     checks, _ = drive_checks(profile, robot, robot.drives_from_joints(home), PERIOD)
     assert all(c.passed for c in checks), [c.detail for c in checks if not c.passed]
     assert float(path_deviation(profile.joints, (path,)).max()) <= 1e-9
+
+
+def test_public_linprog_route_gives_the_law_of_the_highs_bindings(
+    robot: Cabin8, generated: JointPath, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without scipy's private HiGHS bindings the same LPs go through the public ``linprog``: same law."""
+    from planner.timing import jerk
+
+    direct = JerkLimitedStage(robot, None, sample_period_s=PERIOD).time_path(generated)
+    monkeypatch.setattr(jerk, "_core", None)
+    public = JerkLimitedStage(robot, None, sample_period_s=PERIOD).time_path(generated)
+    assert abs(public.duration - direct.duration) <= 1e-6 * direct.duration
+    t = np.linspace(0.0, direct.duration, 400)
+    for a, b in zip(direct.state(t, 2), public.state(t, 2), strict=True):
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-7 * max(1.0, float(np.abs(a).max())))
