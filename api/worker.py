@@ -79,8 +79,14 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
     """
     die_with_parent(job.get("server_pid"))
 
+    def send(message: tuple[Any, ...]) -> None:
+        try:
+            conn.send(message)
+        except OSError:  # the server is gone (its end of the pipe closed): its lease re-queues the job
+            os._exit(0)  # quietly, before the parent-death signal: no traceback in the server's log
+
     def progress(stage: str, fraction: float) -> None:
-        conn.send(("progress", str(stage), float(fraction)))
+        send(("progress", str(stage), float(fraction)))
 
     if job.get("nice"):
         os.nice(int(job["nice"]))  # planning yields the CPU to the service's event loop
@@ -98,7 +104,7 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
     document = outcome.pop("document", None)
     outcome.pop("csv", None)
     outcome["packed"] = pack_document(document) if document is not None else None
-    conn.send(("done", outcome))
+    send(("done", outcome))
     conn.close()
 
 
