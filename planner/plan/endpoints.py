@@ -2,9 +2,18 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from planner.core.exceptions import GoalInCollision, GoalUnreachable, StartInvalid
 from planner.core.types import Array
+from planner.gate.checks import deflected_joints
 from planner.plan.context import PlanContext
+
+#: The gate also certifies the robot sagging under its predicted static deflection (a few mm at the
+#: payload, milliradians in the joints): an end configuration whose limit margins (in their own units) are
+#: below this, or that is within this of the clearance [m], is checked sagging too (else the check, tens of
+#: milliseconds, cannot fail and is skipped).
+SAG_SCREEN = 0.02
 
 
 def check_configuration(ctx: PlanContext, q: Array, what: str) -> None:
@@ -55,3 +64,39 @@ def check_configuration(ctx: PlanContext, q: Array, what: str) -> None:
         if what == "start":
             raise StartInvalid(msg, limits=True, static_force_ratio=ratio)
         raise GoalUnreachable(msg, static_force_ratio=ratio)
+    check_sagging(ctx, q, what)
+
+
+def check_sagging(ctx: PlanContext, q: Array, what: str) -> None:
+    """Refuse an end configuration whose predicted sag leaves a limit or the requested clearance.
+
+    The gate certifies the sagging robot as well as the rigid one
+    (:func:`~planner.gate.checks.deflected_joints`, with a payload and the robot's stiffness data): an end
+    configuration that fails there can never pass, whatever the path, so this is said now, with the cause.
+    Only configurations near a limit or the clearance (:data:`SAG_SCREEN`) are checked.
+
+    Raises:
+        StartInvalid: the sagging start leaves a limit (``start_outside_limits``) or the clearance.
+        GoalUnreachable, GoalInCollision: the sagging goal leaves a limit, or the clearance.
+    """
+    sc, world, c = ctx.sc, ctx.world, ctx.clearances
+    if sc.payload is None or ctx.payload is None or ctx.robot.desc.stiffness is None:
+        return
+    near_limit = float(np.nanmin(ctx.robot.margins(q))) < SAG_SCREEN
+    if not near_limit and world.is_valid(q, c.requested_m + SAG_SCREEN):
+        return
+    q_def, sag = deflected_joints(ctx.robot, np.atleast_2d(q), ctx.payload, sc.payload.T_tool_payload)
+    rep = world.check_state(q_def[0], c.requested_m)
+    if rep.valid:
+        return
+    limits = any(x.kind == "limit" for x in rep.contacts)
+    msg = (
+        f"{what}: sagging under the payload as the stiffness model predicts ({1e3 * sag:.2f} mm at the "
+        f"payload), the robot there has {rep.contacts[0].detail}; the gate certifies the sagging robot too"
+    )
+    contacts = [x.to_dict() for x in rep.contacts]
+    if what == "start":
+        raise StartInvalid(msg, limits=limits, contacts=contacts, sag_m=sag)
+    if limits:
+        raise GoalUnreachable(msg, contacts=contacts, sag_m=sag)
+    raise GoalInCollision(msg, contacts=contacts, sag_m=sag)

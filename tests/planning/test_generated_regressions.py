@@ -1,0 +1,67 @@
+"""Generated cases the default planner once got wrong (``python -m bench.generalization --seed 0``).
+
+Each is rebuilt by the generator (deterministic, well under a second) and checked against the property that
+failed, with the project's own independent routes (exact distances, the gate's sag model).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.core.exceptions import StartInvalid
+from planner.gate.checks import deflected_joints
+from planner.plan.context import PlanContext
+from planner.plan.targets import goal_targets
+from planner.scenario import load_scenario
+from planner.scenario.resolve import ResolvedScenario
+from planner.tools.generate import GeneratorOptions, generate_case, write_case
+
+
+def _scenario(seed: int, index: int, folder: Path) -> tuple[ResolvedScenario, dict[str, object]]:
+    case = generate_case(seed, index, GeneratorOptions())
+    return load_scenario(write_case(case, folder)), case.meta
+
+
+def test_a_clear_goal_posture_is_not_hidden_by_a_colliding_neighbour(tmp_path: Path) -> None:
+    """Shelf goal (seed 0, case 2): the best-scored postures of the redundant family touch the cabin.
+
+    Their clear neighbours (one grid step of d5 away, 21.7 mm from the cabin) used to be skipped by the
+    diversity rule, and the goal was refused as goal_in_collision although the generator's own witness
+    posture keeps 15.5 mm.
+    """
+    sc, meta = _scenario(0, 2, tmp_path)
+    assert meta["goal"] == "shelf"
+    ctx = PlanContext.build(sc)
+    targets, _ = goal_targets(ctx)
+    assert targets
+    for q in targets:
+        # The exact distance, independently of the certified state check.
+        assert ctx.world.min_distance(q).distance_m >= ctx.clearances.planner_m
+        assert ctx.forces.ok(q)
+        T = sc.robot.fk(q)
+        assert sc.T_base_tool_goal is not None
+        assert np.linalg.norm(T[:3, 3] - sc.T_base_tool_goal[:3, 3]) <= 1e-6
+
+
+def test_a_start_that_leaves_a_limit_when_sagging_is_refused_up_front(tmp_path: Path) -> None:
+    """Bay goal (seed 0, case 13): the start's theta3 is 15 urad inside its limit; sagging, it is outside.
+
+    The gate certifies the sagging robot from the first sample, so no profile can pass: the planner says so
+    at the start, as ``start_outside_limits`` with the limit, instead of searching and failing the gate.
+    """
+    sc, _ = _scenario(0, 13, tmp_path)
+    assert sc.payload is not None
+    assert not sc.robot.violations(sc.start_q)  # the rigid start is admissible
+    ctx = PlanContext.build(sc)
+    q_def, _ = deflected_joints(sc.robot, sc.start_q[None, :], ctx.payload, sc.payload.T_tool_payload)
+    assert sc.robot.violations(q_def[0])  # the gate's own model: the sagging start is not
+    from planner.plan.pipeline import run_stages
+
+    with pytest.raises(StartInvalid) as info:
+        run_stages(ctx)
+    assert info.value.reason == "start_outside_limits"
+    assert "sagging" in info.value.message and "theta3" in info.value.message
+    assert "goals" not in ctx.report["stages_s"]  # refused before any goal or search work
