@@ -65,3 +65,38 @@ def test_a_start_that_leaves_a_limit_when_sagging_is_refused_up_front(tmp_path: 
     assert info.value.reason == "start_outside_limits"
     assert "sagging" in info.value.message and "theta3" in info.value.message
     assert "goals" not in ctx.report["stages_s"]  # refused before any goal or search work
+
+
+def test_a_blocked_posture_change_takes_a_certified_rail_detour(tmp_path: Path) -> None:
+    """Drive goal (seed 0, case 60): the posture change onto the transit ride is blocked where it starts.
+
+    It is clear a few decimetres along the rail: :func:`planner.plan.connect.detour` finds the two straight
+    motions with a few checks; OMPL took some 1 500 certified checks for it (3.6 s) after its local attempt
+    failed. Both motions are certified again here with the gate's own path check at the requested clearance.
+    """
+    from planner.plan import connect
+    from planner.plan.transit import find_transit
+
+    sc, meta = _scenario(0, 60, tmp_path)
+    assert meta["goal"] == "drive" and sc.goal_q is not None
+    ctx = PlanContext.build(sc)
+    c = ctx.clearances
+    transit = find_transit(
+        ctx.world,
+        sc.start_q,
+        sc.goal_q,
+        c.planner_m,
+        c.motion_margin_m,
+        ctx.forces.ok,
+        ctx.forces.segment_ok,
+        0,
+    )
+    assert transit is not None
+    assert not ctx.motion_ok(sc.start_q, transit.q_a)  # the straight posture change is blocked
+    via = connect.detour(ctx, sc.start_q, transit.q_a)
+    assert via is not None and len(via) == 3
+    assert np.array_equal(via[0], sc.start_q) and np.array_equal(via[-1], transit.q_a)
+    attempt = ctx.report["search_attempts"][-1]
+    assert attempt["method"] == "detour" and attempt["checks"] <= connect.DETOUR_MAX_CHECKS
+    assert ctx.world.check_path(via, c.requested_m, c.motion_margin_m).valid
+    assert all(ctx.forces.segment_ok(a, b) for a, b in zip(via[:-1], via[1:], strict=True))
