@@ -100,3 +100,27 @@ def test_a_blocked_posture_change_takes_a_certified_rail_detour(tmp_path: Path) 
     assert attempt["method"] == "detour" and attempt["checks"] <= connect.DETOUR_MAX_CHECKS
     assert ctx.world.check_path(via, c.requested_m, c.motion_margin_m).valid
     assert all(ctx.forces.segment_ok(a, b) for a, b in zip(via[:-1], via[1:], strict=True))
+
+
+def test_a_start_the_gate_cannot_certify_when_sagging_is_refused_with_the_distance(tmp_path: Path) -> None:
+    """Drive goal (seed 1, case 54): the start keeps 6.05 mm between link_ef and the platform, sagging 5.9 mm.
+
+    The gate certifies the 5 mm self-clearance with its 1 mm margin from every sample, the sagging robot's
+    too, so the plan failed the gate at sample 0; it is refused at the start with the exact distance.
+    """
+    from planner.gate.requirements import GATE_MOTION_MARGIN_M
+
+    sc, _ = _scenario(1, 54, tmp_path)
+    assert sc.payload is not None
+    ctx = PlanContext.build(sc)
+    world = ctx.world
+    q_def, _ = deflected_joints(sc.robot, sc.start_q[None, :], ctx.payload, sc.payload.T_tool_payload)
+    required = world.self_clearance + GATE_MOTION_MARGIN_M
+    assert world.min_distance(sc.start_q).distance_m >= required  # rigid: certifiable
+    assert world.min_distance(q_def[0]).distance_m < required  # sagging: not
+    from planner.plan.pipeline import run_stages
+
+    with pytest.raises(StartInvalid) as info:
+        run_stages(ctx)
+    assert info.value.reason == "start_in_collision"
+    assert "sagging" in info.value.message and "5.9 mm from platform, 6.0 mm required" in info.value.message
