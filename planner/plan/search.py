@@ -56,10 +56,10 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
         if res is not None:
             return res
     if preset.straight:  # two straight motions through a configuration off the rail position (a few checks)
-        via = connect.detour(ctx, q_start, targets[0])
-        if via is not None:
+        detour = connect.detour(ctx, q_start, targets[0])
+        if detour is not None:
             ctx.report["search"] = {"method": "detour"}
-            return via, 0
+            return detour, 0
     res = ompl_attempt(ctx, q_start, targets, max_checks=connect.FULL_MOTION_CHECKS)
     if res is not None:
         return res
