@@ -34,6 +34,10 @@ from planner.robots.cabin8 import Cabin8
 log = logging.getLogger(__name__)
 
 
+#: Most grid points of the redundant family polished into exact goal configurations per pose goal.
+MAX_GOAL_POLISH = 24
+
+
 @dataclass(frozen=True)
 class StaticForceCheck:
     """Static drive forces (holding the payload at rest) within ``fraction`` of the force limits.
@@ -157,25 +161,28 @@ def goal_configurations(
     opts = IKOptions(grid_gamma=15, grid_d5=15)
     good, _ = family_candidates(robot, T_base_tool, u_ref, 0.3, opts)
     # The grid points already clear (a state check, ~50 us) are polished first, best score first within
-    # each group: the diversity rule below skips the neighbours of every polished point, so a colliding
-    # point tried first would hide a clear neighbour (a shelf goal whose clear postures are the fourth-best
-    # grid row was refused as goal_in_collision that way).
+    # each group, and the diversity rule keeps the accepted candidates apart only: a rejected one (a grid
+    # point whose polished solution touches the cabin) must not hide its neighbours (a shelf goal whose
+    # clear postures are the fourth-best grid row, and a bay goal whose one clear posture neighbours a
+    # clear grid point that polishes into the cabin, were refused as goal_in_collision that way). At most
+    # MAX_GOAL_POLISH points are polished.
     clear = [world.is_valid(cand.q, clearance) for cand in good]
     good = [cand for _, cand in sorted(zip(clear, good, strict=True), key=lambda x: not x[0])]
     stats = {"family_points": len(good), "not_converged": 0, "collision": 0, "force": 0}
     out: list[GoalCandidate] = []
     used: list[Array] = []
+    polished = 0
     for cand in good:
-        if len(out) >= max_candidates:
+        if len(out) >= max_candidates or polished >= MAX_GOAL_POLISH:
             break
         key = cand.q[[3, 6]]
         if any(np.all(np.abs(key - u) < np.array([0.05, 0.06])) for u in used):
             continue
+        polished += 1
         sol = track_pose(robot, cand.q, T_base_tool, cand.q, opts)
         if sol is None:
             stats["not_converged"] += 1
             continue
-        used.append(key)
         if not world.is_valid(sol.q, clearance):
             stats["collision"] += 1
             if evidence is not None:
@@ -186,6 +193,7 @@ def goal_configurations(
             if evidence is not None:
                 evidence.append(force_evidence(forces, sol.q, "at the goal"))
             continue
+        used.append(key)
         out.append(GoalCandidate(sol.q, normalised_margin(robot, sol.q)))
     out.sort(key=lambda c: -c.min_margin)
     return out, stats

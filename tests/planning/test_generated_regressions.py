@@ -46,6 +46,24 @@ def test_a_clear_goal_posture_is_not_hidden_by_a_colliding_neighbour(tmp_path: P
         assert np.linalg.norm(T[:3, 3] - sc.T_base_tool_goal[:3, 3]) <= 1e-6
 
 
+def test_a_colliding_polished_point_does_not_hide_its_clear_neighbour(tmp_path: Path) -> None:
+    """Bay goal (seed 0, case 7): clear grid points of the family polish into the cabin (10.9 mm).
+
+    Rejected candidates used to block their neighbours in the diversity rule, and with the clear points
+    polished first the goal was refused as goal_in_collision although the generator's witness keeps 14.2
+    mm. The plan must find its goal and pass the gate.
+    """
+    from planner.plan.pipeline import run_stages
+
+    sc, meta = _scenario(0, 7, tmp_path)
+    assert meta["goal"] == "bay-side"
+    ctx = PlanContext.build(sc)
+    result = run_stages(ctx)
+    assert result.gate.passed, result.gate.summary()
+    assert result.gate.min_clearance_m >= sc.options.clearance_m
+    assert ctx.report["goal_candidates"]["found"] >= 1
+
+
 def test_a_start_that_leaves_a_limit_when_sagging_is_refused_up_front(tmp_path: Path) -> None:
     """Bay goal (seed 0, case 13): the start's theta3 is 15 urad inside its limit; sagging, it is outside.
 
