@@ -293,12 +293,15 @@ def track_approach(
     motion_margin: float,
     forces: StaticForceCheck,
     cancelled: Callable[[], bool] = lambda: False,
+    evidence: list[dict[str, Any]] | None = None,
 ) -> GoalCandidate | None:
     """Track the straight approach backwards from the goal; None if any step fails.
 
     The tool moves along ``-direction`` with fixed orientation; the payload frame moves the same way
     (it is rigidly attached). Every step is an exact IK solution seeded by the previous one, admissible,
     collision-free with ``clearance`` (certified motion between steps) and within the static force limits.
+    A step that fails on clearance or force appends its evidence to ``evidence`` when given (the closest
+    bodies against the clearance a motion needs, ``clearance`` + the adaptive walk's smallest margin).
     """
     robot = world.robot
     n = int(np.ceil(distance_m / step_m))
@@ -317,9 +320,25 @@ def track_approach(
         # One continuous branch: a step of a few millimetres never moves a joint far.
         if float(np.max(np.abs(q - qs[-1]))) > 20 * step_m + 0.05:
             return None
-        if not certify_motion(world, qs[-1], q, clearance, motion_margin).valid or not forces.segment_ok(
-            qs[-1], q
-        ):
+        motion = certify_motion(world, qs[-1], q, clearance, motion_margin)
+        if not motion.valid:
+            if evidence is not None and motion.report.t_fail is not None:
+                # What blocks the step: the closest bodies against the clearance a motion needs there.
+                t = float(motion.report.t_fail)
+                q_at = qs[-1] + t * (q - qs[-1])
+                back_m = s[k - 1] + t * (s[k] - s[k - 1])
+                where = (
+                    f"{1e3 * back_m:.0f} mm before the goal on the insertion line"
+                    if back_m >= 5e-4
+                    else "at the goal"
+                )
+                evidence.append(collision_evidence(world, q_at, clearance + MIN_MARGIN_M, where))
+            return None
+        if not forces.segment_ok(qs[-1], q):
+            if evidence is not None:
+                evidence.append(
+                    force_evidence(forces, q, f"{1e3 * s[k]:.0f} mm before the goal on the insertion line")
+                )
             return None
         qs.append(q)
     line = np.array(qs[::-1])

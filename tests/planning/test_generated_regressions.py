@@ -142,3 +142,26 @@ def test_a_start_the_gate_cannot_certify_when_sagging_is_refused_with_the_distan
         run_stages(ctx)
     assert info.value.reason == "start_in_collision"
     assert "sagging" in info.value.message and "5.9 mm from platform, 6.0 mm required" in info.value.message
+
+
+def test_an_insertion_inside_the_slack_band_is_refused_with_what_blocks_it(tmp_path: Path) -> None:
+    """Bay goal (seed 1, case 14): its clear goal postures keep 11.6-11.7 mm between slide and cabin.
+
+    That is inside the band the planner does not promise (requested 10 mm + 2 mm); the generator's own
+    witness keeps 10.8 mm. No motion can leave such a goal, so the approach is refused, and the refusal
+    names the step that fails (the closest bodies against the 12 mm a motion needs), not a goal posture
+    that was rejected anyway.
+    """
+    from planner.core.exceptions import ApproachInfeasible
+    from planner.plan.motion import MIN_MARGIN_M
+
+    sc, meta = _scenario(1, 14, tmp_path)
+    c = PlanContext.build(sc).clearances
+    assert float(meta["witness_goal_distance_m"]) < c.requested_m + 0.002  # type: ignore[arg-type]
+    with pytest.raises(ApproachInfeasible) as info:
+        goal_targets(PlanContext.build(sc))
+    best = info.value.details["best"]
+    assert best["cause"] == "clearance" and best["bodies"] == ["slide", "cabin"]
+    assert best["required_m"] == pytest.approx(c.planner_m + MIN_MARGIN_M)
+    assert c.planner_m <= best["distance_m"] < best["required_m"]
+    assert "slide 11.7 mm from the cabin at the goal, 12.0 mm required" in info.value.message
