@@ -30,6 +30,12 @@ CONNECT_RAIL_WINDOW_M = 0.3
 RIDE_FRACTIONS = (0.0, 0.15, 0.3, 0.45, 0.6, 0.75, 0.9, 1.0)
 RIDE_MAX_CHECKS = 12
 RIDE_SIDE_CHECKS = 4
+#: Rail offsets [m] of the intermediate configuration of a detour connection (:func:`detour`), and how far
+#: it is along the posture change (0: the first posture, 1: the second).
+DETOUR_RAIL_M = (0.1, -0.1, 0.2, -0.2, 0.35, -0.35, 0.5, -0.5)
+DETOUR_BLEND = (1.0, 0.5, 0.0)
+#: Most certified motion checks a detour search spends (each ~1-3 ms; an OMPL connection needs hundreds).
+DETOUR_MAX_CHECKS = 24
 
 
 def joint_box(world: CollisionWorld) -> tuple[Array, Array]:
@@ -98,7 +104,10 @@ def ompl_attempt(
 
 
 def connect(ctx: PlanContext, q_a: Array, targets: list[Array]) -> tuple[Array, int] | None:
-    """``q_a`` to any target: straight where certified, else OMPL (local first); None when not found."""
+    """``q_a`` to any target: straight where certified, else OMPL as a local problem, a rail detour, OMPL.
+
+    None when not found.
+    """
     for k, q in enumerate(targets):
         if np.allclose(q, q_a, rtol=0.0, atol=1e-12):
             return np.array([q_a, q]), k
@@ -106,11 +115,60 @@ def connect(ctx: PlanContext, q_a: Array, targets: list[Array]) -> tuple[Array, 
             return np.array([q_a, q]), k
     # Not simplified here: the caller shortcuts and simplifies the whole path it is part of. First as a
     # local problem (the rail near the connection's ends: a posture change at the end of a rail move
-    # needs no rail detour), then in the whole joint box.
+    # needs no rail detour), then two straight motions through a configuration off the rail position
+    # (a few checks), then in the whole joint box.
     local = ompl_attempt(
         ctx, q_a, targets, max_checks=QUICK_MOTION_CHECKS, simplify=False, rail_window_m=CONNECT_RAIL_WINDOW_M
     )
-    return local or ompl_attempt(ctx, q_a, targets, max_checks=FULL_MOTION_CHECKS, simplify=False)
+    if local is not None:
+        return local
+    via = detour(ctx, q_a, targets[0])
+    if via is not None:
+        return via, 0
+    return ompl_attempt(ctx, q_a, targets, max_checks=FULL_MOTION_CHECKS, simplify=False)
+
+
+def detour(ctx: PlanContext, q_a: Array, q_b: Array) -> Array | None:
+    """Two certified straight motions ``q_a`` -> m -> ``q_b`` through a configuration m off the rail position.
+
+    A posture change that is blocked where it starts (a ring frame, a bracket or a bay's rack beside the
+    payload) is often clear a few decimetres along the rail: m takes the posture ``q_a + lam (q_b - q_a)``
+    (the whole change, half of it or none, :data:`DETOUR_BLEND`) at the rail position of ``q_a`` or
+    ``q_b`` (whichever the posture is nearer) shifted by :data:`DETOUR_RAIL_M`. These are the paths the
+    sampling planner found for such connections (posture change during a short rail move, then the rail
+    back), at a few motion checks instead of hundreds. The candidates are tried in order of estimated time
+    (each motion's slowest drive at its velocity limit); at most :data:`DETOUR_MAX_CHECKS` are spent.
+    Returns the waypoints (3, 8), or None.
+    """
+    lo, hi = ctx.robot.limits.lower[chain.D1], ctx.robot.limits.upper[chain.D1]
+    q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)
+    candidates: list[tuple[float, float, float, Array]] = []
+    for lam in DETOUR_BLEND:
+        base = float(q_b[chain.D1] if lam >= 0.5 else q_a[chain.D1])
+        for offset in DETOUR_RAIL_M:
+            m = q_a + lam * (q_b - q_a)
+            m[chain.D1] = base + offset
+            if lo <= m[chain.D1] <= hi:
+                t = float(segment_times(ctx.robot, q_a, q_a, m)[0] + segment_times(ctx.robot, m, m, q_b)[0])
+                candidates.append((t, offset, lam, m))
+    candidates.sort(key=lambda c: c[0])  # least estimated time first (stable: the listed order on ties)
+    checks = 0
+    for _, offset, lam, m in candidates:
+        if checks >= DETOUR_MAX_CHECKS:
+            break
+        if not ctx.state_ok(m):
+            continue
+        checks += 1
+        if not ctx.motion_ok(q_a, m):
+            continue
+        checks += 1
+        if ctx.motion_ok(m, q_b):
+            ctx.report.setdefault("search_attempts", []).append(
+                {"method": "detour", "checks": checks, "rail_offset_m": offset, "blend": lam}
+            )
+            return np.array([q_a, m, q_b])
+    ctx.report.setdefault("search_attempts", []).append({"method": "detour", "checks": checks})
+    return None
 
 
 def greedy_shortcut(ctx: PlanContext, waypoints: Array) -> Array:

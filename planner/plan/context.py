@@ -213,6 +213,13 @@ class PlanContext:
         c = self.clearances
         self.world.is_valid(q, c.planner_m)
         self.world.check_motion(q, q_b, c.planner_m, c.motion_margin_m)
+        # The kernels the later stages call first (batch poses and sphere covers, the exact-distance state,
+        # the path runs): loading each from numba's disk cache takes 5-25 ms in a fresh process, which
+        # was counted in the planning time of the first plan of every process (a CLI call: each plan).
+        self.world.cover_centres(np.stack([q, q_b]))
+        self.world.check_path(np.stack([q, q_b, q]), c.requested_m, c.motion_margin_m)
+        if self.world.cabin is not None:
+            self.world.min_distance(q, include_self=False)
 
     # ------------------------------------------------------------------ clock
     def elapsed(self) -> float:

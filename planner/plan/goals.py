@@ -34,6 +34,10 @@ from planner.robots.cabin8 import Cabin8
 log = logging.getLogger(__name__)
 
 
+#: Most grid points of the redundant family polished into exact goal configurations per pose goal.
+MAX_GOAL_POLISH = 24
+
+
 @dataclass(frozen=True)
 class StaticForceCheck:
     """Static drive forces (holding the payload at rest) within ``fraction`` of the force limits.
@@ -156,20 +160,29 @@ def goal_configurations(
     robot = world.robot
     opts = IKOptions(grid_gamma=15, grid_d5=15)
     good, _ = family_candidates(robot, T_base_tool, u_ref, 0.3, opts)
+    # The grid points already clear (a state check, ~50 us) are polished first, best score first within
+    # each group, and the diversity rule keeps the accepted candidates apart only: a rejected one (a grid
+    # point whose polished solution touches the cabin) must not hide its neighbours (a shelf goal whose
+    # clear postures are the fourth-best grid row, and a bay goal whose one clear posture neighbours a
+    # clear grid point that polishes into the cabin, were refused as goal_in_collision that way). At most
+    # MAX_GOAL_POLISH points are polished.
+    clear = [world.is_valid(cand.q, clearance) for cand in good]
+    good = [cand for _, cand in sorted(zip(clear, good, strict=True), key=lambda x: not x[0])]
     stats = {"family_points": len(good), "not_converged": 0, "collision": 0, "force": 0}
     out: list[GoalCandidate] = []
     used: list[Array] = []
+    polished = 0
     for cand in good:
-        if len(out) >= max_candidates:
+        if len(out) >= max_candidates or polished >= MAX_GOAL_POLISH:
             break
         key = cand.q[[3, 6]]
         if any(np.all(np.abs(key - u) < np.array([0.05, 0.06])) for u in used):
             continue
+        polished += 1
         sol = track_pose(robot, cand.q, T_base_tool, cand.q, opts)
         if sol is None:
             stats["not_converged"] += 1
             continue
-        used.append(key)
         if not world.is_valid(sol.q, clearance):
             stats["collision"] += 1
             if evidence is not None:
@@ -180,6 +193,7 @@ def goal_configurations(
             if evidence is not None:
                 evidence.append(force_evidence(forces, sol.q, "at the goal"))
             continue
+        used.append(key)
         out.append(GoalCandidate(sol.q, normalised_margin(robot, sol.q)))
     out.sort(key=lambda c: -c.min_margin)
     return out, stats
@@ -279,12 +293,15 @@ def track_approach(
     motion_margin: float,
     forces: StaticForceCheck,
     cancelled: Callable[[], bool] = lambda: False,
+    evidence: list[dict[str, Any]] | None = None,
 ) -> GoalCandidate | None:
     """Track the straight approach backwards from the goal; None if any step fails.
 
     The tool moves along ``-direction`` with fixed orientation; the payload frame moves the same way
     (it is rigidly attached). Every step is an exact IK solution seeded by the previous one, admissible,
     collision-free with ``clearance`` (certified motion between steps) and within the static force limits.
+    A step that fails on clearance or force appends its evidence to ``evidence`` when given (the closest
+    bodies against the clearance a motion needs, ``clearance`` + the adaptive walk's smallest margin).
     """
     robot = world.robot
     n = int(np.ceil(distance_m / step_m))
@@ -303,9 +320,25 @@ def track_approach(
         # One continuous branch: a step of a few millimetres never moves a joint far.
         if float(np.max(np.abs(q - qs[-1]))) > 20 * step_m + 0.05:
             return None
-        if not certify_motion(world, qs[-1], q, clearance, motion_margin).valid or not forces.segment_ok(
-            qs[-1], q
-        ):
+        motion = certify_motion(world, qs[-1], q, clearance, motion_margin)
+        if not motion.valid:
+            if evidence is not None and motion.report.t_fail is not None:
+                # What blocks the step: the closest bodies against the clearance a motion needs there.
+                t = float(motion.report.t_fail)
+                q_at = qs[-1] + t * (q - qs[-1])
+                back_m = s[k - 1] + t * (s[k] - s[k - 1])
+                where = (
+                    f"{1e3 * back_m:.0f} mm before the goal on the insertion line"
+                    if back_m >= 5e-4
+                    else "at the goal"
+                )
+                evidence.append(collision_evidence(world, q_at, clearance + MIN_MARGIN_M, where))
+            return None
+        if not forces.segment_ok(qs[-1], q):
+            if evidence is not None:
+                evidence.append(
+                    force_evidence(forces, q, f"{1e3 * s[k]:.0f} mm before the goal on the insertion line")
+                )
             return None
         qs.append(q)
     line = np.array(qs[::-1])

@@ -3,8 +3,10 @@
 The cascade of the plan's :class:`~planner.plan.context.SearchPreset`: a target equal to the start; the
 straight joint motion when it is certified clear; for a long rail move a transit posture
 (:func:`planner.plan.connect.via_transit`: cheap, and it solves narrow passages such as a hatch); then the
-sampling planner with a budget counted in motion checks (reproducible), then again with the rest of the
-time. The path found is cut at its corners for time (:func:`planner.plan.shortcut.cut_corners`).
+sampling planner with a budget counted in motion checks (reproducible), two straight motions through a
+configuration off the rail position (:func:`planner.plan.connect.detour`), and the sampling planner again
+with the rest of the time. The path found is cut at its corners for time
+(:func:`planner.plan.shortcut.cut_corners`).
 """
 
 from __future__ import annotations
@@ -53,6 +55,11 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
         res = ompl_attempt(ctx, q_start, targets, max_checks=connect.QUICK_MOTION_CHECKS)
         if res is not None:
             return res
+    if preset.straight:  # two straight motions through a configuration off the rail position (a few checks)
+        detour = connect.detour(ctx, q_start, targets[0])
+        if detour is not None:
+            ctx.report["search"] = {"method": "detour"}
+            return detour, 0
     res = ompl_attempt(ctx, q_start, targets, max_checks=connect.FULL_MOTION_CHECKS)
     if res is not None:
         return res

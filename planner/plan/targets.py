@@ -96,6 +96,7 @@ def goal_targets(ctx: PlanContext) -> tuple[list[Array], list[GoalCandidate | No
             c.planner_m,
             c.motion_margin_m,
             ctx.forces,
+            evidence=evidence,
         )
         if tr is not None:
             tracked.append(tr)
