@@ -18,10 +18,9 @@ from __future__ import annotations
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
-from planner.core.provenance import __version__
-
 #: Public name -> the module that defines it.
 _PUBLIC: dict[str, str] = {
+    "__version__": "planner.core.provenance",
     # scenarios
     "Scenario": "planner.scenario.schema",
     "ResolvedScenario": "planner.scenario.resolve",

@@ -271,7 +271,7 @@ def plan(
     The JSON written to --output is the profile on success and the refusal document otherwise.
     """
     from planner.core.exceptions import PlanRefused
-    from planner.documents.output import refusal_document, result_document
+    from planner.documents.output import document_bytes, refusal_document, result_document
     from planner.plan.pipeline import Planner
 
     sc = _load(scenario)
@@ -287,8 +287,7 @@ def plan(
     except PlannerError as exc:  # any other failure still leaves its reason in --output, never a stale file
         _write(output, json.dumps(refusal_document(exc, sc), indent=1) + "\n", "--output")
         _fail(f"{exc.reason}: {exc.message}", 1)
-    doc = result_document(sc, result)
-    _write(output, json.dumps(doc) + "\n", "--output")
+    _write(output, document_bytes(result_document(sc, result, arrays=True)) + b"\n", "--output")
     if csv is not None:
         _write(csv, result.profile.to_csv(), "--csv")
     if plot is not None:

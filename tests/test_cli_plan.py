@@ -259,3 +259,15 @@ def test_check_on_a_refusal_document_exits_2(tmp_path: Path) -> None:
     result = invoke("check", TRANSFER, path)
     assert result.exit_code == 2
     assert one_line(result.stderr).startswith("cabinplan: invalid_input: profile: not a drive profile")
+
+
+def test_the_cli_document_writes_the_numbers_of_the_list_document(scenario: ResolvedScenario) -> None:
+    """The CLI writes the sample arrays directly (orjson): parsed, exactly the list form's document."""
+    from planner.documents.output import document_bytes, result_document
+    from planner.plan.pipeline import plan_scenario
+
+    result = plan_scenario(scenario)
+    direct = json.loads(document_bytes(result_document(scenario, result, arrays=True)))
+    listed = json.loads(json.dumps(result_document(scenario, result)))
+    assert direct == listed
+    assert json.loads(document_bytes({"a": np.array([1.0, np.nan, np.inf])})) == {"a": [1.0, None, None]}

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from planner.core.cache import cache_dir, prune, touch
 from planner.core.types import Array, IntArray
@@ -112,6 +111,8 @@ class ClearanceGrid:
         idx = np.clip(np.rint((samples - lo) / step).astype(np.int64), 0, np.array(shape) - 1)
         free = np.ones(shape, dtype=bool)
         free[idx[:, 0], idx[:, 1], idx[:, 2]] = False
+        from scipy import ndimage  # building only: a plan that finds its grid cached never imports it
+
         d_marked = ndimage.distance_transform_edt(free, sampling=step)
         bound = d_marked - step * math.sqrt(3.0) - 2.0 * sample_spacing
         # One layer of -inf around the grid: clipped indices of outside points land there.

