@@ -236,7 +236,9 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         store=store,
         runner=job_runner,
         metrics=service_metrics,
-        limiter=TenantRateLimiter(settings.rate_limit, settings.rate_limit_storage_uri),
+        limiter=TenantRateLimiter(
+            settings.rate_limit, settings.rate_limit_storage_uri, settings.rate_limit_namespace
+        ),
     )
     service_metrics.registry.register(
         QueueCollector(

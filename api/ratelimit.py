@@ -21,6 +21,9 @@ from limits.strategies import MovingWindowRateLimiter
 
 _LOG = logging.getLogger(__name__)
 
+#: Longest wait for the rate-limit store [s]; past it the request is let through (and logged).
+STORE_TIMEOUT_S = 0.5
+
 
 class TenantRateLimiter:
     """The moving-window limiter of one instance.
@@ -33,7 +36,14 @@ class TenantRateLimiter:
 
     def __init__(self, rate: str, storage_uri: str = "memory://", namespace: str = "cabinplan") -> None:
         self.item: RateLimitItem = parse(rate)
-        options = {} if storage_uri.startswith("memory") else {"key_prefix": f"{namespace}:ratelimit"}
+        options: dict[str, float | str | bool] = {}
+        if not storage_uri.startswith("memory"):
+            # A store that stops answering must not hold every request: give up after STORE_TIMEOUT_S.
+            options = {
+                "key_prefix": f"{namespace}:ratelimit",
+                "socket_timeout": STORE_TIMEOUT_S,
+                "socket_connect_timeout": STORE_TIMEOUT_S,
+            }
         self.storage = storage_from_string(storage_uri, **options)
         self.limiter = MovingWindowRateLimiter(self.storage)
         self.store_errors = 0

@@ -94,6 +94,14 @@ class Settings(BaseSettings):
             raise ValueError(f"not a rate limit such as '120 per 10 seconds': {exc}") from None
         return value
 
+    rate_limit_namespace: str = Field(
+        "cabinplan",
+        min_length=1,
+        max_length=64,
+        pattern=r"^[A-Za-z0-9_.-]+$",
+        description="Prefix of the rate-limit keys in a shared store: one per deployment sharing a Redis.",
+    )
+
     @field_validator("rate_limit_storage_uri")
     @classmethod
     def _check_storage(cls, value: str) -> str:

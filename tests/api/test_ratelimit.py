@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import os
+import socket
+import time
 import uuid
 
 import pytest
 from pydantic import ValidationError
 
-from api.ratelimit import TenantRateLimiter
+from api.ratelimit import STORE_TIMEOUT_S, TenantRateLimiter
 from api.settings import Settings
 
 REDIS_URI = os.environ.get("CABINPLAN_TEST_REDIS_URI", "redis://127.0.0.1:6379/0")
@@ -51,9 +53,23 @@ def test_redis_window_is_shared_by_every_instance() -> None:
 
 
 def test_a_store_that_does_not_answer_lets_requests_through() -> None:
-    down = TenantRateLimiter("1 per 60 seconds", "redis://127.0.0.1:1/0")
+    down = TenantRateLimiter("1 per 60 seconds", "redis://127.0.0.1:1/0")  # connection refused
     assert down.hit("t") is None and down.hit("t") is None
     assert down.store_errors == 2
+
+
+def test_a_store_that_accepts_but_never_replies_is_given_up_on_quickly() -> None:
+    """A frozen Redis (or a partition) must not hold requests: each waits at most the store timeout."""
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(8)
+        port = silent.getsockname()[1]
+        frozen = TenantRateLimiter("1 per 60 seconds", f"redis://127.0.0.1:{port}/0")
+        t0 = time.monotonic()
+        assert frozen.hit("t") is None
+        waited = time.monotonic() - t0
+    assert frozen.store_errors == 1
+    assert waited < 4 * STORE_TIMEOUT_S + 1.0, waited
 
 
 def test_settings_refuse_an_unknown_storage(tmp_path) -> None:
