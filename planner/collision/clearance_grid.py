@@ -25,14 +25,12 @@ import hashlib
 import json
 import logging
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from planner.core.cache import cache_dir, prune, touch
+from planner.core.cache import cache_dir, prune, touch, write_atomic
 from planner.core.types import Array, IntArray
 
 log = logging.getLogger(__name__)
@@ -188,14 +186,10 @@ def _write_cached(folder: Path, name: str, grid: ClearanceGrid) -> None:
         "sample_spacing": grid.sample_spacing,
         "shape": list(grid.lower_bound.shape),
     }
+    bounds = np.ascontiguousarray(grid.lower_bound, dtype=np.float64)
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=folder, suffix=".tmp", delete=False) as tmp:
-            np.save(tmp, np.ascontiguousarray(grid.lower_bound, dtype=np.float64), allow_pickle=False)
-        os.replace(tmp.name, folder / f"grid-{name}.npy")
-        with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as tmp_meta:
-            json.dump(meta, tmp_meta)
-        os.replace(tmp_meta.name, folder / f"grid-{name}.json")  # last: the entry is complete
+        write_atomic(folder / f"grid-{name}.npy", lambda f: np.save(f, bounds, allow_pickle=False))
+        write_atomic(folder / f"grid-{name}.json", lambda f: json.dump(meta, f), text=True)  # last: complete
         prune(folder, ("grid-*", "meshes/*.npz"))
     except OSError as exc:
         log.warning("clearance grid cache not written (%s)", exc)

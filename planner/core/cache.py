@@ -12,12 +12,18 @@ from __future__ import annotations
 
 import logging
 import os
+import tempfile
+import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import IO, Any
 
 log = logging.getLogger(__name__)
 
 #: Default bound of the cache folder's size [bytes].
 DEFAULT_MAX_BYTES = 2 * 1024**3
+#: A temporary file older than this [s] belongs to a writer that died: :func:`prune` deletes it.
+STALE_TMP_S = 600.0
 
 
 def cache_dir() -> Path | None:
@@ -48,13 +54,52 @@ def touch(*paths: Path) -> None:
             pass
 
 
+def write_atomic(path: Path, write: Callable[[IO[Any]], None], text: bool = False) -> None:
+    """Write ``path`` through a temporary file in its folder and one rename: whole or not at all.
+
+    The temporary file is removed when writing fails (a full disk); one left by a killed writer is
+    removed by :func:`prune`.
+
+    Raises:
+        OSError: the entry could not be written (nothing is left behind).
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile(
+        "w" if text else "wb", dir=path.parent, suffix=".tmp", delete=False
+    ) as tmp:
+        name = tmp.name
+        try:
+            write(tmp)
+        except BaseException:
+            tmp.close()
+            Path(name).unlink(missing_ok=True)
+            raise
+    try:
+        os.replace(name, path)
+    except BaseException:
+        Path(name).unlink(missing_ok=True)
+        raise
+
+
 def prune(folder: Path, patterns: tuple[str, ...], limit: int | None = None) -> int:
     """Delete the least recently used entries matching ``patterns`` until they fit in ``limit`` bytes.
+
+    Temporary files of writers that died (older than :data:`STALE_TMP_S`) go first, whatever the bound.
 
     Returns:
         The number of bytes deleted. Entries another process deletes meanwhile are skipped.
     """
     limit = max_bytes() if limit is None else limit
+    freed = 0
+    now = time.time()
+    for stale in (*folder.glob("*.tmp"), *folder.glob("*/*.tmp")):  # writers that died mid-write
+        try:
+            st = stale.stat()
+            if now - st.st_mtime > STALE_TMP_S:
+                stale.unlink()
+                freed += st.st_size
+        except OSError:
+            continue
     entries: list[tuple[float, int, Path]] = []
     for pattern in patterns:
         for path in folder.glob(pattern):
@@ -64,15 +109,16 @@ def prune(folder: Path, patterns: tuple[str, ...], limit: int | None = None) -> 
                 continue
             entries.append((st.st_mtime, st.st_size, path))
     total = sum(size for _, size, _ in entries)
-    freed = 0
+    deleted = 0
     for _, size, path in sorted(entries, key=lambda e: e[0]):
-        if total - freed <= limit:
+        if total - deleted <= limit:
             break
         try:
             path.unlink()
-            freed += size
+            deleted += size
         except OSError:
             continue
+    freed += deleted
     if freed:
         log.info("cache %s: %d bytes of least recently used entries deleted", folder, freed)
     return freed

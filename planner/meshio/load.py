@@ -36,8 +36,6 @@ import functools
 import hashlib
 import importlib.metadata
 import logging
-import os
-import tempfile
 import threading
 from collections import OrderedDict
 from collections.abc import Hashable
@@ -47,7 +45,7 @@ from typing import Any, get_args
 import numpy as np
 from numpy.typing import ArrayLike
 
-from planner.core.cache import cache_dir, prune, touch
+from planner.core.cache import cache_dir, prune, touch, write_atomic
 from planner.core.types import Array, IntArray
 from planner.meshio.build import validate_and_build, validate_pose
 from planner.meshio.parse import concatenate, parse_obj, parse_with_trimesh
@@ -143,7 +141,8 @@ def _parse(
     A CLI call then never imports trimesh (0.2-1 s of its start-up).
 
     The cache holds the parser's raw output only (before units, validation and pose), keyed by the
-    content hash, the format, the parser's version and the caps the parse enforced; every later step runs
+    content hash, the format, our parsing code (its source hash) and trimesh's version, and the caps
+    the parse enforced; every later step runs
     as on a fresh parse. A missing, unreadable or foreign entry is parsed anew.
     """
     path = _parse_cache_path(kind, fmt, sha256, limits)
@@ -169,8 +168,20 @@ def _parse_cache_path(kind: str, fmt: str, sha256: str, limits: MeshLimits) -> P
     if root is None:
         return None
     parser = "obj" if kind == "obj" else f"trimesh-{_trimesh_version()}"
-    tag = f"{PARSE_CACHE_LAYOUT}-{parser}-{limits.max_faces}-{limits.max_vertices}"
+    tag = f"{PARSE_CACHE_LAYOUT}-{_parser_source()}-{parser}-{limits.max_faces}-{limits.max_vertices}"
     return root / "meshes" / f"{sha256}-{fmt}-{hashlib.sha256(tag.encode()).hexdigest()[:16]}.npz"
+
+
+@functools.cache
+def _parser_source() -> str:
+    """SHA-256 of our own parsing code (:mod:`planner.meshio.parse`), part of every parse-cache key.
+
+    A change to that code invalidates every cached parse: a fixed parser is never shadowed by the output
+    of the old one.
+    """
+    from planner.meshio import parse
+
+    return hashlib.sha256(Path(parse.__file__).read_bytes()).hexdigest()[:16]
 
 
 @functools.cache
@@ -205,10 +216,7 @@ def _write_parts(path: Path, parts: list[tuple[Array, IntArray]], n_ignored: int
         arrays[f"v{i}"] = vertices
         arrays[f"f{i}"] = faces
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as tmp:
-            np.savez(tmp, **arrays)
-        os.replace(tmp.name, path)  # atomic: a reader sees the old entry or the whole new one
+        write_atomic(path, lambda f: np.savez(f, **arrays))  # a reader sees the old entry or the new one
         prune(path.parent.parent, ("grid-*", "meshes/*.npz"))
     except OSError as exc:  # a read-only or full cache folder only costs the next call a parse
         _LOG.warning("mesh parse cache %s not written: %s", path, exc)

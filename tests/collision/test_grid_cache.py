@@ -95,3 +95,27 @@ def test_the_cache_keeps_the_most_recently_used_entries_within_its_bound(
     cached_build("box3", v, f, 0.05)  # over the bound: the least recently used entry ("box2") goes
     assert len(list(tmp_path.glob("grid-*.npy"))) == 2
     assert prune(tmp_path, ("grid-*",), limit=0) > 0 and not list(tmp_path.glob("grid-*"))
+
+
+def test_a_failed_write_leaves_nothing_and_a_dead_writers_file_is_pruned(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, box_mesh
+) -> None:
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
+    v, f = box_mesh
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "save", full_disk)
+    grid = cached_build("box", v, f, 0.05)  # built, served, not cached
+    assert np.array_equal(grid.lower_bound, ClearanceGrid.build(v, f, step=0.05).lower_bound)
+    assert not list(tmp_path.iterdir())
+    monkeypatch.undo()
+    dead = tmp_path / "tmpdead.tmp"  # what a writer killed mid-write leaves
+    dead.write_bytes(b"x" * 1000)
+    fresh = tmp_path / "tmpalive.tmp"  # a writer at work now
+    fresh.write_bytes(b"y")
+    old = time.time() - 3600
+    os.utime(dead, (old, old))
+    assert prune(tmp_path, ("grid-*",), limit=10**9) == 1000
+    assert not dead.exists() and fresh.exists()

@@ -117,3 +117,14 @@ def test_plan_command_imports_neither_trimesh_nor_matplotlib(cache: Path, tmp_pa
     assert json.loads((tmp_path / "out.json").read_text())["status"] == "succeeded"
     assert "trimesh" in runs[0].stdout  # the first call parses the cabin
     assert "LOADED []" in runs[1].stdout, runs[1].stdout  # the second reads the parse back
+
+
+def test_a_change_to_our_parsing_code_invalidates_the_cached_parses(
+    cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    data = export(box_mesh(), "obj")
+    load_mesh(data, units="m", name="b.obj")
+    mesh_load.clear_mesh_cache()
+    monkeypatch.setattr(mesh_load, "_parser_source", lambda: "a-fixed-parser")
+    load_mesh(data, units="m", name="b.obj")
+    assert len(_entries(cache)) == 2  # parsed again under the new code's key
