@@ -14,11 +14,13 @@ import hashlib
 import logging
 import os
 import tempfile
+import threading
 from pathlib import Path
 from typing import Any, Literal
 
 from sqlalchemy import delete, func, select
 from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
 
 from api.db import ACTIVE_STATES, Database, Job, Mesh, MeshBlob, now_s
 from api.problems import Problem
@@ -76,6 +78,28 @@ def local_mesh_file(db: Database, root: Path, stored: str) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     MeshStore.write_file(local, data)
     return local
+
+
+#: Serialises this instance's mesh uploads and deletes (the row lock of :func:`_lock_blob` does it across
+#: instances on PostgreSQL; SQLite serves one instance).
+_BLOB_LOCK = threading.Lock()
+_MESH_COLUMNS = (
+    "tenant",
+    "sha256",
+    "name",
+    "filename",
+    "units",
+    "byte_size",
+    "n_faces",
+    "n_vertices",
+    "report",
+    "created_at",
+)
+
+
+def _lock_blob(s: Session, sha256: str) -> str | None:
+    """The stored bytes' key, its row locked until the transaction ends (``FOR UPDATE``), or None."""
+    return s.scalar(select(MeshBlob.sha256).where(MeshBlob.sha256 == sha256).with_for_update())
 
 
 def _file_names(meshes: dict[str, str] | None) -> set[str]:
@@ -191,14 +215,20 @@ class MeshStore:
             created_at=now_s(),
         )
         self.write_file(self.path_of(row), data)
-        try:  # the bytes for every instance sharing the database (once per content hash)
-            with self.db.session() as s:
-                if s.get(MeshBlob, mesh.sha256) is None:
-                    s.add(MeshBlob(sha256=mesh.sha256, data=data, created_at=now_s()))
-        except IntegrityError:  # another upload of the same bytes stored them first
-            pass
-        with self.db.session() as s:
-            s.add(row)
+        # The metadata row and the bytes (once per content hash, for every instance sharing the database)
+        # in one transaction holding the bytes' row: a concurrent delete of the last other reference
+        # either ran before (and the bytes are stored again here) or waits and then counts this row.
+        for attempt in range(2):
+            try:
+                with _BLOB_LOCK, self.db.session() as s:
+                    if _lock_blob(s, mesh.sha256) is None:
+                        s.add(MeshBlob(sha256=mesh.sha256, data=data, created_at=now_s()))
+                    s.add(row)
+                break
+            except IntegrityError:  # another instance stored the same bytes first: they are there now
+                if attempt:
+                    raise
+                row = Mesh(**{c: getattr(row, c) for c in _MESH_COLUMNS})
         return row, True
 
     def get(self, tenant: str, mesh_id: str) -> Mesh | None:
@@ -226,7 +256,8 @@ class MeshStore:
             MeshInUse: a queued or running job of the tenant plans in this cabin (deleting it would fail
                 the job): cancel the job or wait for it.
         """
-        with self.db.session() as s:
+        with _BLOB_LOCK, self.db.session() as s:
+            _lock_blob(s, mesh_id)  # an upload of the same bytes waits (see add)
             row = s.scalar(select(Mesh).where(Mesh.tenant == tenant, Mesh.sha256 == mesh_id))
             if row is None:
                 return False

@@ -134,3 +134,51 @@ def test_a_mesh_uploaded_on_one_instance_plans_on_another(pg: tuple[Service, str
             there.local_files(job_meshes)
     finally:
         db.dispose()
+
+
+def test_an_upload_waits_for_a_delete_of_the_same_bytes_on_another_instance(
+    pg: tuple[Service, str], tmp_path: Path
+) -> None:
+    """Upload and delete of the same bytes take the bytes' row lock.
+
+    So a delete that counted no other reference cannot remove the bytes under an upload that is adding
+    one (which would leave a mesh listed but unplannable).
+    """
+    import subprocess
+    import sys
+    import time
+
+    from api.store import MeshStore
+    from planner.meshio import MeshLimits
+
+    _, schema = pg
+    db = Database(PG_URL, schema)
+    try:
+        here = MeshStore(db, tmp_path / "a", MeshLimits())
+        data = box_stl((2.5, 3.0, 7.0))
+        row, _ = here.add("delta", data, "box.stl", "m", "box")
+        hold_s = 1.5
+        code = (
+            "import time\n"
+            "from api.db import Database\n"
+            "from api.store import _lock_blob\n"
+            f"db = Database({PG_URL!r}, {schema!r})\n"
+            "with db.session() as s:\n"
+            f"    assert _lock_blob(s, {row.sha256!r}) is not None\n"
+            "    print('locked', flush=True)\n"
+            f"    time.sleep({hold_s})\n"
+        )
+        root = Path(__file__).resolve().parents[2]
+        other = subprocess.Popen([sys.executable, "-c", code], cwd=root, stdout=subprocess.PIPE, text=True)
+        try:
+            assert other.stdout is not None and other.stdout.readline().strip() == "locked"
+            t0 = time.monotonic()
+            there = MeshStore(db, tmp_path / "b", MeshLimits())
+            _, created = there.add("epsilon", data, "box.stl", "m", "box")
+            assert created and time.monotonic() - t0 > 0.5 * hold_s
+        finally:
+            assert other.wait(timeout=30) == 0
+        assert here.delete("delta", row.sha256)  # epsilon still refers to the bytes: they stay
+        assert Path(there.local_files({row.sha256: str(here.path_of(row))})[row.sha256]).read_bytes() == data
+    finally:
+        db.dispose()
