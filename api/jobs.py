@@ -453,9 +453,8 @@ class ProcessJobRunner:
                 if len(self._running) >= self.settings.workers:
                     return
             job = self._claim()
-            if job is None:
+            if job is None or not self._launch(job):
                 return
-            self._launch(job)
 
     def _claim(self) -> dict[str, Any] | None:
         """Claim the oldest queued job (conditional update); its launch description, or ``None``."""
@@ -492,16 +491,20 @@ class ProcessJobRunner:
                     }
         return None
 
-    def _launch(self, job: dict[str, Any]) -> None:
+    def _launch(self, job: dict[str, Any]) -> bool:
+        """Start the job's process; False when it went back to the queue (try again on a later pass)."""
         from api.worker import run_job  # the child's entry point (preloaded by the forkserver)
 
         try:  # the tenant's mesh files on this instance's disk (another instance may have taken them)
             root = self.settings.mesh_dir
             meshes = {k: str(local_mesh_file(self.db, root, v)) for k, v in job["meshes"].items()}
-        except Exception as exc:
-            _LOG.exception("job %s: a mesh file could not be made available", job["id"])
+        except FileNotFoundError as exc:  # the mesh is gone (deleted): the job can never run
             self._fail_unlaunched(job["id"], "mesh_unavailable", f"a cabin mesh is unavailable: {exc}")
-            return
+            return True
+        except Exception:  # a passing failure (the database, the disk): back to the queue, not failed
+            _LOG.exception("job %s: its mesh files could not be fetched now; re-queued", job["id"])
+            self._requeue_unlaunched(job["id"])
+            return False
         job = {**job, "meshes": meshes}
         parent, child = self._ctx.Pipe(duplex=False)
         proc = self._ctx.Process(
@@ -515,13 +518,14 @@ class ProcessJobRunner:
             child.close()
             why = f"the worker process did not start: {type(exc).__name__}: {exc}"
             self._fail_unlaunched(job["id"], "worker_start_failed", why)
-            return
+            return True
         child.close()
         started = time.monotonic()
         deadline = started + float(job["time_limit_s"]) + self.settings.job_grace_s
         with self._lock:
             self._running[job["id"]] = _Running(job["id"], proc, parent, deadline, started)
         _LOG.info("job %s started (pid %s)", job["id"], proc.pid)
+        return True
 
     def _fail_unlaunched(self, job_id: str, reason: str, message: str) -> None:
         """Fail a job this instance claimed but could not start (only over its own ``running``)."""
@@ -532,6 +536,26 @@ class ProcessJobRunner:
                 .values(status="failed", reason=reason, message=message, finished_at=now_s())
             )
         self.metrics.job_outcomes.labels(status="failed", reason=reason).inc()
+
+    def _requeue_unlaunched(self, job_id: str) -> None:
+        """Put a job this instance claimed but could not start back in the queue, its attempt uncounted."""
+        try:
+            with self.db.session() as s:
+                s.execute(
+                    update(Job)
+                    .where(Job.id == job_id, Job.status == "running", Job.owner == self.instance_id)
+                    .values(
+                        status="queued",
+                        stage=None,
+                        progress=0.0,
+                        started_at=None,
+                        owner=None,
+                        lease_expires_at=None,
+                        attempts=Job.attempts - 1,
+                    )
+                )
+        except Exception:  # the database itself is away: the lease lapses and any instance re-queues it
+            _LOG.exception("job %s: not re-queued now; its lease will lapse", job_id)
 
     def _drain(self, r: _Running) -> None:
         while not r.eof:

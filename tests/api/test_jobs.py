@@ -205,3 +205,53 @@ def test_a_failed_terminal_write_is_retried_and_the_process_reaped(tmp_path, mon
     assert fails[0] == 0 and parent.closed
     with pytest.raises(ValueError):
         process.is_alive()  # closed: the process object was reaped
+
+
+def test_a_mesh_that_cannot_be_fetched_now_requeues_the_job_and_a_deleted_one_fails_it(
+    tmp_path, monkeypatch
+) -> None:
+    """A passing failure to fetch a job's mesh puts it back in the queue; a mesh that is gone fails it."""
+    from sqlalchemy.exc import OperationalError
+
+    import api.jobs as jobs
+    from api.db import Database, Job, now_s
+    from api.jobs import ProcessJobRunner
+
+    db = Database(f"sqlite:///{tmp_path / 'jobs.db'}")
+    db.create_all()
+    runner = ProcessJobRunner(db, make_settings(tmp_path, forkserver_preload=False))
+    with db.session() as s:
+        s.add(
+            Job(
+                id="j1",
+                tenant="t",
+                status="queued",
+                scenario={},
+                scenario_name="x",
+                request_sha256="0" * 64,
+                meshes={"m": str(tmp_path / "elsewhere" / "abc.stl")},
+                provenance={},
+                time_limit_s=1.0,
+                attempts=0,
+                created_at=now_s(),
+            )
+        )
+
+    def busy(*args):
+        raise OperationalError("SELECT mesh_blobs", {}, Exception("database is locked"))
+
+    monkeypatch.setattr(jobs, "local_mesh_file", busy)
+    runner._fill()
+    with db.session() as s:
+        row = s.get(Job, "j1")
+        assert row is not None and (row.status, row.owner, row.attempts) == ("queued", None, 0)
+
+    def gone(*args):
+        raise FileNotFoundError("mesh abc: neither on this instance nor in the database")
+
+    monkeypatch.setattr(jobs, "local_mesh_file", gone)
+    runner._fill()
+    with db.session() as s:
+        row = s.get(Job, "j1")
+        assert row is not None and (row.status, row.reason) == ("failed", "mesh_unavailable")
+    db.dispose()
