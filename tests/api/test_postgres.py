@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import time
 import uuid
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -72,43 +76,52 @@ def test_jobs_keys_and_meshes_live_in_postgres(pg: tuple[Service, str]) -> None:
     db.dispose()
 
 
+HOLD_S = 1.5
+
+
+@contextmanager
+def _held_by_another_process(schema: str, body: str) -> Iterator[None]:
+    """Another process (another instance) holds a lock for :data:`HOLD_S` while the block runs.
+
+    ``body`` opens the transaction that takes it (Python, ``db`` its Database).
+    """
+    code = (
+        "import time\n"
+        "from api.db import Database\n"
+        "from api.store import _lock_blob\n"
+        f"db = Database({PG_URL!r}, {schema!r})\n"
+        f"{body}\n"
+        "    print('locked', flush=True)\n"
+        f"    time.sleep({HOLD_S})\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    other = subprocess.Popen([sys.executable, "-c", code], cwd=root, stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout is not None and other.stdout.readline().strip() == "locked"
+        yield
+    finally:
+        assert other.wait(timeout=30) == 0
+
+
 def test_tenant_quota_lock_is_shared_by_every_instance_on_the_database(pg: tuple[Service, str]) -> None:
     """Another process (another instance) holding a tenant's quota lock makes this one wait for it.
 
     The count and the insert of a submission run under the lock, so two instances cannot both pass a
     tenant's quota; another tenant's lock is independent.
     """
-    import subprocess
-    import sys
-    import time
-
     _, schema = pg
-    hold_s = 1.5
-    code = (
-        "import sys, time\n"
-        "from api.db import Database\n"
-        f"db = Database({PG_URL!r}, {schema!r})\n"
-        "with db.tenant_quota_session('alpha'):\n"
-        "    print('locked', flush=True)\n"
-        f"    time.sleep({hold_s})\n"
-    )
-    root = Path(__file__).resolve().parents[2]
-    other = subprocess.Popen([sys.executable, "-c", code], cwd=root, stdout=subprocess.PIPE, text=True)
-    try:
-        assert other.stdout is not None and other.stdout.readline().strip() == "locked"
+    with _held_by_another_process(schema, "with db.tenant_quota_session('alpha'):"):
         db = Database(PG_URL, schema)
         try:
             t0 = time.monotonic()
             with db.tenant_quota_session("beta"):  # another tenant: no wait
                 pass
-            assert time.monotonic() - t0 < 0.5 * hold_s
+            assert time.monotonic() - t0 < 0.5 * HOLD_S
             with db.tenant_quota_session("alpha"):
                 waited = time.monotonic() - t0
-            assert waited > 0.5 * hold_s, waited
+            assert waited > 0.5 * HOLD_S, waited
         finally:
             db.dispose()
-    finally:
-        assert other.wait(timeout=30) == 0
 
 
 def test_a_mesh_uploaded_on_one_instance_plans_on_another(pg: tuple[Service, str], tmp_path: Path) -> None:
@@ -144,10 +157,6 @@ def test_an_upload_waits_for_a_delete_of_the_same_bytes_on_another_instance(
     So a delete that counted no other reference cannot remove the bytes under an upload that is adding
     one (which would leave a mesh listed but unplannable).
     """
-    import subprocess
-    import sys
-    import time
-
     from api.store import MeshStore
     from planner.meshio import MeshLimits
 
@@ -157,27 +166,13 @@ def test_an_upload_waits_for_a_delete_of_the_same_bytes_on_another_instance(
         here = MeshStore(db, tmp_path / "a", MeshLimits())
         data = box_stl((2.5, 3.0, 7.0))
         row, _ = here.add("delta", data, "box.stl", "m", "box")
-        hold_s = 1.5
-        code = (
-            "import time\n"
-            "from api.db import Database\n"
-            "from api.store import _lock_blob\n"
-            f"db = Database({PG_URL!r}, {schema!r})\n"
-            "with db.session() as s:\n"
-            f"    assert _lock_blob(s, {row.sha256!r}) is not None\n"
-            "    print('locked', flush=True)\n"
-            f"    time.sleep({hold_s})\n"
-        )
-        root = Path(__file__).resolve().parents[2]
-        other = subprocess.Popen([sys.executable, "-c", code], cwd=root, stdout=subprocess.PIPE, text=True)
-        try:
-            assert other.stdout is not None and other.stdout.readline().strip() == "locked"
+        with _held_by_another_process(
+            schema, f"with db.session() as s:\n    assert _lock_blob(s, {row.sha256!r})"
+        ):
             t0 = time.monotonic()
             there = MeshStore(db, tmp_path / "b", MeshLimits())
             _, created = there.add("epsilon", data, "box.stl", "m", "box")
-            assert created and time.monotonic() - t0 > 0.5 * hold_s
-        finally:
-            assert other.wait(timeout=30) == 0
+            assert created and time.monotonic() - t0 > 0.5 * HOLD_S
         assert here.delete("delta", row.sha256)  # epsilon still refers to the bytes: they stay
         assert Path(there.local_files({row.sha256: str(here.path_of(row))})[row.sha256]).read_bytes() == data
     finally:
