@@ -161,28 +161,10 @@ def test_a_failed_terminal_write_is_retried_and_the_process_reaped(tmp_path, mon
 
     from sqlalchemy.exc import OperationalError
 
-    from api.db import Database, Job, now_s
-    from api.jobs import ProcessJobRunner, _Running
+    from api.db import Job
+    from api.jobs import _Running
 
-    db = Database(f"sqlite:///{tmp_path / 'jobs.db'}")
-    db.create_all()
-    runner = ProcessJobRunner(db, make_settings(tmp_path, forkserver_preload=False))
-    with db.session() as s:
-        s.add(
-            Job(
-                id="j1",
-                tenant="t",
-                status="running",
-                owner=runner.instance_id,
-                scenario={},
-                scenario_name="x",
-                request_sha256="0" * 64,
-                meshes={},
-                provenance={},
-                time_limit_s=1.0,
-                created_at=now_s(),
-            )
-        )
+    db, runner = _runner_with_job(tmp_path, status="running", owned=True, meshes={})
     process = mp.get_context("fork").Process(target=int)
     process.start()
     parent, _child = mp.Pipe()
@@ -214,28 +196,9 @@ def test_a_mesh_that_cannot_be_fetched_now_requeues_the_job_and_a_deleted_one_fa
     from sqlalchemy.exc import OperationalError
 
     import api.jobs as jobs
-    from api.db import Database, Job, now_s
-    from api.jobs import ProcessJobRunner
+    from api.db import Job
 
-    db = Database(f"sqlite:///{tmp_path / 'jobs.db'}")
-    db.create_all()
-    runner = ProcessJobRunner(db, make_settings(tmp_path, forkserver_preload=False))
-    with db.session() as s:
-        s.add(
-            Job(
-                id="j1",
-                tenant="t",
-                status="queued",
-                scenario={},
-                scenario_name="x",
-                request_sha256="0" * 64,
-                meshes={"m": str(tmp_path / "elsewhere" / "abc.stl")},
-                provenance={},
-                time_limit_s=1.0,
-                attempts=0,
-                created_at=now_s(),
-            )
-        )
+    db, runner = _runner_with_job(tmp_path, status="queued", meshes={"m": str(tmp_path / "else" / "abc.stl")})
 
     def busy(*args):
         raise OperationalError("SELECT mesh_blobs", {}, Exception("database is locked"))
@@ -255,3 +218,31 @@ def test_a_mesh_that_cannot_be_fetched_now_requeues_the_job_and_a_deleted_one_fa
         row = s.get(Job, "j1")
         assert row is not None and (row.status, row.reason) == ("failed", "mesh_unavailable")
     db.dispose()
+
+
+def _runner_with_job(tmp_path, status: str, meshes: dict[str, str], owned: bool = False):
+    """A SQLite database with one job ``j1`` and a job runner on it (no forkserver warm-up)."""
+    from api.db import Database, Job, now_s
+    from api.jobs import ProcessJobRunner
+
+    db = Database(f"sqlite:///{tmp_path / 'jobs.db'}")
+    db.create_all()
+    runner = ProcessJobRunner(db, make_settings(tmp_path, forkserver_preload=False))
+    with db.session() as s:
+        s.add(
+            Job(
+                id="j1",
+                tenant="t",
+                status=status,
+                owner=runner.instance_id if owned else None,
+                scenario={},
+                scenario_name="x",
+                request_sha256="0" * 64,
+                meshes=meshes,
+                provenance={},
+                time_limit_s=1.0,
+                attempts=0,
+                created_at=now_s(),
+            )
+        )
+    return db, runner
