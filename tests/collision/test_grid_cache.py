@@ -119,3 +119,30 @@ def test_a_failed_write_leaves_nothing_and_a_dead_writers_file_is_pruned(
     os.utime(dead, (old, old))
     assert prune(tmp_path, ("grid-*",), limit=10**9) == 1000
     assert not dead.exists() and fresh.exists()
+
+
+def test_a_built_and_a_mapped_grid_reach_the_kernels_as_one_type(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, box_mesh, robot
+) -> None:
+    """A freshly built grid and a memory-mapped one reach the kernels as one type.
+
+    numba compiles one specialisation per argument type: a built (writable) grid and a cached (read-only,
+    memory-mapped) one of different types made the plan after a grid build compile every kernel again
+    (10 s in a fresh process).
+    """
+    import numba
+
+    from planner.collision.bodies import robot_bodies
+    from planner.collision.kernels import buffers
+
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
+    v, f = box_mesh
+    built = cached_build("box", v, f, 0.05)
+    mapped = cached_build("box", v, f, 0.05)
+    assert not isinstance(built.lower_bound, np.memmap) and isinstance(mapped.lower_bound, np.memmap)
+    model = robot.collision_model()
+    bodies = robot_bodies(model, None)
+    data = [buffers.build(model, bodies, np.eye(4), g, None) for g in (built, mapped, None)]
+    assert len({numba.typeof(d.grid) for d in data}) == 1
+    assert len({(numba.typeof(d.fbuf), numba.typeof(d.ibuf)) for d in data}) == 1
+    np.testing.assert_array_equal(data[0].grid, data[1].grid)

@@ -293,11 +293,16 @@ def build(
             ratio_rows=np.array(model.ratio_rows, dtype=np.int64),
         )
     )
-    flat_grid = grid.lower_bound.reshape(-1) if grid is not None else np.zeros(1)
+    # Always a read-only plain array: numba compiles one specialisation per argument type, and a grid read
+    # from the cache is a read-only memory map while a freshly built one is writable -- two types, so the
+    # plan after a grid build used to compile every kernel a second time (10 s in a fresh process).
+    bounds = grid.lower_bound if grid is not None else np.zeros(1)
+    flat_grid = np.ascontiguousarray(np.asarray(bounds, dtype=np.float64).reshape(-1)).view(np.ndarray)
+    flat_grid.setflags(write=False)
     return KernelData(
         fbuf=fbuf,
         ibuf=ibuf,
-        grid=np.ascontiguousarray(flat_grid, dtype=float),
+        grid=flat_grid,
         upper_slack=grid.upper_slack if grid is not None else -1.0,
         fine=fine,
         coarse=coarse,
