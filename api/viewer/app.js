@@ -554,6 +554,11 @@ function describeEvidence(e) {
     return `${e.drive} needs ${(100 * e.force_ratio).toFixed(0)}% of its force limit ${e.where}` +
       ` (${(100 * e.allowed_ratio).toFixed(0)}% allowed)`;
   }
+  if (e.cause === 'limit') {
+    if (e.excess === null || e.excess === undefined) return `${e.limit} is not finite ${e.where}`;
+    const g = (x) => Number(x).toPrecision(4);
+    return `${e.limit} = ${g(e.value)} outside [${g(e.lower)}, ${g(e.upper)}] by ${Number(e.excess).toPrecision(3)} ${e.where}`;
+  }
   if (e.cause === 'clearance' && Array.isArray(e.bodies)) {
     const other = e.bodies[1] === 'cabin' ? 'the cabin' : e.bodies[1];
     const what = e.distance_m <= 0 ? `in contact with ${other}` : `${(1e3 * e.distance_m).toFixed(1)} mm from ${other}`;

@@ -16,6 +16,7 @@ layer, and the candidate whose line keeps the largest clearance (measured at a f
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -112,8 +113,52 @@ def force_evidence(forces: StaticForceCheck, q: Array, where: str) -> dict[str, 
     }
 
 
+def limit_evidence(violations: list[dict[str, Any]], q: Array, where: str) -> dict[str, Any]:
+    """The limit or margin configuration q is furthest outside (of ``robot.violations(q)``), and by how much.
+
+    ``excess`` is the distance outside the bound in the limit's own unit (m or rad; None for a value that
+    is not finite), ``span`` the width of the admissible range (for ranking records of different limits).
+    """
+
+    def excess(v: dict[str, Any]) -> float:
+        value, lo, hi = v["value"], v["lower"], v["upper"]
+        if not isinstance(value, float) or lo is None or hi is None or not np.isfinite(value):
+            return float("inf")
+        return float(max(lo - value, value - hi))
+
+    worst = max(violations, key=lambda v: excess(v) / _span(v))
+    return {
+        "cause": "limit",
+        "where": where,
+        "limit": worst["name"],
+        "value": worst["value"],
+        "lower": worst["lower"],
+        "upper": worst["upper"],
+        "excess": excess(worst) if np.isfinite(excess(worst)) else None,
+        "span": _span(worst),
+        "q": [float(v) for v in q],
+    }
+
+
+def _span(v: dict[str, Any]) -> float:
+    lo, hi = v["lower"], v["upper"]
+    if lo is None or hi is None or not np.isfinite(hi - lo) or hi <= lo:
+        return 1.0
+    return float(hi - lo)
+
+
 def describe(evidence: dict[str, Any]) -> str:
-    """One readable line of an evidence record (see :func:`collision_evidence`, :func:`force_evidence`)."""
+    """One readable line of an evidence record.
+
+    The records of :func:`collision_evidence`, :func:`force_evidence` and :func:`limit_evidence`.
+    """
+    if evidence["cause"] == "limit":
+        if evidence["excess"] is None:
+            return f"{evidence['limit']} is not finite {evidence['where']}"
+        return (
+            f"{evidence['limit']} = {evidence['value']:.4g} outside [{evidence['lower']:.4g}, "
+            f"{evidence['upper']:.4g}] by {evidence['excess']:.3g} {evidence['where']}"
+        )
     if evidence["cause"] == "force":
         return (
             f"{evidence['drive']} needs {100 * evidence['force_ratio']:.0f}% of its force limit "
@@ -138,6 +183,8 @@ def dominant(evidence: list[dict[str, Any]], cause: str | None = None) -> dict[s
     def shortfall(e: dict[str, Any]) -> float:
         if e["cause"] == "force":
             return e["force_ratio"] / e["allowed_ratio"] - 1.0
+        if e["cause"] == "limit":
+            return math.inf if e["excess"] is None else e["excess"] / e["span"]
         return (e["required_m"] - e["distance_m"]) / max(e["required_m"], 1e-6)
 
     return min(evidence, key=shortfall) if evidence else None

@@ -182,3 +182,33 @@ def test_line_speed_bounds_hold_the_planned_line_and_the_rail(
     along_rail = line_speed_bounds(robot, qs[:1], T_tp, np.array([0.0, 0.0, 1.0]))
     assert along_rail.line_m_s[0] >= robot.limits.v_max[0] - 1e-9
     assert along_rail.rail_m_s[0] >= robot.limits.v_max[0] - 1e-9
+
+
+def test_a_limit_refusal_names_the_limit_furthest_outside_and_by_how_much(robot) -> None:  # noqa: ANN001
+    """limit_evidence picks the worst violation relative to its range; describe and dominant read it."""
+    from planner.plan.goals import describe, dominant, limit_evidence
+
+    q = admissible_joints(robot, 1, 0)[0]
+    q[0] = robot.limits.upper[0] + 0.05  # the rail 50 mm past its end
+    q[6] = robot.limits.lower[6] - 0.001  # d5 1 mm short: a smaller share of its range
+    violations = robot.violations(q)
+    names = {v["name"] for v in violations}
+    assert len(names) >= 2
+    e = limit_evidence(violations, q, "at the compensated goal")
+    rail = next(v for v in violations if v["value"] == pytest.approx(q[0]))
+    assert e["cause"] == "limit" and e["limit"] == rail["name"]
+    assert e["excess"] == pytest.approx(0.05, abs=1e-12)
+    assert e["span"] == pytest.approx(robot.limits.upper[0] - robot.limits.lower[0])
+    text = describe(e)
+    assert text.startswith(f"{rail['name']} = ") and "by 0.05 at the compensated goal" in text
+    # Ranked against clearance records by relative shortfall: 50 mm of a 6 m rail is 0.83% of its range,
+    # 0.05 mm short of 10 mm is 0.5% (closer to passing), 1 mm short is 10% (further).
+    close = {"cause": "clearance", "bodies": ["payload", "cabin"], "distance_m": 0.00995, "required_m": 0.01}
+    far = {**close, "distance_m": 0.009}
+    assert dominant([e, close]) is close
+    assert dominant([e, far]) is e
+    assert dominant([e, close], "limit") is e
+    not_finite = [{"name": "finite", "value": [float("nan")], "lower": None, "upper": None}]
+    nan = limit_evidence(not_finite, q, "here")
+    assert nan["excess"] is None and describe(nan) == "finite is not finite here"
+    assert dominant([nan, e]) is e
