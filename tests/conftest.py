@@ -35,3 +35,17 @@ def admissible_joints(robot: Cabin8, n: int, seed: int) -> np.ndarray:
 @pytest.fixture(scope="session")
 def configs(robot: Cabin8) -> np.ndarray:
     return admissible_joints(robot, 300, seed=42)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels() -> None:
+    """The compiled kernels resolved once, before any test points ``CABINPLAN_CACHE_DIR`` elsewhere.
+
+    The ahead-of-time build in the session's cache folder (built now if missing, as ``make`` does), or
+    numba's JIT (``CABINPLAN_KERNELS=jit``, no cache folder): a test that switches the cache folder must
+    not make the first kernel call build the kernels into its temporary folder.
+    """
+    from planner.collision.kernels.entries import DEFAULT
+    from planner.timing import reference
+
+    assert DEFAULT.module is not None and reference.kernels() is not None
