@@ -14,6 +14,9 @@ $(STAMP): requirements.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade "pip>=24"
 	$(BIN)/python -m pip install --quiet -r requirements.lock
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	# The compiled kernels, ahead of time (about 40 s; without a C compiler plans use numba's JIT instead).
+	$(BIN)/python -m planner.collision.kernels.build && $(BIN)/python -m planner.timing.reference \
+		|| echo "kernels: no ahead-of-time build (see above); plans will use numba's JIT"
 	touch $(STAMP)
 
 $(DEV_STAMP): $(STAMP) requirements-dev.lock
