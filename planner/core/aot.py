@@ -15,9 +15,10 @@ subprocess, under a file lock, atomically renamed into place), and numba's JIT d
 functions otherwise: no cache folder (``CABINPLAN_CACHE_DIR=""``), ``CABINPLAN_KERNELS=jit``, or a build
 that failed (no C compiler: one warning, and a marker file so later processes do not try again).
 
-The key is a hash of the kernel source files, the numba, numpy and Python versions, the platform and the
-target CPU (the build is compiled for this machine's CPU; its model and feature flags are part of the
-key, so a cache folder shared with another machine never loads code for the wrong CPU).
+The key is a hash of the kernel source files (and of this module), the numba, numpy and Python versions,
+the platform and the target CPU (the build is compiled for this machine's CPU; its model and feature
+flags are part of the key, so a cache folder shared with another machine never loads code for the wrong
+CPU).
 
 The extension's entries do not check their arguments: an array of another dtype, layout or number of
 dimensions is read as if it had the declared one (wrong numbers or a crash). Each layer therefore reaches
@@ -27,6 +28,7 @@ This module imports numba only to build.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.machinery
 import importlib.util
@@ -38,6 +40,7 @@ import sys
 import sysconfig
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -121,7 +124,7 @@ def _numba_version() -> str:
 def key(ext: Extension) -> str:
     """The hash of everything the build depends on (24 hex digits)."""
     h = hashlib.sha256()
-    for path in ext.sources:
+    for path in (*ext.sources, Path(__file__)):  # this module's build steps are part of the build
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     for part in (
         repr(ext.entries),
@@ -278,7 +281,10 @@ def build(ext: Extension) -> Path:
 
     kernels_module = importlib.import_module(ext.kernels_module)
     lib.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=lib.parent, prefix=f"{ext.name}-build-") as tmp:
+    with (
+        tempfile.TemporaryDirectory(dir=lib.parent, prefix=f"{ext.name}-build-") as tmp,
+        _arrays_boxed_with_a_cached_type(),
+    ):
         cc = CC(ext.name)
         cc.output_dir = tmp
         cc.target_cpu = TARGET_CPU
@@ -292,6 +298,48 @@ def build(ext: Extension) -> Path:
     _failed_marker(lib).unlink(missing_ok=True)
     prune(lib.parent, (f"{ext.name}-*{_suffix()}",))
     return lib
+
+
+@contextlib.contextmanager
+def _arrays_boxed_with_a_cached_type() -> Iterator[None]:
+    """Box returned arrays with the array type read from the module's constants, not unpickled per call.
+
+    numba boxes a returned array with its Python type (``numpy.ndarray``) embedded as a pickle; under the
+    JIT the unpickled object is cached, but an extension built by ``numba.pycc`` runs ``pickle.loads`` on
+    every array it returns (measured: +0.35 us an array, +1 us on a state check returning three). This
+    boxes them as numba does, with the type added to the environment's constants like the dtype already
+    is (unpickled once, when the extension is imported). Only the boxing of results differs: the compiled
+    arithmetic is the same (``tests/test_aot.py`` compares the bits).
+    """
+    from llvmlite import ir  # type: ignore[import-untyped]  # noqa: PLC0415 - numba only to build
+    from numba.core import boxing, cgutils, types  # noqa: PLC0415
+    from numba.core.pythonapi import _boxers  # noqa: PLC0415
+    from numba.np import numpy_support  # noqa: PLC0415
+
+    original = boxing.box_array
+    assert _boxers.functions[types.Array] is original
+
+    def box_array(typ: Any, val: Any, c: Any) -> Any:
+        if not c.context.enable_nrt:
+            return original(typ, val, c)
+        dtype = c.env_manager.read_const(c.env_manager.add_const(numpy_support.as_dtype(typ.dtype)))
+        pytype = c.env_manager.read_const(c.env_manager.add_const(typ.box_type))
+        api, i32 = c.pyapi, ir.IntType(32)
+        fnty = ir.FunctionType(api.pyobj, [api.voidptr, api.pyobj, i32, i32, api.pyobj])
+        fn = api._get_function(fnty, name="NRT_adapt_ndarray_to_python_acqref")
+        fn.args[0].add_attribute("captures(none)")
+        ndim = c.context.get_constant(types.int32, typ.ndim)
+        writable = c.context.get_constant(types.int32, int(typ.mutable))
+        ptr = cgutils.alloca_once_value(c.builder, val)
+        out = c.builder.call(fn, [c.builder.bitcast(ptr, api.voidptr), pytype, ndim, writable, dtype])
+        c.context.nrt.decref(c.builder, typ, val)  # the new array holds the reference
+        return out
+
+    _boxers.functions[types.Array] = box_array
+    try:
+        yield
+    finally:
+        _boxers.functions[types.Array] = original
 
 
 def signature(entry: Entry) -> Any:
