@@ -269,3 +269,19 @@ def test_the_key_follows_the_sources(tmp_path: Path, monkeypatch: pytest.MonkeyP
     ext.sources[0].write_text("# toy, edited\n")
     after = aot.path(ext)
     assert before != after and before is not None and before.parent == tmp_path / "native"
+
+
+def test_a_missing_build_is_built_at_first_use(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """No build in the cache folder: the first use builds it (a child process, under the lock), loads it."""
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("CABINPLAN_KERNELS", raising=False)
+    lib = aot.path(reference.EXTENSION)
+    assert lib is not None and not lib.exists()
+    module = aot.kernels(reference.EXTENSION)
+    assert lib.is_file() and module.__file__ == str(lib)
+    rows = np.ones((3, 1)), np.zeros((3, 1)), np.ones((3, 1))
+    x = reference.acceleration_limited(np.full(2, 0.5), *rows, np.ones(3), implementation=module)
+    jit = reference.acceleration_limited(
+        np.full(2, 0.5), *rows, np.ones(3), implementation=aot.jit_kernels(reference.EXTENSION)
+    )
+    assert x.tobytes() == jit.tobytes() and x[0] == x[-1] == 0.0

@@ -161,16 +161,20 @@ def load(ext: Extension) -> ModuleType | None:
     lib = path(ext)
     if lib is None or not lib.is_file():
         return None
-    if ext.name in sys.modules and getattr(sys.modules[ext.name], "__file__", None) == str(lib):
-        return sys.modules[ext.name]
+    module = _LOADED.get(str(lib))
+    if module is not None:
+        return module
     spec = importlib.util.spec_from_file_location(ext.name, lib)
     if spec is None or spec.loader is None:
         return None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    sys.modules[ext.name] = module
+    _LOADED[str(lib)] = module  # not in sys.modules: builds of other keys may be loaded beside it
     touch(lib)
     return module
+
+
+_LOADED: dict[str, ModuleType] = {}
 
 
 def jit_kernels(ext: Extension) -> ModuleType:
@@ -184,7 +188,7 @@ _WARNED: set[str] = set()
 def kernels(ext: Extension) -> Any:
     """The entries of ``ext``: the ahead-of-time build (built now if missing), or numba's JIT.
 
-    Call it before a plan's clock starts: a missing build takes a minute or two of compilation.
+    Call it before a plan's clock starts: a missing build takes about 15 s of compilation.
     """
     if mode() == "jit" or folder() is None:
         return jit_kernels(ext)
@@ -218,12 +222,13 @@ def _build_in_subprocess(ext: Extension) -> ModuleType | None:
         _warn(ext, f"an earlier build failed, see {marker}")
         return None
     lib.parent.mkdir(parents=True, exist_ok=True)
-    with _lock(lib.parent / f"{ext.name}.lock"):
+    with _Lock(lib.parent / f"{ext.name}.lock"):
         if not lib.is_file() and not marker.is_file():
             log.info("kernels %s: building the ahead-of-time extension (once per install)", ext.name)
             started = time.perf_counter()
             root = str(Path(__file__).resolve().parents[2])  # the folder holding the planner package
-            env = {**os.environ, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}
+            paths = [root, *(p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p)]
+            env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
             run = subprocess.run(
                 [sys.executable, "-m", ext.builder_module],
                 env=env,
@@ -243,7 +248,7 @@ def _build_in_subprocess(ext: Extension) -> ModuleType | None:
     return load(ext)
 
 
-class _lock:
+class _Lock:
     """An exclusive ``flock`` on a file for the ``with`` block (no lock where ``fcntl`` is missing)."""
 
     def __init__(self, lock_path: Path) -> None:
