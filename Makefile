@@ -9,11 +9,15 @@ DEV_STAMP := $(VENV)/.installed-dev
 
 .PHONY: run serve test lint typecheck check bench lock clean chromium
 
+# After installing: the compiled kernels built ahead of time into the cache folder (about 15 s; without a
+# C compiler plans use numba's JIT instead, README "Start-up").
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade "pip>=24"
 	$(BIN)/python -m pip install --quiet -r requirements.lock
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	$(BIN)/python -m planner.collision.kernels.build && $(BIN)/python -m planner.timing.reference \
+		|| echo "kernels: no ahead-of-time build (see above); plans will use numba's JIT"
 	touch $(STAMP)
 
 $(DEV_STAMP): $(STAMP) requirements-dev.lock

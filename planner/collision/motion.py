@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from planner.collision.bodies import BodySet
-from planner.collision.kernels import walk
+from planner.collision.kernels import codes as walk
 from planner.collision.kernels.buffers import KernelData
+from planner.collision.kernels.entries import Kernels
 from planner.collision.probes import Probes
 from planner.collision.reports import BodyState, MotionReport, body_contact, limit_contacts
 from planner.core.types import Array
@@ -39,11 +40,14 @@ class CertifiedMotion:
         probes: The world's FCL probes.
     """
 
-    def __init__(self, model: CollisionModel, bodies: BodySet, data: KernelData, probes: Probes) -> None:
+    def __init__(
+        self, model: CollisionModel, bodies: BodySet, data: KernelData, probes: Probes, kernels: Kernels
+    ) -> None:
         self.model = model
         self.bodies = bodies
         self.data = data
         self.probes = probes
+        self.kernels = kernels
 
     def check(
         self,
@@ -64,22 +68,19 @@ class CertifiedMotion:
         dq = q_b - q_a
         adq = np.abs(dq)
         n_fine = limit_samples(dq)
-        bad = walk.first_inadmissible(q_a, dq, n_fine, d.fbuf, d.ibuf)
+        k = self.kernels
+        bad = k.first_inadmissible(q_a, dq, n_fine, d)
         if bad >= 0:
             t = bad * (1.0 / n_fine) if bad < n_fine else 1.0  # numpy.linspace's samples
             contacts = limit_contacts(self.model.admissibility, q_a + t * dq)
             return MotionReport(False, n_fine + 1, 0, t, tuple(contacts))
-        end = walk.end_ratio(q_a, q_b, d.fbuf, d.ibuf)
+        end = k.end_ratio(q_a, q_b, d)
         if ratio is not None:
             end = max(end, ratio)
-        reach, pair_reach = walk.segment_reach(
-            self.bodies.rho,
-            d.link_mask,
+        reach, pair_reach = k.segment_reach(
+            d,
             self.model.slope_bound(end + self.model.slope_deviation(q_a, q_b)),
             self.model.slope_half_width,
-            d.pair_a,
-            d.pair_b,
-            self.bodies.pair_rigid,
             adq,
         )
         has_cabin = self.probes.cabin_obj is not None
@@ -101,9 +102,7 @@ class CertifiedMotion:
         n_cabin = n_bodies if has_cabin else 0
         before = self.probes.queries
         while True:
-            code = walk.motion_walk(
-                ci, cf, q_a, q_b, dq, reach, pair_reach, d.fbuf, d.ibuf, d.grid, slot_of, poses, cabin, pairs
-            )
+            code = k.motion_walk(ci, cf, q_a, q_b, dq, reach, pair_reach, d, slot_of, poses, cabin, pairs)
             task = int(ci[walk.CI_TASK])
             is_cabin = task < n_cabin
             idx = task if is_cabin else task - n_cabin

@@ -40,8 +40,9 @@ import numpy as np
 
 from planner.collision.bodies import BodySet, PayloadGeometry, robot_bodies, segment_reach_bounds
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
-from planner.collision.kernels import buffers, state, walk
-from planner.collision.kernels.bounds import cover_centres_batch
+from planner.collision.kernels import buffers, codes
+from planner.collision.kernels.entries import DEFAULT as KERNELS
+from planner.collision.kernels.entries import Kernels
 from planner.collision.motion import CertifiedMotion
 from planner.collision.probes import Probes, cabin_bvh
 from planner.collision.reports import (
@@ -138,7 +139,9 @@ class CollisionWorld(Generic[RobotT]):
         self._kernel = buffers.build(
             self.model, self.bodies, self._T_tool_box, self._grid, self._carriage_table
         )
-        self._motion = CertifiedMotion(self.model, self.bodies, self._kernel, self._probes)
+        #: The compiled kernels' entries (the ahead-of-time build or numba's JIT, :mod:`.kernels.entries`).
+        self.kernels: Kernels = KERNELS
+        self._motion = CertifiedMotion(self.model, self.bodies, self._kernel, self._probes, self.kernels)
         #: Fine-cover sphere radii (S,), grouped by body (the spheres of :meth:`cover_centres`).
         self._fine_r = self._kernel.fine.radii
 
@@ -175,14 +178,14 @@ class CollisionWorld(Generic[RobotT]):
             return np.ascontiguousarray(flat.reshape(n, self._n_bodies, 13)), c
         # The closed-form kernel, ~100x faster than CasADi's batch call.
         poses, c = np.empty((n, self._n_bodies, 13)), np.empty((n, len(self._kernel.c_lo)))
-        state.packed_poses(np.ascontiguousarray(q2), self._kernel.fbuf, self._kernel.ibuf, poses, c)
+        self.kernels.packed_poses(np.ascontiguousarray(q2), self._kernel, poses, c)
         return poses, c
 
     def cover_centres(self, q: Array, coarse: bool = False) -> Array:
         """World centres (N, S, 3) of the fine (cabin) or coarse (self) sphere cover, grouped by body."""
         flat, _ = self._evaluate(q)
         cover = self._kernel.coarse if coarse else self._kernel.fine
-        return cover_centres_batch(flat, *cover.table)
+        return self.kernels.cover_centres_batch(flat, cover)
 
     def poses(self, q: Array) -> tuple[Array, Array, Array]:
         """(R (N, B, 3, 3), p (N, B, 3), lengths (N, B)) of every body for (N, 8) or (8,) joints.
@@ -226,14 +229,12 @@ class CollisionWorld(Generic[RobotT]):
     def _screen(self, q: Array, clearance: float) -> StateReport | BodyState:
         """The compiled part of :meth:`check_state`: a final report, or the state for the FCL probes."""
         d = self._kernel
-        code, flat, cabin, pairs = state.packed_check(
-            q, d.fbuf, d.ibuf, d.grid, clearance, self.self_clearance, -1.0
-        )
-        if code == state.CLEAR:  # the bounds prove everything: no FCL query
+        code, flat, cabin, pairs = self.kernels.packed_check(q, d, clearance, self.self_clearance, -1.0)
+        if code == codes.CLEAR:  # the bounds prove everything: no FCL query
             return VALID
-        if code == state.NOT_FINITE:
+        if code == codes.NOT_FINITE:
             return StateReport(False, tuple(limit_contacts(self.model.admissibility, q)))
-        return BodyState(flat, cabin, pairs, code != state.INADMISSIBLE)
+        return BodyState(flat, cabin, pairs, code != codes.INADMISSIBLE)
 
     def is_valid(self, q: Array, clearance: float = DEFAULT_CLEARANCE_M) -> bool:
         """True when limits, margins, cabin clearance and self-clearance all hold at q.
@@ -245,11 +246,9 @@ class CollisionWorld(Generic[RobotT]):
         q = _joints(q, self.model.n_joints)
         own = self.self_clearance
         d = self._kernel
-        code, flat, cabin, pairs = state.packed_check(
-            q, d.fbuf, d.ibuf, d.grid, clearance, own, d.upper_slack
-        )
-        if code != state.UNDECIDED:
-            return code == state.CLEAR  # a certain contact is as invalid as an FCL-found one
+        code, flat, cabin, pairs = self.kernels.packed_check(q, d, clearance, own, d.upper_slack)
+        if code != codes.UNDECIDED:
+            return code == codes.CLEAR  # a certain contact is as invalid as an FCL-found one
         st = BodyState(flat, cabin, pairs, True)
         for b, lb in enumerate(cabin.tolist()):
             if lb <= clearance and self._probes.cabin_hit(st, b, clearance):
@@ -265,7 +264,7 @@ class CollisionWorld(Generic[RobotT]):
         ``threshold``: pairs whose bound is not above it get their exact distance where one is known.
         """
         d = self._kernel
-        flat, cabin, pairs, ok = state.packed_state(q, d.fbuf, d.ibuf, d.grid, threshold)
+        flat, cabin, pairs, ok = self.kernels.packed_state(q, d, threshold)
         return BodyState(flat, cabin, pairs, ok)
 
     def check_motion(
@@ -345,7 +344,7 @@ class CollisionWorld(Generic[RobotT]):
         i, checks, cap = 0, 0, max_run
         while i < n - 1:
             # Both bodies of a self pair may move: the kernel doubles the reach-weighted deviation.
-            j, extra = walk.run_extent(qs, i, min(n - 1, i + cap), rho_joint, float(max_extra_m))
+            j, extra = self.kernels.run_extent(qs, i, min(n - 1, i + cap), rho_joint, float(max_extra_m))
             motion = self.check_motion(
                 qs[i],
                 qs[j],

@@ -23,6 +23,7 @@ from planner.gate.requirements import timing_of
 from planner.kinematics import chain
 from planner.plan.goals import StaticForceCheck
 from planner.plan.motion import motion_clear
+from planner.timing import reference
 from planner.timing.jerk import JerkLimitedStage
 from planner.timing.stage import TimingFactory, TimingStage
 from planner.timing.toppra import ToppraStage
@@ -204,9 +205,11 @@ class PlanContext:
     def warm_up(self, q: Array) -> None:
         """Run one state and one motion check before the clock starts (results unused).
 
-        The collision kernels are compiled by numba on first use and cached on disk; in a process that
-        finds no cache (a fresh install) that takes tens of seconds, which must not count against the
-        scenario's planning time limit. Once compiled, this costs well under a millisecond.
+        The first kernel call loads the ahead-of-time build of the collision kernels (under a
+        millisecond), or builds it first where it is missing (a fresh install that skipped ``make``:
+        about half a minute), or compiles them with numba's JIT where no build can be made; none of
+        that may count against the scenario's planning time limit. The timing kernels are loaded here
+        too. Once loaded, this costs well under a millisecond.
         """
         q_b = np.array(q, dtype=float)
         q_b[chain.THETA6] += 1e-3
@@ -220,6 +223,7 @@ class PlanContext:
         self.world.check_path(np.stack([q, q_b, q]), c.requested_m, c.motion_margin_m)
         if self.world.cabin is not None:
             self.world.min_distance(q, include_self=False)
+        reference.kernels()
 
     # ------------------------------------------------------------------ clock
     def elapsed(self) -> float:

@@ -34,10 +34,9 @@ import numpy as np
 from planner.core.types import Array
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import FastFunction, dense_function
-from planner.robots import kernels
 from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
-from planner.robots.cabin8_kernels import KIND_CODES, PARAMS
 from planner.robots.geometry import PAYLOAD, Admissibility, Shape
+from planner.robots.kernel_codes import CABIN8, CABIN8_KIND_CODES, CABIN8_PARAMS
 
 #: cabin8's bodies in pose order, the payload last (when carried).
 BODY_NAMES = ("carriage", "link_ab", "link_cd", "link_ef", "platform", "column", "arm", "slide", "payload")
@@ -86,7 +85,7 @@ class Cabin8CollisionModel:
 
     body_names: tuple[str, ...] = tuple(n for n in BODY_NAMES if n != PAYLOAD)
     n_joints: int = 8
-    kernel: int = kernels.CABIN8
+    kernel: int = CABIN8
     slope_bodies: tuple[str, ...] = ("link_ab", "link_cd", "link_ef")
     rail_body: str | None = "carriage"
 
@@ -107,7 +106,7 @@ class Cabin8CollisionModel:
             ]
         )
         self.kernel_params = np.concatenate([mdh.ravel(), [g.L1, g.L2, g.L3, g.L4]])
-        assert self.kernel_params.shape == (PARAMS,)
+        assert self.kernel_params.shape == (CABIN8_PARAMS,)
 
     def shapes(self, payload_size: tuple[float, float, float] | None) -> dict[str, Shape]:
         """Every body's shape; the slide's cover and reach bounds use its longest extension over d5."""
@@ -138,7 +137,7 @@ class Cabin8CollisionModel:
 
     def kind_code(self, name: str) -> int:
         """The body's code in :func:`planner.robots.cabin8_kernels.body_poses`."""
-        return KIND_CODES[name]
+        return CABIN8_KIND_CODES[name]
 
     def reach_bounds(
         self, names: tuple[str, ...], shapes: Mapping[str, Shape], payload_reach: float

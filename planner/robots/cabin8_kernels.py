@@ -15,21 +15,11 @@ import math
 import numpy as np
 from numba import njit
 
-#: Length of cabin8's kernel parameters: the MDH table (4 x 6: alpha, a, theta offset, d offset, joint
-#: index, revolute 1/0) then the stage lengths L1, L2, L3, L4.
-PARAMS = 28
-#: Body kinds of :func:`body_poses` (the order of ``planner.robots.cabin8_geometry.BODY_NAMES``).
-KIND_CODES = {
-    "carriage": 0,
-    "link_ab": 1,
-    "link_cd": 2,
-    "link_ef": 3,
-    "platform": 4,
-    "column": 5,
-    "arm": 6,
-    "slide": 7,
-    "payload": 8,
-}
+from planner.robots.kernel_codes import CABIN8_KIND_CODES, CABIN8_PARAMS
+
+#: Length of cabin8's kernel parameters and its body kinds (:mod:`planner.robots.kernel_codes`).
+PARAMS = CABIN8_PARAMS
+KIND_CODES = CABIN8_KIND_CODES
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

@@ -20,9 +20,9 @@ import numpy as np
 from numba import njit
 
 from planner.robots import cabin8_kernels
+from planner.robots.kernel_codes import CABIN8
 
-#: Kernel codes (``CollisionModel.kernel``).
-CABIN8 = 1
+__all__ = ["CABIN8", "body_poses", "constraints"]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

@@ -12,65 +12,41 @@ reference: the LP (HiGHS) decides the law under every constraint, conservatively
 
 from __future__ import annotations
 
-import numpy as np
-from numba import njit
+from pathlib import Path
+from typing import Any
 
+import numpy as np
+
+from planner.core import aot
+from planner.core.aot import F8, Entry, check_array
 from planner.core.types import Array
 
-#: Bisection steps of the maximum velocity curve (relative accuracy 2^-40).
-BISECTIONS = 40
+#: The extension of the integration (:mod:`planner.timing.reference_kernels`), built ahead of time by
+#: :mod:`planner.core.aot` (``python -m planner.timing.reference``; at first use otherwise).
+EXTENSION = aot.Extension(
+    name="cabinplan_timing_kernels",
+    kernels_module="planner.timing.reference_kernels",
+    builder_module="planner.timing.reference",
+    sources=(Path(__file__).resolve().parent / "reference_kernels.py",),
+    entries=(Entry("_forward_backward", ("f8[1]", "f8[2]", "f8[2]", "f8[2]", "f8[1]"), "f8[1]w"),),
+)
+
+_kernels: Any = None
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _y_range(cx: Array, cy: Array, b: Array, x: float) -> tuple[float, float]:  # pragma: no cover - numba
-    """The interval of y allowed by the rows at one point for x (lo > hi: none)."""
-    lo, hi = -np.inf, np.inf
-    for r in range(len(b)):
-        rhs = b[r] - cx[r] * x
-        if cy[r] > 1e-12:
-            hi = min(hi, rhs / cy[r])
-        elif cy[r] < -1e-12:
-            lo = max(lo, rhs / cy[r])
-        elif rhs < 0.0:
-            return np.inf, -np.inf
-    return lo, hi
+def kernels(module: Any = None) -> Any:
+    """The implementation of the integration: ``module`` if given (tests), else the build or the JIT."""
+    global _kernels
+    if module is not None:
+        return module
+    if _kernels is None:
+        _kernels = aot.kernels(EXTENSION)
+    return _kernels
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _forward_backward(
-    ds: Array, cx: Array, cy: Array, b: Array, x_max: Array
-) -> Array:  # pragma: no cover - numba
-    n = len(x_max)
-    mvc = np.zeros(n)
-    for i in range(n):
-        lo, hi = _y_range(cx[i], cy[i], b[i], x_max[i])
-        if lo <= hi:
-            mvc[i] = x_max[i]
-            continue
-        a, c = 0.0, x_max[i]
-        for _ in range(BISECTIONS):
-            mid = 0.5 * (a + c)
-            lo, hi = _y_range(cx[i], cy[i], b[i], mid)
-            if lo <= hi:
-                a = mid
-            else:
-                c = mid
-        mvc[i] = a
-    fwd = np.zeros(n)
-    for i in range(n - 1):
-        lo, hi = _y_range(cx[i], cy[i], b[i], fwd[i])
-        step = max(hi, 0.0) if lo <= hi else 0.0
-        fwd[i + 1] = min(mvc[i + 1], fwd[i] + 2.0 * ds[i] * step)
-    out = np.zeros(n)
-    for i in range(n - 2, -1, -1):
-        lo, hi = _y_range(cx[i + 1], cy[i + 1], b[i + 1], out[i + 1])
-        step = max(-lo, 0.0) if lo <= hi else 0.0
-        out[i] = min(fwd[i], out[i + 1] + 2.0 * ds[i] * step)
-    out[-1] = 0.0
-    return out
-
-
-def acceleration_limited(ds: Array, cx: Array, cy: Array, b: Array, x_max: Array) -> Array:
+def acceleration_limited(
+    ds: Array, cx: Array, cy: Array, b: Array, x_max: Array, implementation: Any = None
+) -> Array:
     """sd^2 (N + 1,) of the time-optimal acceleration-limited law at rest at both ends.
 
     Args:
@@ -79,13 +55,25 @@ def acceleration_limited(ds: Array, cx: Array, cy: Array, b: Array, x_max: Array
         cy: (N + 1, R) coefficients of y = sdd.
         b: (N + 1, R) right-hand sides.
         x_max: (N + 1,) upper bound of x at each point (velocity limits).
+        implementation: The compiled functions to use (tests: the build or the JIT); default: the build.
+
+    Raises:
+        TypeError: an argument has the wrong number of dimensions.
+        ValueError: the shapes do not fit together (the compiled code does not check its indices).
     """
-    return np.asarray(
-        _forward_backward(
-            np.ascontiguousarray(ds, dtype=float),
-            np.ascontiguousarray(cx, dtype=float),
-            np.ascontiguousarray(cy, dtype=float),
-            np.ascontiguousarray(b, dtype=float),
-            np.ascontiguousarray(x_max, dtype=float),
+    ds = check_array(np.ascontiguousarray(ds, dtype=float), "ds", F8, 1)
+    cx = check_array(np.ascontiguousarray(cx, dtype=float), "cx", F8, 2)
+    cy = check_array(np.ascontiguousarray(cy, dtype=float), "cy", F8, 2)
+    b = check_array(np.ascontiguousarray(b, dtype=float), "b", F8, 2)
+    x_max = check_array(np.ascontiguousarray(x_max, dtype=float), "x_max", F8, 1)
+    n = len(x_max)
+    if not (cx.shape == cy.shape == b.shape and cx.shape[0] == n and len(ds) >= n - 1):
+        raise ValueError(
+            f"acceleration_limited: shapes ds {ds.shape}, cx {cx.shape}, cy {cy.shape}, b {b.shape}, "
+            f"x_max {x_max.shape} do not fit (N,), (N + 1, R) x 3, (N + 1,)"
         )
-    )
+    return np.asarray(kernels(implementation)._forward_backward(ds, cx, cy, b, x_max))
+
+
+if __name__ == "__main__":
+    aot.main(EXTENSION)

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.kernels import bounds, buffers, state, walk
+from planner.collision.kernels import bounds, state, walk
+from planner.collision.kernels.packed import unpack
 from planner.collision.reference import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
@@ -50,7 +51,7 @@ def test_closed_form_poses_equal_the_casadi_model(robot: Cabin8, worlds: tuple[C
     world = worlds[0]
     qs = along_rail(robot, 200, seed=11)
     wild = qs + np.random.default_rng(12).normal(0.0, 0.3, qs.shape)  # inadmissible, some links unreachable
-    u = buffers.unpack(world._kernel.fbuf, world._kernel.ibuf)
+    u = unpack(world._kernel.fbuf, world._kernel.ibuf)
     for q in np.vstack([qs, wild]):
         ref_poses, ref_c = world._evaluate(q)
         poses, c = np.empty((len(world.names), 13)), np.empty(len(u.c_lo))

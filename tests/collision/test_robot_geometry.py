@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.kernels import buffers
+from planner.collision.kernels.packed import unpack
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
 from planner.meshio import load_mesh
@@ -48,7 +48,7 @@ def test_the_world_is_built_from_the_models_pieces(robot: Cabin8) -> None:
     assert world.model is model
     assert world.names == (*model.body_names, "payload")
     assert all(not model.adjacent(world.names[a], world.names[b]) for a, b in world.bodies.pairs)
-    u = buffers.unpack(world._kernel.fbuf, world._kernel.ibuf)
+    u = unpack(world._kernel.fbuf, world._kernel.ibuf)
     assert u.kernel == model.kernel
     np.testing.assert_array_equal(u.params, model.kernel_params)
     assert tuple(u.ratio_rows) == model.ratio_rows
@@ -63,7 +63,7 @@ def test_a_model_without_a_rail_body_gives_the_same_verdicts(robot: Cabin8) -> N
     world = CollisionWorld(robot, mesh, payload)
     bare = CollisionWorld(_NoRailCabin8(), mesh, payload)
     assert bare._carriage_table is None
-    assert buffers.unpack(bare._kernel.fbuf, bare._kernel.ibuf).carriage == -1
+    assert unpack(bare._kernel.fbuf, bare._kernel.ibuf).carriage == -1
     qs = admissible_joints(robot, 120, seed=5)
     qs[:, 0] = np.random.default_rng(5).uniform(0.2, 5.8, len(qs))
     verdicts = [world.is_valid(q) for q in qs]

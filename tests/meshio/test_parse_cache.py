@@ -19,6 +19,7 @@ import pytest
 from planner.core.exceptions import InvalidMesh
 from planner.meshio import MeshLimits, load_mesh
 from planner.meshio import load as mesh_load
+from tests.conftest import share_compiled_kernels
 from tests.meshio.test_load import box_mesh, export
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -108,6 +109,7 @@ def test_plan_command_imports_neither_trimesh_nor_matplotlib(cache: Path, tmp_pa
         "    print('LOADED', loaded)\n"
     )
     env = {**os.environ, "CABINPLAN_CACHE_DIR": str(cache)}
+    share_compiled_kernels(cache)
     runs = [
         subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
         for _ in range(2)

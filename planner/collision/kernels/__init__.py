@@ -14,8 +14,12 @@ By concern, each module importing only those above it:
 * :mod:`.state` -- one state check in one call (poses, bounds, verdict code);
 * :mod:`.walk` -- the certified motion walk, resumable around the FCL probes that stay in Python.
 
-Every kernel is compiled with ``cache=True`` (numba's on-disk cache next to these files). Numba checks a
-cached function against its own file only: after editing one of these modules, delete
+The Python side calls them through :mod:`.entries` (arguments checked), which runs their ahead-of-time
+build (:mod:`planner.core.aot`: an extension module keyed by a hash of these sources, so an edit makes a
+new build) or, without one, numba's JIT. :mod:`.buffers` and :mod:`.codes` import no numba.
+
+Under the JIT, every kernel is compiled with ``cache=True`` (numba's on-disk cache next to these files).
+Numba checks a cached function against its own file only: after editing one of these modules, delete
 ``planner/collision/kernels/__pycache__`` (and ``planner/robots/__pycache__`` after editing a robot's
 kernel) so that the kernels of the other modules that call into it are compiled again.
 """

@@ -25,13 +25,14 @@ import math
 import numpy as np
 from numba import njit
 
-from planner.collision.kernels.buffers import Packed, unpack
+from planner.collision.kernels.buffers import Packed
 from planner.collision.kernels.distances import (
     capsule_box_distance,
     capsule_box_distances,
     capsule_capsule_distance,
     capsule_pair_distances,
 )
+from planner.collision.kernels.packed import unpack
 from planner.collision.kernels.poses import admissible
 
 

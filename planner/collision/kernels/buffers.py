@@ -23,16 +23,16 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from planner.collision.bodies import BodySet, Shape
 from planner.collision.clearance_grid import ClearanceGrid
+from planner.core.aot import B1, F8, I8, check_array
 from planner.core.types import Array, BoolArray, IntArray
 from planner.robots.geometry import CollisionModel
 
 #: Integers before the int64 arrays: counts (bodies, fine spheres, coarse spheres, pairs, table length),
 #: has_grid, carriage, grid shape (3), then kernel code, counts (kernel parameters, constraints, ratio rows).
-_HEADER = 14
+HEADER = 14
 
 
 class Packed(NamedTuple):
@@ -77,7 +77,7 @@ def pack(data: Packed) -> tuple[Array, IntArray]:
     counts = [len(d.kinds), len(d.fine_r), len(d.coarse_r), len(d.pair_a), len(d.table)]
     header = [*counts, int(d.has_grid), int(d.carriage), *(int(x) for x in d.shape)]
     header += [int(d.kernel), len(d.params), len(d.c_lo), len(d.ratio_rows)]
-    ints = [np.array(header + [0] * (_HEADER - len(header)))]
+    ints = [np.array(header + [0] * (HEADER - len(header)))]
     ints += [d.kinds, d.fine_body, d.fine_bounds, d.coarse_body, d.coarse_bounds, d.pair_a, d.pair_b]
     ints += [d.capsule_pair, d.capsule_box, d.ratio_rows]
     floats = [d.T_tool_box, d.params, d.fine_local, d.fine_frac, d.fine_r, d.origin, [d.inv_step]]
@@ -86,79 +86,6 @@ def pack(data: Packed) -> tuple[Array, IntArray]:
     fbuf = np.ascontiguousarray(np.concatenate([np.asarray(f, dtype=np.float64).ravel() for f in floats]))
     ibuf = np.ascontiguousarray(np.concatenate([np.asarray(i, dtype=np.int64).ravel() for i in ints]))
     return fbuf, ibuf
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _cover_ints(ibuf: np.ndarray, o: int, n: int, n_b: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """(sphere body (n,), body bounds (n_b + 1,), next offset) of a packed sphere cover at ``o``."""
-    return ibuf[o : o + n], ibuf[o + n : o + n + n_b + 1], o + n + n_b + 1
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _cover_floats(fbuf: np.ndarray, f: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(local centres (n, 3), length fractions (n,), radii (n,), next offset) of a packed cover at ``f``."""
-    return (
-        fbuf[f : f + 3 * n].reshape((n, 3)),
-        fbuf[f + 3 * n : f + 4 * n],
-        fbuf[f + 4 * n : f + 5 * n],
-        f + 5 * n,
-    )
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def unpack(fbuf: np.ndarray, ibuf: np.ndarray) -> Packed:
-    """Views of the packed world data (:func:`pack`'s layout), by name."""
-    n_b, n_s, n_c, n_p, n_t = ibuf[0], ibuf[1], ibuf[2], ibuf[3], ibuf[4]
-    n_par, n_con, n_rat = ibuf[11], ibuf[12], ibuf[13]
-    kinds = ibuf[_HEADER : _HEADER + n_b]
-    fine_body, fine_bounds, o = _cover_ints(ibuf, _HEADER + n_b, n_s, n_b)
-    coarse_body, coarse_bounds, o = _cover_ints(ibuf, o, n_c, n_b)
-    pair_a = ibuf[o : o + n_p]
-    pair_b = ibuf[o + n_p : o + 2 * n_p]
-    capsule_pair = ibuf[o + 2 * n_p : o + 3 * n_p]
-    capsule_box = ibuf[o + 3 * n_p : o + 4 * n_p]
-    ratio_rows = ibuf[o + 4 * n_p : o + 4 * n_p + n_rat]
-    # Floats: T_tool_box (16), kernel parameters, fine cover, grid origin (3) and 1 / step, coarse cover.
-    fine_local, fine_frac, fine_r, f = _cover_floats(fbuf, 16 + n_par, n_s)
-    origin, inv_step = fbuf[f : f + 3], fbuf[f + 3]
-    coarse_local, coarse_frac, coarse_r, f = _cover_floats(fbuf, f + 4, n_c)
-    radius = fbuf[f : f + n_b]
-    half = fbuf[f + n_b : f + 4 * n_b].reshape((n_b, 3))
-    table = fbuf[f + 4 * n_b : f + 4 * n_b + n_t]
-    f += 4 * n_b + n_t
-    return Packed(
-        fbuf[0:16].reshape((4, 4)),
-        ibuf[10],
-        fbuf[16 : 16 + n_par],
-        kinds,
-        fine_body,
-        fine_local,
-        fine_frac,
-        fine_r,
-        fine_bounds,
-        origin,
-        inv_step,
-        ibuf[7:10],
-        ibuf[5] != 0,
-        coarse_body,
-        coarse_local,
-        coarse_frac,
-        coarse_r,
-        coarse_bounds,
-        pair_a,
-        pair_b,
-        radius,
-        capsule_pair,
-        half,
-        capsule_box,
-        ibuf[6],
-        table,
-        fbuf[f],
-        fbuf[f + 1],
-        fbuf[f + 2 : f + 2 + n_con],
-        fbuf[f + 2 + n_con : f + 2 + 2 * n_con],
-        ratio_rows,
-    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,6 +100,12 @@ class Cover:
     frac: Array  # (S,)
     radii: Array  # (S,)
     start: IntArray  # (B,)
+
+    def __post_init__(self) -> None:
+        """The arrays the kernels read have their entry types (:func:`planner.core.aot.check_array`)."""
+        check_array(self.body, "cover.body", I8, 1)
+        check_array(self.local, "cover.local", F8, 2)
+        check_array(self.frac, "cover.frac", F8, 1)
 
     @property
     def table(self) -> tuple[IntArray, Array, Array]:
@@ -198,9 +131,9 @@ def cover(shapes: tuple[Shape, ...], centres: tuple[Array, ...], radii: tuple[Ar
             frac.append(np.zeros(len(c)))
     counts = [len(r) for r in radii]
     return Cover(
-        np.concatenate(body),
-        np.ascontiguousarray(np.concatenate(local)),
-        np.concatenate(frac),
+        np.concatenate(body).astype(np.int64),
+        np.ascontiguousarray(np.concatenate(local), dtype=np.float64),
+        np.ascontiguousarray(np.concatenate(frac), dtype=np.float64),
         np.concatenate(radii),
         np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int),
     )
@@ -213,7 +146,11 @@ class KernelData:
     ``fbuf``/``ibuf`` are the packed buffers, ``grid`` the flat clearance lower-bound grid (C order; one
     dummy value without a cabin), ``upper_slack`` the grid's upper-bound slack (-1: no grid, which disables
     the certain-contact test). The covers and pair masks stay for the Python side (sphere centres for
-    :mod:`planner.plan.transit`, the reference route, the motion walk's reach bounds).
+    :mod:`planner.plan.transit`, the reference route, the motion walk's reach bounds), with the bodies'
+    reach bounds ``rho`` and rigid pair joints ``pair_rigid`` (the motion walk's segment reach).
+
+    Every array a kernel entry reads is checked for its entry type when the data is built, so the entries
+    (:mod:`.entries`) need not check them again on every call.
     """
 
     fbuf: Array
@@ -228,6 +165,22 @@ class KernelData:
     link_mask: BoolArray  # (B,) slope-dependent bodies (cabin8: the stage links; ``slope_bodies``)
     c_lo: Array
     c_hi: Array
+    rho: Array  # (B, n_joints) static reach bounds (``BodySet.rho``)
+    pair_rigid: BoolArray  # (P, n_joints) joint j moves both bodies of pair p rigidly
+
+    def __post_init__(self) -> None:
+        """The arrays the kernels read have their entry types (:func:`planner.core.aot.check_array`)."""
+        for name, value, dtype, ndim in (
+            ("fbuf", self.fbuf, F8, 1),
+            ("ibuf", self.ibuf, I8, 1),
+            ("grid", self.grid, F8, 1),
+            ("pair_a", self.pair_a, I8, 1),
+            ("pair_b", self.pair_b, I8, 1),
+            ("link_mask", self.link_mask, B1, 1),
+            ("rho", self.rho, F8, 2),
+            ("pair_rigid", self.pair_rigid, B1, 2),
+        ):
+            check_array(value, f"kernel data {name}", dtype, ndim)
 
 
 def build(
@@ -249,8 +202,8 @@ def build(
         fine_centres[carriage], fine_radii[carriage] = np.zeros((0, 3)), np.zeros(0)
     fine = cover(shapes, tuple(fine_centres), tuple(fine_radii))
     coarse = cover(shapes, bodies.coarse_centres, bodies.coarse_radii)
-    pair_a = np.array([a for a, _ in bodies.pairs], dtype=int)
-    pair_b = np.array([b for _, b in bodies.pairs], dtype=int)
+    pair_a = np.array([a for a, _ in bodies.pairs], dtype=np.int64)
+    pair_b = np.array([b for _, b in bodies.pairs], dtype=np.int64)
     kinds = [(shapes[a].kind, shapes[b].kind) for a, b in bodies.pairs]
     capsule_pair = np.array([k == ("capsule", "capsule") for k in kinds], dtype=np.bool_)
     capsule_box = np.array(
@@ -312,4 +265,6 @@ def build(
         link_mask=np.array([n in model.slope_bodies for n in names], dtype=bool),
         c_lo=c_lo,
         c_hi=c_hi,
+        rho=np.ascontiguousarray(bodies.rho, dtype=np.float64),
+        pair_rigid=np.ascontiguousarray(bodies.pair_rigid, dtype=np.bool_),
     )

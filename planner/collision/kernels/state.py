@@ -12,11 +12,12 @@ import numpy as np
 from numba import njit
 
 from planner.collision.kernels.bounds import bounds_of_state, certain_cabin_contact
-from planner.collision.kernels.buffers import Packed, unpack
+from planner.collision.kernels.buffers import Packed
+from planner.collision.kernels.codes import CLEAR, CONTACT, INADMISSIBLE, NOT_FINITE, UNDECIDED
+from planner.collision.kernels.packed import unpack
 from planner.collision.kernels.poses import poses_at
 
-#: Codes of :func:`packed_check`.
-CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
+__all__ = ["CLEAR", "CONTACT", "INADMISSIBLE", "NOT_FINITE", "UNDECIDED", "packed_check", "packed_poses"]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

@@ -15,7 +15,32 @@ import numpy as np
 from numba import njit
 
 from planner.collision.kernels.bounds import cabin_bound, pair_bound, pair_scratch
-from planner.collision.kernels.buffers import Packed, unpack
+from planner.collision.kernels.buffers import Packed
+from planner.collision.kernels.codes import (
+    CF_CLEARANCE,
+    CF_E,
+    CF_LAST,
+    CF_LEVEL0,
+    CF_MARGIN,
+    CF_OWN,
+    CF_PROBE_PROVEN,
+    CF_TFAIL,
+    CF_THRESHOLD,
+    CF_TSTOP,
+    CI_CABIN,
+    CI_COUNT,
+    CI_I,
+    CI_LEVELS,
+    CI_N,
+    CI_PHASE,
+    CI_SLOT,
+    CI_TASK,
+    WALK_DONE,
+    WALK_FAIL,
+    WALK_GROW,
+    WALK_PROBE,
+)
+from planner.collision.kernels.packed import unpack
 from planner.collision.kernels.poses import admissible, constraints_at, poses_at
 
 
@@ -116,15 +141,6 @@ def run_extent(qs: np.ndarray, i: int, j: int, rho: np.ndarray, max_extra: float
             return j, extra
         j = i + max(1, m // 2)
     return j, 0.0
-
-
-#: Codes of :func:`motion_walk`.
-WALK_DONE, WALK_PROBE, WALK_FAIL, WALK_GROW = 0, 1, 2, 3
-#: Slots of the walk's integer (``ci``) and float (``cf``) context arrays.
-CI_TASK, CI_I, CI_PHASE, CI_N, CI_COUNT, CI_SLOT, CI_LEVELS, CI_CABIN = 0, 1, 2, 3, 4, 5, 6, 7
-CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_PROBE_PROVEN = range(9)
-CF_LEVEL0 = 9
-CI_SIZE, CF_SIZE = 8, 13
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

@@ -1,0 +1,18 @@
+"""The codes and context slots the compiled kernels share with their Python callers (no numba import).
+
+:mod:`.state` and :mod:`.walk` read these names inside compiled code, the collision world and the motion
+walk in Python; keeping them here lets a plan served by the ahead-of-time build never import numba.
+"""
+
+from __future__ import annotations
+
+#: Codes of :func:`.state.packed_check`.
+CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
+
+#: Codes of :func:`.walk.motion_walk`.
+WALK_DONE, WALK_PROBE, WALK_FAIL, WALK_GROW = 0, 1, 2, 3
+#: Slots of the walk's integer (``ci``) and float (``cf``) context arrays.
+CI_TASK, CI_I, CI_PHASE, CI_N, CI_COUNT, CI_SLOT, CI_LEVELS, CI_CABIN = 0, 1, 2, 3, 4, 5, 6, 7
+CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_PROBE_PROVEN = range(9)
+CF_LEVEL0 = 9
+CI_SIZE, CF_SIZE = 8, 13

@@ -1,0 +1,198 @@
+"""The collision kernels as Python calls: arguments checked, then the ahead-of-time build or numba's JIT.
+
+The kernels (:mod:`.state`, :mod:`.walk`, :mod:`.bounds`, compiled with the robot's pose kernel of
+:mod:`planner.robots.kernels`) are exported as one extension module, :data:`EXTENSION`, built once per
+install by :mod:`planner.core.aot` (``make`` runs ``python -m planner.collision.kernels.build``; a plan
+that finds no build makes it before its clock starts). A plan served by the build never imports numba;
+without a build (no cache folder, ``CABINPLAN_KERNELS=jit``, no C compiler) the same functions run under
+numba's JIT. Both give the same numbers, bit for bit (``tests/collision/test_aot.py``).
+
+The build's entries do not check their arguments, so they are reached only through :class:`Kernels`: every
+array argument is checked for the dtype, number of dimensions, C order (and, for outputs, writability)
+of the entry's signature, every scalar converted; a world's constant arrays are checked once, when its
+:class:`~.buffers.KernelData` is built. A wrong argument raises ``TypeError`` naming it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from planner.collision.kernels.buffers import Cover, KernelData
+from planner.core import aot
+from planner.core.aot import F8, I8, Entry, check_array
+from planner.core.types import Array, IntArray
+
+_HERE = Path(__file__).resolve().parent
+_ROBOTS = _HERE.parent.parent / "robots"
+
+#: Inputs of a world's constant data: packed buffers (floats, ints) and the flat clearance grid.
+_DATA = ("f8[1]", "i8[1]")
+_GRID = "f8[1]"
+
+#: The collision kernels' extension: compiled from every module of this folder and the robots' kernels.
+EXTENSION = aot.Extension(
+    name="cabinplan_collision_kernels",
+    kernels_module="planner.collision.kernels.jit",
+    builder_module="planner.collision.kernels.build",
+    sources=(
+        *sorted(_HERE.glob("*.py")),
+        _ROBOTS / "kernels.py",
+        _ROBOTS / "cabin8_kernels.py",
+        _ROBOTS / "kernel_codes.py",
+    ),
+    entries=(
+        Entry("packed_check", ("f8[1]", *_DATA, _GRID, "f8", "f8", "f8"), "(i8,f8[2]w,f8[1]w,f8[1]w)"),
+        Entry("packed_state", ("f8[1]", *_DATA, _GRID, "f8"), "(f8[2]w,f8[1]w,f8[1]w,b1)"),
+        Entry("packed_poses", ("f8[2]", *_DATA, "f8[3]w", "f8[2]w"), "none"),
+        Entry("cover_centres_batch", ("f8[3]", "i8[1]", "f8[2]", "f8[1]"), "f8[3]w"),
+        Entry("run_extent", ("f8[2]", "i8", "i8", "f8[1]", "f8"), "(i8,f8)"),
+        Entry("first_inadmissible", ("f8[1]", "f8[1]", "i8", *_DATA), "i8"),
+        Entry("end_ratio", ("f8[1]", "f8[1]", *_DATA), "f8"),
+        Entry(
+            "segment_reach",
+            ("f8[2]", "b1[1]", "f8", "f8", "i8[1]", "i8[1]", "b1[2]", "f8[1]"),
+            "(f8[1]w,f8[1]w)",
+        ),
+        Entry(
+            "motion_walk",
+            ("i8[1]w", "f8[1]w", *(["f8[1]"] * 5), *_DATA, _GRID, "i8[1]w", "f8[3]w", "f8[2]w", "f8[2]w"),
+            "i8",
+        ),
+    ),
+)
+
+
+def _data(d: object) -> KernelData:
+    if not isinstance(d, KernelData):
+        raise TypeError(f"d: KernelData expected, got {type(d).__name__}")
+    return d
+
+
+class Kernels:
+    """The entries of the collision kernels on one implementation, with checked arguments.
+
+    ``module``: the ahead-of-time build or the JIT dispatchers (:mod:`.jit`); None (the default) takes
+    :func:`planner.core.aot.kernels` on the first call.
+    """
+
+    def __init__(self, module: Any = None) -> None:
+        self._module = module
+
+    @property
+    def module(self) -> Any:
+        """The implementation (resolved on first use)."""
+        if self._module is None:
+            self._module = aot.kernels(EXTENSION)
+        return self._module
+
+    def packed_check(
+        self, q: Array, d: KernelData, clearance: float, self_clearance: float, upper_slack: float
+    ) -> tuple[int, Array, Array, Array]:
+        """:func:`.state.packed_check` on a world's data: (code, poses (B, 13), cabin (B,), pairs (P,))."""
+        d = _data(d)
+        return self.module.packed_check(
+            check_array(q, "q", F8, 1),
+            d.fbuf,
+            d.ibuf,
+            d.grid,
+            float(clearance),
+            float(self_clearance),
+            float(upper_slack),
+        )
+
+    def packed_state(self, q: Array, d: KernelData, threshold: float) -> tuple[Array, Array, Array, bool]:
+        """:func:`.state.packed_state`: (poses (B, 13), cabin bounds (B,), pair bounds (P,), admissible)."""
+        d = _data(d)
+        q = check_array(q, "q", F8, 1)
+        return self.module.packed_state(q, d.fbuf, d.ibuf, d.grid, float(threshold))
+
+    def packed_poses(self, qs: Array, d: KernelData, poses: Array, c: Array) -> None:
+        """:func:`.state.packed_poses`: poses (N, B, 13) and c(q) (N, m) of (N, n) joints, in place."""
+        d = _data(d)
+        self.module.packed_poses(
+            check_array(qs, "qs", F8, 2),
+            d.fbuf,
+            d.ibuf,
+            check_array(poses, "poses", F8, 3, out=True),
+            check_array(c, "c", F8, 2, out=True),
+        )
+
+    def cover_centres_batch(self, poses: Array, cover: Cover) -> Array:
+        """:func:`.bounds.cover_centres_batch`: world centres (N, S, 3) of a cover for poses (N, B, 13)."""
+        if not isinstance(cover, Cover):
+            raise TypeError(f"cover: Cover expected, got {type(cover).__name__}")
+        poses = check_array(poses, "poses", F8, 3)
+        return self.module.cover_centres_batch(poses, cover.body, cover.local, cover.frac)
+
+    def run_extent(self, qs: Array, i: int, j: int, rho: Array, max_extra: float) -> tuple[int, float]:
+        """:func:`.walk.run_extent`: (last sample, extra clearance) of the run from sample i."""
+        return self.module.run_extent(
+            check_array(qs, "qs", F8, 2), int(i), int(j), check_array(rho, "rho", F8, 1), float(max_extra)
+        )
+
+    def first_inadmissible(self, q_a: Array, dq: Array, n_fine: int, d: KernelData) -> int:
+        """:func:`.walk.first_inadmissible`: the first failing limit sample, -1: none."""
+        d = _data(d)
+        return self.module.first_inadmissible(
+            check_array(q_a, "q_a", F8, 1), check_array(dq, "dq", F8, 1), int(n_fine), d.fbuf, d.ibuf
+        )
+
+    def end_ratio(self, q_a: Array, q_b: Array, d: KernelData) -> float:
+        """:func:`.walk.end_ratio`: the largest slope ratio at the two ends."""
+        d = _data(d)
+        return self.module.end_ratio(
+            check_array(q_a, "q_a", F8, 1), check_array(q_b, "q_b", F8, 1), d.fbuf, d.ibuf
+        )
+
+    def segment_reach(self, d: KernelData, k: float, h: float, adq: Array) -> tuple[Array, Array]:
+        """:func:`.walk.segment_reach` of a world's bodies: displacement bounds of bodies (B,), pairs (P,)."""
+        d = _data(d)
+        return self.module.segment_reach(
+            d.rho,
+            d.link_mask,
+            float(k),
+            float(h),
+            d.pair_a,
+            d.pair_b,
+            d.pair_rigid,
+            check_array(adq, "adq", F8, 1),
+        )
+
+    def motion_walk(
+        self,
+        ci: IntArray,
+        cf: Array,
+        q_a: Array,
+        q_b: Array,
+        dq: Array,
+        reach: Array,
+        pair_reach: Array,
+        d: KernelData,
+        slot_of: IntArray,
+        poses: Array,
+        cabin: Array,
+        pairs: Array,
+    ) -> int:
+        """:func:`.walk.motion_walk` on a world's data (resumable; the state store is written in place)."""
+        d = _data(d)
+        return self.module.motion_walk(
+            check_array(ci, "ci", I8, 1, out=True),
+            check_array(cf, "cf", F8, 1, out=True),
+            check_array(q_a, "q_a", F8, 1),
+            check_array(q_b, "q_b", F8, 1),
+            check_array(dq, "dq", F8, 1),
+            check_array(reach, "reach", F8, 1),
+            check_array(pair_reach, "pair_reach", F8, 1),
+            d.fbuf,
+            d.ibuf,
+            d.grid,
+            check_array(slot_of, "slot_of", I8, 1, out=True),
+            check_array(poses, "poses", F8, 3, out=True),
+            check_array(cabin, "cabin", F8, 2, out=True),
+            check_array(pairs, "pairs", F8, 2, out=True),
+        )
+
+
+#: The kernels every world uses: the ahead-of-time build when there is one, resolved on first use.
+DEFAULT = Kernels()

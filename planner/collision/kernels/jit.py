@@ -1,0 +1,29 @@
+"""The numba dispatchers of the collision kernels' entries, in one namespace (imports numba).
+
+:mod:`.entries` calls these when no ahead-of-time build is used, and the build compiles them
+(:data:`.entries.EXTENSION`); their names are the entry names.
+"""
+
+from __future__ import annotations
+
+from planner.collision.kernels.bounds import cover_centres_batch
+from planner.collision.kernels.state import packed_check, packed_poses, packed_state
+from planner.collision.kernels.walk import (
+    end_ratio,
+    first_inadmissible,
+    motion_walk,
+    run_extent,
+    segment_reach,
+)
+
+__all__ = [
+    "cover_centres_batch",
+    "end_ratio",
+    "first_inadmissible",
+    "motion_walk",
+    "packed_check",
+    "packed_poses",
+    "packed_state",
+    "run_extent",
+    "segment_reach",
+]

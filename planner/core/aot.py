@@ -1,0 +1,402 @@
+"""Ahead-of-time builds of numba kernels: one extension module per layer that owns kernels, cached on disk.
+
+numba compiles a kernel on first use and keeps it in its own on-disk cache, but even a cached kernel costs
+a fresh process the import of numba and llvmlite (~0.1 s), its type registries on the first load (~0.14 s)
+and 2-20 ms per further kernel. An extension module built by ``numba.pycc`` from the same kernels imports
+in well under a millisecond and needs neither numba nor llvmlite at run time.
+
+A layer describes its extension as an :class:`Extension`: the module name, the source files the kernels
+are compiled from, the module holding the ``@njit`` kernels and the exported entries with their argument
+types (:class:`Entry`, in a small type language: ``"f8"``, ``"i8"``, ``"b1"`` scalars, ``"f8[2]"`` a
+read-only C-contiguous 2-D float64 array, ``"f8[2]w"`` a writable one, tuples ``"(i8,f8[1])"``,
+``"none"``). :func:`kernels` gives the entries of the extension when its build for this key is in the
+cache folder (``cache_dir()/native/<name>-<key><suffix>``), building it first when it is missing (in a
+subprocess, under a file lock, atomically renamed into place), and numba's JIT dispatchers of the same
+functions otherwise: no cache folder (``CABINPLAN_CACHE_DIR=""``), ``CABINPLAN_KERNELS=jit``, or a build
+that failed (no C compiler: one warning, and a marker file so later processes do not try again).
+
+The key is a hash of the kernel source files (and of this module), the numba, numpy and Python versions,
+the platform and the target CPU (the build is compiled for this machine's CPU; its model and feature
+flags are part of the key, so a cache folder shared with another machine never loads code for the wrong
+CPU).
+
+The extension's entries do not check their arguments: an array of another dtype, layout or number of
+dimensions is read as if it had the declared one (wrong numbers or a crash). Each layer therefore reaches
+them only through Python wrappers that check every array (:func:`check_array`) and convert scalars.
+This module imports numba only to build.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import importlib.machinery
+import importlib.util
+import logging
+import os
+import platform
+import subprocess
+import sys
+import sysconfig
+import tempfile
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from planner.core.cache import cache_dir, prune, touch
+
+log = logging.getLogger(__name__)
+
+#: ``CABINPLAN_KERNELS``: ``auto`` (the default: the ahead-of-time build, built on first use) or ``jit``.
+MODES = ("auto", "jit")
+#: Target CPU of the builds: the machine's own (as numba's JIT; its identity is part of the key).
+TARGET_CPU = "host"
+#: Longest a build may take [s] before the JIT is used instead.
+BUILD_TIMEOUT_S = 900.0
+
+_DTYPES = {"f8": np.dtype(np.float64), "i8": np.dtype(np.int64), "b1": np.dtype(np.bool_)}
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One exported kernel: its name in the kernels module, argument types and return type."""
+
+    name: str
+    args: tuple[str, ...]
+    returns: str
+
+
+@dataclass(frozen=True)
+class Extension:
+    """A layer's extension module: what it is compiled from and what it exports.
+
+    Attributes:
+        name: The extension module's name (``[A-Za-z0-9_]``), also the stem of its cache entries.
+        kernels_module: The dotted name of the module holding the ``@njit`` functions of ``entries``.
+        builder_module: The dotted name of the module that builds it when run as ``python -m``.
+        sources: Every source file the kernels are compiled from (their bytes are in the key).
+        entries: The exported kernels.
+    """
+
+    name: str
+    kernels_module: str
+    builder_module: str
+    sources: tuple[Path, ...]
+    entries: tuple[Entry, ...]
+
+
+def mode() -> str:
+    """``CABINPLAN_KERNELS`` (``auto`` unless set to ``jit``)."""
+    value = os.environ.get("CABINPLAN_KERNELS", "auto").strip().lower() or "auto"
+    if value not in MODES:
+        log.warning("CABINPLAN_KERNELS=%r is neither of %s; using auto", value, MODES)
+        return "auto"
+    return value
+
+
+def _cpu_identity() -> str:
+    """This machine's CPU: model and feature flags (Linux), else what ``platform`` reports."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            lines = [ln for ln in f.read().split("\n\n", 1)[0].splitlines()]
+        keep = ("vendor_id", "cpu family", "model", "model name", "flags", "Features", "CPU part")
+        return "\n".join(ln for ln in lines if ln.split(":", 1)[0].strip() in keep)
+    except OSError:
+        return f"{platform.machine()} {platform.processor()}"
+
+
+def _numba_version() -> str:
+    """The version file of numba, read without importing numba (empty when numba is not installed)."""
+    spec = importlib.util.find_spec("numba")
+    if spec is None or spec.origin is None:
+        return ""
+    try:
+        return (Path(spec.origin).parent / "_version.py").read_text(encoding="utf-8")
+    except OSError:
+        return spec.origin
+
+
+def key(ext: Extension) -> str:
+    """The hash of everything the build depends on (24 hex digits)."""
+    h = hashlib.sha256()
+    for path in (*ext.sources, Path(__file__)):  # this module's build steps are part of the build
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    for part in (
+        repr(ext.entries),
+        _numba_version(),
+        np.__version__,
+        sys.version,
+        sysconfig.get_platform(),
+        _suffix(),
+        TARGET_CPU,
+        _cpu_identity(),
+    ):
+        h.update(part.encode() + b"\0")
+    return h.hexdigest()[:24]
+
+
+def _suffix() -> str:
+    return importlib.machinery.EXTENSION_SUFFIXES[0]
+
+
+def folder() -> Path | None:
+    """The folder of the builds (``cache_dir()/native``), or None without a cache folder."""
+    root = cache_dir()
+    return None if root is None else root / "native"
+
+
+def path(ext: Extension) -> Path | None:
+    """Where the build of ``ext`` for the current key lives (None without a cache folder)."""
+    where = folder()
+    return None if where is None else where / f"{ext.name}-{key(ext)}{_suffix()}"
+
+
+def load(ext: Extension) -> ModuleType | None:
+    """The extension built for the current key, loaded, or None when it is not in the cache."""
+    lib = path(ext)
+    if lib is None or not lib.is_file():
+        return None
+    module = _LOADED.get(str(lib))
+    if module is not None:
+        return module
+    spec = importlib.util.spec_from_file_location(ext.name, lib)
+    if spec is None or spec.loader is None:
+        return None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    _LOADED[str(lib)] = module  # not in sys.modules: builds of other keys may be loaded beside it
+    touch(lib)
+    return module
+
+
+_LOADED: dict[str, ModuleType] = {}
+
+
+def jit_kernels(ext: Extension) -> ModuleType:
+    """The module of numba's JIT dispatchers of the entries (imports numba)."""
+    return importlib.import_module(ext.kernels_module)
+
+
+_WARNED: set[str] = set()
+
+
+def kernels(ext: Extension) -> Any:
+    """The entries of ``ext``: the ahead-of-time build (built now if missing), or numba's JIT.
+
+    Call it before a plan's clock starts: a missing build takes about 15 s of compilation.
+    """
+    if mode() == "jit" or folder() is None:
+        return jit_kernels(ext)
+    try:
+        module = load(ext)
+        if module is None:
+            module = _build_in_subprocess(ext)
+        if module is not None:
+            return module
+    except (OSError, ImportError, subprocess.SubprocessError) as exc:
+        _warn(ext, f"{type(exc).__name__}: {exc}")
+    return jit_kernels(ext)
+
+
+def _warn(ext: Extension, reason: str) -> None:
+    if ext.name not in _WARNED:
+        _WARNED.add(ext.name)
+        log.warning("kernels %s: no ahead-of-time build (%s); using numba's JIT", ext.name, reason)
+
+
+def _failed_marker(lib: Path) -> Path:
+    return lib.with_name(lib.name + ".failed")
+
+
+def _build_in_subprocess(ext: Extension) -> ModuleType | None:
+    """Build ``ext`` in a child process under a file lock (another process may be building it)."""
+    lib = path(ext)
+    assert lib is not None
+    marker = _failed_marker(lib)
+    if marker.is_file():
+        _warn(ext, f"an earlier build failed, see {marker}")
+        return None
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    with _Lock(lib.parent / f"{ext.name}.lock"):
+        if not lib.is_file() and not marker.is_file():
+            log.info("kernels %s: building the ahead-of-time extension (once per install)", ext.name)
+            started = time.perf_counter()
+            root = str(Path(__file__).resolve().parents[2])  # the folder holding the planner package
+            paths = [root, *(p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p)]
+            env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+            run = subprocess.run(
+                [sys.executable, "-m", ext.builder_module],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=BUILD_TIMEOUT_S,
+            )
+            if run.returncode != 0 or not lib.is_file():
+                reason = (run.stderr or run.stdout).strip().splitlines()[-1:] or ["no output"]
+                marker.write_text(run.stderr[-20000:] + run.stdout[-5000:], encoding="utf-8")
+                _warn(ext, f"the build failed: {reason[0]}")
+                return None
+            log.info("kernels %s: built in %.0f s", ext.name, time.perf_counter() - started)
+    if marker.is_file():
+        _warn(ext, f"the build failed, see {marker}")
+        return None
+    return load(ext)
+
+
+class _Lock:
+    """An exclusive ``flock`` on a file for the ``with`` block (no lock where ``fcntl`` is missing)."""
+
+    def __init__(self, lock_path: Path) -> None:
+        self.path = lock_path
+        self.fd: int | None = None
+
+    def __enter__(self) -> None:
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not POSIX
+            return
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        fcntl.flock(self.fd, fcntl.LOCK_EX)
+
+    def __exit__(self, *exc: object) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # closing releases the lock
+            self.fd = None
+
+
+def build(ext: Extension) -> Path:
+    """Compile the entries of ``ext`` with ``numba.pycc`` into the cache folder (imports numba).
+
+    The build is written in a temporary folder beside its place and renamed into it: a reader sees the
+    whole extension or none. Earlier builds of the same extension count against the cache's size bound.
+
+    Raises:
+        OSError: no cache folder, or the build could not be written.
+        Exception: whatever numba or the C compiler raise when the build fails.
+    """
+    lib = path(ext)
+    if lib is None:
+        raise OSError("no cache folder (CABINPLAN_CACHE_DIR is empty)")
+    from numba.pycc import CC  # noqa: PLC0415 - numba only to build
+
+    kernels_module = importlib.import_module(ext.kernels_module)
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    with (
+        tempfile.TemporaryDirectory(dir=lib.parent, prefix=f"{ext.name}-build-") as tmp,
+        _arrays_boxed_with_a_cached_type(),
+    ):
+        cc = CC(ext.name)
+        cc.output_dir = tmp
+        cc.target_cpu = TARGET_CPU
+        cc.verbose = False
+        for entry in ext.entries:
+            dispatcher = getattr(kernels_module, entry.name)
+            cc.export(entry.name, signature(entry))(dispatcher.py_func)
+        cc.compile()
+        built = next(Path(tmp).glob(f"{ext.name}*{_suffix()}"))
+        os.replace(built, lib)
+    _failed_marker(lib).unlink(missing_ok=True)
+    prune(lib.parent, (f"{ext.name}-*{_suffix()}",))
+    return lib
+
+
+@contextlib.contextmanager
+def _arrays_boxed_with_a_cached_type() -> Iterator[None]:
+    """Box returned arrays with the array type read from the module's constants, not unpickled per call.
+
+    numba boxes a returned array with its Python type (``numpy.ndarray``) embedded as a pickle; under the
+    JIT the unpickled object is cached, but an extension built by ``numba.pycc`` runs ``pickle.loads`` on
+    every array it returns (measured: +0.35 us an array, +1 us on a state check returning three). This
+    boxes them as numba does, with the type added to the environment's constants like the dtype already
+    is (unpickled once, when the extension is imported). Only the boxing of results differs: the compiled
+    arithmetic is the same (``tests/test_aot.py`` compares the bits).
+    """
+    from llvmlite import ir  # type: ignore[import-untyped]  # noqa: PLC0415 - numba only to build
+    from numba.core import boxing, cgutils, types  # noqa: PLC0415
+    from numba.core.pythonapi import _boxers  # noqa: PLC0415
+    from numba.np import numpy_support  # noqa: PLC0415
+
+    original = boxing.box_array
+    assert _boxers.functions[types.Array] is original
+
+    def box_array(typ: Any, val: Any, c: Any) -> Any:
+        if not c.context.enable_nrt:
+            return original(typ, val, c)
+        dtype = c.env_manager.read_const(c.env_manager.add_const(numpy_support.as_dtype(typ.dtype)))
+        pytype = c.env_manager.read_const(c.env_manager.add_const(typ.box_type))
+        api, i32 = c.pyapi, ir.IntType(32)
+        fnty = ir.FunctionType(api.pyobj, [api.voidptr, api.pyobj, i32, i32, api.pyobj])
+        fn = api._get_function(fnty, name="NRT_adapt_ndarray_to_python_acqref")
+        fn.args[0].add_attribute("captures(none)")
+        ndim = c.context.get_constant(types.int32, typ.ndim)
+        writable = c.context.get_constant(types.int32, int(typ.mutable))
+        ptr = cgutils.alloca_once_value(c.builder, val)
+        out = c.builder.call(fn, [c.builder.bitcast(ptr, api.voidptr), pytype, ndim, writable, dtype])
+        c.context.nrt.decref(c.builder, typ, val)  # the new array holds the reference
+        return out
+
+    _boxers.functions[types.Array] = box_array
+    try:
+        yield
+    finally:
+        _boxers.functions[types.Array] = original
+
+
+def signature(entry: Entry) -> Any:
+    """The numba signature of an entry (imports numba)."""
+    return _type(entry.returns)(*(_type(a) for a in entry.args))
+
+
+def _type(code: str) -> Any:
+    """A numba type from the small type language of :class:`Entry`."""
+    from numba import types  # noqa: PLC0415 - numba only to build
+
+    code = code.strip()
+    if code == "none":
+        return types.none
+    if code.startswith("("):
+        return types.Tuple([_type(part) for part in code[1:-1].split(",")])
+    scalars = {"f8": types.float64, "i8": types.int64, "b1": types.boolean}
+    if "[" not in code:
+        return scalars[code]
+    base, rest = code.split("[", 1)
+    ndim, flags = rest.split("]")
+    return types.Array(scalars[base], int(ndim), "C", readonly=flags != "w")
+
+
+#: The dtypes of the entry types, for :func:`check_array`.
+F8, I8, B1 = _DTYPES["f8"], _DTYPES["i8"], _DTYPES["b1"]
+
+
+def check_array(value: object, name: str, dtype: np.dtype[Any], ndim: int, out: bool = False) -> np.ndarray:
+    """``value`` if it is a C-contiguous ``ndim``-D array of ``dtype`` (and writable, for an ``out``).
+
+    Raises:
+        TypeError: naming ``name``, when it is not: an extension entry would read it wrongly.
+    """
+    if (
+        isinstance(value, np.ndarray)
+        and value.dtype == dtype
+        and value.ndim == ndim
+        and value.flags.c_contiguous
+        and (not out or value.flags.writeable)
+    ):
+        return value
+    got = (
+        f"{value.dtype} array of shape {value.shape} (C-contiguous {value.flags.c_contiguous}, "
+        f"writable {value.flags.writeable})"
+        if isinstance(value, np.ndarray)
+        else type(value).__name__
+    )
+    what = "a writable" if out else "a"
+    raise TypeError(f"{name}: {what} C-contiguous {ndim}-D {dtype} array expected, got {got}")
+
+
+def main(ext: Extension) -> None:
+    """``python -m <builder module>``: build ``ext`` into the cache folder and print where."""
+    sys.stdout.write(f"{build(ext)}\n")
