@@ -27,8 +27,9 @@ killed and re-queued without counting the attempt.
 
 Job processes die with the service: they arm a parent-death signal and the forkserver watches the
 server (:mod:`api.lifeline`), so a SIGKILLed server leaves no process behind. Before it claims the
-first job the runner starts the forkserver and waits for its warm-up (imports, numba kernels compiled
-or loaded from their cache, one reference plan): ``/ready`` answers 503 with stage ``compiling kernels``
+first job the runner starts the forkserver and waits for its warm-up (imports, the collision kernels
+loaded from their ahead-of-time build, or built first on a fresh install -- numba's JIT without a C
+compiler --, one reference plan): ``/ready`` answers 503 with stage ``compiling kernels``
 until then, and no job's time limit is spent on it.
 """
 
@@ -62,7 +63,8 @@ MAX_ATTEMPTS = 2
 #: Stage reported (``/ready``, queued jobs) while the forkserver warms up.
 WARMUP_STAGE = "compiling kernels"
 
-#: Longest wait for the forkserver's warm-up [s] (a fresh machine compiles the numba kernels: ~2 min).
+#: Longest wait for the forkserver's warm-up [s] (a fresh machine builds the kernels: 15-30 s, up to
+#: ~2 min for numba's JIT on a loaded machine without a C compiler).
 WARMUP_TIMEOUT_S = 900.0
 
 #: Period of the retention purge [s].
