@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import importlib.machinery
+import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -70,3 +74,31 @@ def share_compiled_kernels(cache_root: Path) -> None:
     for built in SESSION_BUILDS:
         (cache_root / "native").mkdir(parents=True, exist_ok=True)
         shutil.copy2(built, cache_root / "native" / built.name)
+
+
+def plan_in_a_fresh_process(
+    scenario: Path, out: Path, watched: tuple[str, ...], env: dict[str, str] | None = None
+) -> tuple[subprocess.CompletedProcess[str], list[str]]:
+    """Run ``cabinplan plan SCENARIO -o OUT`` in a new interpreter; also which of ``watched`` it imported.
+
+    A module counts as imported when it is a real module object at the end (a deferred stand-in of
+    :mod:`planner.core.lazy` that was never touched does not).
+    """
+    root = Path(__file__).resolve().parents[1]
+    code = (
+        "import json, sys\n"
+        f"sys.argv = ['cabinplan', 'plan', {str(scenario)!r}, '-o', {str(out)!r}]\n"
+        "from planner import cli\n"
+        "try:\n"
+        "    cli.app(standalone_mode=False)\n"
+        "finally:\n"
+        f"    watched = {watched!r}\n"
+        "    loaded = sorted(m for m in watched if type(sys.modules.get(m)).__name__ == 'module')\n"
+        "    print('LOADED', json.dumps(loaded))\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code], cwd=root, env=env or dict(os.environ), capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    line = next(ln for ln in run.stdout.splitlines() if ln.startswith("LOADED "))
+    return run, json.loads(line[len("LOADED ") :])

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import logging
 import os
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +25,7 @@ from planner.scenario import load_scenario
 from planner.timing import reference
 from planner.timing.jerk import JerkLimitedStage
 from planner.timing.path import JointPath, LinePiece, segment_time_length
-from tests.conftest import admissible_joints
+from tests.conftest import admissible_joints, plan_in_a_fresh_process
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "tests" / "scenarios"
@@ -202,19 +200,9 @@ def test_a_plan_served_by_the_build_never_imports_numba(tmp_path: Path) -> None:
     _built(EXTENSION)
     _built(reference.EXTENSION)
     scenario = SCENARIOS / "aisle-transfer.yaml"
-    code = (
-        "import sys\n"
-        f"sys.argv = ['cabinplan', 'plan', {str(scenario)!r}, '-o', {str(tmp_path / 'out.json')!r}]\n"
-        "from planner import cli\n"
-        "try:\n"
-        "    cli.app(standalone_mode=False)\n"
-        "finally:\n"
-        "    print('LOADED', sorted(m for m in ('numba', 'llvmlite') if m in sys.modules))\n"
-    )
     env = {k: v for k, v in os.environ.items() if k != "CABINPLAN_KERNELS"}
-    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr[-2000:]
-    assert "LOADED []" in run.stdout, run.stdout
+    _, loaded = plan_in_a_fresh_process(scenario, tmp_path / "out.json", ("numba", "llvmlite"), env)
+    assert loaded == []
     assert '"succeeded"' in (tmp_path / "out.json").read_text()
 
 

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +17,7 @@ import pytest
 from planner.core.exceptions import InvalidMesh
 from planner.meshio import MeshLimits, load_mesh
 from planner.meshio import load as mesh_load
-from tests.conftest import share_compiled_kernels
+from tests.conftest import plan_in_a_fresh_process, share_compiled_kernels
 from tests.meshio.test_load import box_mesh, export
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -97,28 +95,14 @@ def test_no_cache_folder_means_no_cache(tmp_path: Path, monkeypatch: pytest.Monk
 def test_plan_command_imports_neither_trimesh_nor_matplotlib(cache: Path, tmp_path: Path) -> None:
     """Start-up: a warm ``cabinplan plan`` imports no module it does not need (issue 13, item 5)."""
     scenario = ROOT / "tests" / "scenarios" / "aisle-transfer.yaml"
-    code = (
-        "import sys\n"
-        f"sys.argv = ['cabinplan', 'plan', {str(scenario)!r}, '-o', {str(tmp_path / 'out.json')!r}]\n"
-        "from planner import cli\n"
-        "try:\n"
-        "    cli.app(standalone_mode=False)\n"
-        "finally:\n"
-        "    unused = ('trimesh', 'matplotlib', 'PIL', 'fastapi', 'sqlalchemy', 'qpsolvers', 'jinja2')\n"
-        "    loaded = sorted(m for m in unused if type(sys.modules.get(m)).__name__ == 'module')\n"
-        "    print('LOADED', loaded)\n"
-    )
+    unused = ("trimesh", "matplotlib", "PIL", "fastapi", "sqlalchemy", "qpsolvers", "jinja2")
     env = {**os.environ, "CABINPLAN_CACHE_DIR": str(cache)}
     share_compiled_kernels(cache)
-    runs = [
-        subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
-        for _ in range(2)
-    ]
-    for run in runs:
-        assert run.returncode == 0, run.stderr[-2000:]
+    _, first = plan_in_a_fresh_process(scenario, tmp_path / "out.json", unused, env)
+    _, second = plan_in_a_fresh_process(scenario, tmp_path / "out.json", unused, env)
     assert json.loads((tmp_path / "out.json").read_text())["status"] == "succeeded"
-    assert "trimesh" in runs[0].stdout  # the first call parses the cabin
-    assert "LOADED []" in runs[1].stdout, runs[1].stdout  # the second reads the parse back
+    assert "trimesh" in first  # the first call parses the cabin
+    assert second == []  # the second reads the parse back
 
 
 def test_a_change_to_our_parsing_code_invalidates_the_cached_parses(
