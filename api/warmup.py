@@ -1,7 +1,7 @@
 """Preloaded by the job forkserver: imports the planner and plans one reference-like scenario, once.
 
 Every job process is forked from the forkserver, so it inherits what this warm-up loaded (compiled
-CasADi functions, numba kernels compiled or loaded from their cache, the reference cabin's clearance
+CasADi functions, the compiled kernels loaded from their ahead-of-time build, the reference cabin's clearance
 grid, matplotlib's font cache) and starts planning at once instead of spending seconds warming up.
 Importing this module has that side effect on purpose; nothing else imports it.
 """
@@ -17,8 +17,9 @@ from api.worker import plan_job
 _LOG = logging.getLogger(__name__)
 
 #: A bay insertion in the reference aisle cabin with a 60 kg box payload, a pose goal and a straight
-#: approach: every stage and kernel a typical job uses (on a fresh machine numba compiles them here, once,
-#: ~45 s, and writes its cache; afterwards the warm-up takes a few seconds).
+#: approach: every stage and kernel a typical job uses (on a fresh machine the kernels are built here, once,
+#: 15-30 s -- numba's JIT, ~45 s, without a C compiler -- and cached; afterwards the warm-up takes a few
+#: seconds).
 WARMUP_SCENARIO = {
     "name": "warmup",
     "robot": "cabin8",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -87,7 +88,7 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
                 _same(got, jit.packed_check(q, d, clearance, 0.01, slack), "packed_check")
                 seen.add(int(got[0]))
         _same(built.packed_state(q, d, 0.07), jit.packed_state(q, d, 0.07), "packed_state")
-    assert {codes.CLEAR, codes.INADMISSIBLE, codes.UNDECIDED, codes.NOT_FINITE} <= seen, seen
+    assert {codes.CLEAR, codes.INADMISSIBLE, codes.UNDECIDED, codes.NOT_FINITE, codes.CONTACT} <= seen, seen
     n_b, m = len(world.names), len(d.c_lo)
     out = [(np.empty((len(qs), n_b, 13)), np.empty((len(qs), m))) for _ in range(2)]
     built.packed_poses(qs, d, *out[0])
@@ -273,3 +274,108 @@ def test_a_missing_build_is_built_at_first_use(tmp_path: Path, monkeypatch: pyte
         np.full(2, 0.5), *rows, np.ones(3), implementation=aot.jit_kernels(reference.EXTENSION)
     )
     assert x.tobytes() == jit.tobytes() and x[0] == x[-1] == 0.0
+
+
+def test_wrong_shapes_and_walk_states_are_refused_and_the_worlds_data_is_read_only(
+    both: tuple[Kernels, Kernels],
+) -> None:
+    """Shapes the compiled code would read or write past: ValueError by name; the world's data is frozen."""
+    built = both[0]
+    robot = Cabin8()
+    world = CollisionWorld(robot, None, None)
+    d = world._kernel
+    q = robot.joints_from_drives(robot.home_drives).astype(float)
+    b, m = len(world.names), len(d.c_lo)
+    cases = [
+        (lambda: built.packed_check(q[:7].copy(), d, 0.01, 0.01, -1.0), "q"),  # 7 of 8 joints
+        (lambda: built.packed_state(np.append(q, 0.0), d, 0.07), "q"),
+        (lambda: built.packed_poses(q[None, :], d, np.empty((1, 2, 13)), np.empty((1, m))), "poses"),
+        (lambda: built.packed_poses(q[None, :], d, np.empty((1, b, 13)), np.empty((1, 1))), "c"),
+        (lambda: built.cover_centres_batch(np.empty((1, 2, 13)), d.fine), "poses"),
+        (lambda: built.segment_reach(d, 1.0, 0.2, np.ones(3)), "adq"),
+        (lambda: built.run_extent(np.stack([q, q]), 0, 2, np.ones(8), 0.1), "run_extent"),
+        (lambda: built.run_extent(np.stack([q, q]), 0, 1, np.ones(7), 0.1), "rho"),
+        (lambda: built.first_inadmissible(q, 0.0 * q, 0, d), "first_inadmissible"),
+    ]
+    for call, name in cases:
+        with pytest.raises(ValueError, match=f"^{name}: "):
+            call()
+    for arr in (d.fbuf, d.ibuf, d.grid, d.rho, d.pair_a, d.fine.body, d.fine.local):
+        assert not arr.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        d.ibuf[0] = 100  # a count the kernels trust
+    # A motion walk whose bookkeeping does not fit its store is refused before it resumes.
+    n = 4
+    ci, cf = np.zeros(codes.CI_SIZE, dtype=np.int64), np.zeros(codes.CF_SIZE)
+    ci[codes.CI_N] = n
+    slot_of = np.full(n + 1, -1, dtype=np.int64)
+    store = np.empty((2, b, 13)), np.empty((2, b)), np.empty((2, len(d.pair_a)))
+    reach, pair_reach = np.zeros(b), np.zeros(len(d.pair_a))
+    for bad in ("slots", "count", "slot"):
+        c_i, s_o = ci.copy(), slot_of.copy()
+        if bad == "slots":
+            s_o = np.full(n, -1, dtype=np.int64)
+        elif bad == "count":
+            c_i[codes.CI_COUNT] = 3  # more states than the store holds
+        else:
+            s_o[1] = 1  # a slot the walk never filled
+        with pytest.raises(ValueError, match="^(slot_of|motion_walk): "):
+            built.motion_walk(c_i, cf.copy(), q, q, 0.0 * q, reach, pair_reach, d, s_o, *store)
+
+
+def test_the_build_is_compiled_with_the_kernels_error_model(both: tuple[Kernels, Kernels]) -> None:
+    """An entry's own arithmetic follows its kernel's options (numpy's error model), as the JIT's does.
+
+    Called on the raw entries (the wrapper refuses n_fine = 0): the division by zero in the entry's own
+    body gives inf and the same answer on both, where an entry compiled with pycc's defaults raised
+    ZeroDivisionError.
+    """
+    built, jit = (k.module for k in both)
+    world = CollisionWorld(Cabin8(), None, None)
+    d = world._kernel
+    q = world.robot.joints_from_drives(world.robot.home_drives).astype(float)
+    got = built.first_inadmissible(q, 0.0 * q, 0, d.fbuf, d.ibuf)
+    assert got == jit.first_inadmissible(q, 0.0 * q, 0, d.fbuf, d.ibuf)
+
+
+def test_a_killed_build_leaves_no_marker_and_an_old_marker_is_retried(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Only a build that exits with an error marks its key; a marker older than a day is tried again."""
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("CABINPLAN_KERNELS", raising=False)
+    (tmp_path / "killed_builder.py").write_text("import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    killed = _toy(tmp_path, "killed_builder")
+    assert aot.kernels(killed) is aot.jit_kernels(killed)
+    lib = aot.path(killed)
+    assert lib is not None and not lib.exists()
+    assert not lib.with_name(lib.name + ".failed").exists()  # the next process tries again
+    failing = _toy(tmp_path, "planner.nowhere")
+    assert aot.kernels(failing) is aot.jit_kernels(failing)
+    lib = aot.path(failing)
+    assert lib is not None
+    marker = lib.with_name(lib.name + ".failed")
+    assert marker.read_text().startswith("exit code 1 at ")
+    old = time.time() - aot.FAILED_RETRY_S - 60.0
+    os.utime(marker, (old, old))
+    assert aot.kernels(failing) is aot.jit_kernels(failing)  # tried again, failed again
+    assert marker.stat().st_mtime > old + 3600.0
+
+
+def test_a_build_that_does_not_load_is_set_aside_and_built_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("CABINPLAN_KERNELS", raising=False)
+    lib = aot.path(reference.EXTENSION)
+    assert lib is not None
+    lib.parent.mkdir(parents=True)
+    lib.write_bytes(b"not an extension module")
+    stale = lib.parent / f"{reference.EXTENSION.name}-build-left-by-a-killed-build"
+    stale.mkdir()
+    os.utime(stale, (time.time() - 3600.0, time.time() - 3600.0))
+    module = aot.kernels(reference.EXTENSION)
+    assert module.__file__ == str(lib)
+    assert lib.with_name(lib.name + ".bad").read_bytes() == b"not an extension module"
+    assert not stale.exists()

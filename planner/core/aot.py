@@ -13,12 +13,14 @@ read-only C-contiguous 2-D float64 array, ``"f8[2]w"`` a writable one, tuples ``
 cache folder (``cache_dir()/native/<name>-<key><suffix>``), building it first when it is missing (in a
 subprocess, under a file lock, atomically renamed into place), and numba's JIT dispatchers of the same
 functions otherwise: no cache folder (``CABINPLAN_CACHE_DIR=""``), ``CABINPLAN_KERNELS=jit``, or a build
-that failed (no C compiler: one warning, and a marker file so later processes do not try again).
+that failed (no C compiler: one warning, and a marker file so later processes do not try again for a
+day; a build killed by a signal or a timeout leaves none, and a build that does not load is set aside and
+made again once).
 
-The key is a hash of the kernel source files (and of this module), the numba, numpy and Python versions,
-the platform and the target CPU (the build is compiled for this machine's CPU; its model and feature
-flags are part of the key, so a cache folder shared with another machine never loads code for the wrong
-CPU).
+The key is a hash of the kernel source files (and of this module), the numba, llvmlite, numpy and Python
+versions, the platform and the target CPU (the build is compiled for this machine's CPU; its model and
+feature flags are part of the key, so a cache folder shared with another machine never loads code for the
+wrong CPU).
 
 The extension's entries do not check their arguments: an array of another dtype, layout or number of
 dimensions is read as if it had the declared one (wrong numbers or a crash). Each layer therefore reaches
@@ -35,6 +37,7 @@ import importlib.util
 import logging
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -48,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from planner.core.cache import cache_dir, prune, touch
+from planner.core.cache import STALE_TMP_S, cache_dir, prune, touch
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +61,10 @@ MODES = ("auto", "jit")
 TARGET_CPU = "host"
 #: Longest a build may take [s] before the JIT is used instead.
 BUILD_TIMEOUT_S = 900.0
+#: After a failed build, plans use the JIT without trying again for this long [s] (a day).
+FAILED_RETRY_S = 86400.0
+#: Set by a first-use build for its child process: the build lock is already held.
+LOCK_HELD_ENV = "CABINPLAN_AOT_LOCK_HELD"
 
 _DTYPES = {"f8": np.dtype(np.float64), "i8": np.dtype(np.int64), "b1": np.dtype(np.bool_)}
 
@@ -110,9 +117,13 @@ def _cpu_identity() -> str:
         return f"{platform.machine()} {platform.processor()}"
 
 
-def _numba_version() -> str:
-    """The version file of numba, read without importing numba (empty when numba is not installed)."""
-    spec = importlib.util.find_spec("numba")
+def _version_file(package: str) -> str:
+    """The ``_version.py`` of a compiler package (numba, llvmlite), read without importing it.
+
+    Empty when the package is not installed. llvmlite's is read too: numba accepts a range of llvmlite
+    releases, and a new one may generate other machine code.
+    """
+    spec = importlib.util.find_spec(package)
     if spec is None or spec.origin is None:
         return ""
     try:
@@ -128,7 +139,8 @@ def key(ext: Extension) -> str:
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     for part in (
         repr(ext.entries),
-        _numba_version(),
+        _version_file("numba"),
+        _version_file("llvmlite"),
         np.__version__,
         sys.version,
         sysconfig.get_platform(),
@@ -193,7 +205,14 @@ def kernels(ext: Extension) -> Any:
     if mode() == "jit" or folder() is None:
         return jit_kernels(ext)
     try:
-        module = load(ext)
+        try:
+            module = load(ext)
+        except ImportError as exc:  # a damaged file: set it aside and build again, once
+            lib = path(ext)
+            assert lib is not None
+            log.warning("kernels %s: %s does not load (%s); building it again", ext.name, lib, exc)
+            os.replace(lib, lib.with_name(lib.name + ".bad"))
+            module = None
         if module is None:
             module = _build_in_subprocess(ext)
         if module is not None:
@@ -213,22 +232,51 @@ def _failed_marker(lib: Path) -> Path:
     return lib.with_name(lib.name + ".failed")
 
 
+def _failed_recently(marker: Path) -> bool:
+    """Whether a build failed less than :data:`FAILED_RETRY_S` ago (an older marker is removed)."""
+    try:
+        age = time.time() - marker.stat().st_mtime
+    except FileNotFoundError:
+        return False
+    if age < FAILED_RETRY_S:
+        return True
+    marker.unlink(missing_ok=True)
+    return False
+
+
+def _remove_stale_build_folders(ext: Extension, where: Path) -> None:
+    """Delete the temporary build folders of ``ext`` that a killed build left (older than STALE_TMP_S)."""
+    now = time.time()
+    for stale in where.glob(f"{ext.name}-build-*"):
+        try:
+            if stale.is_dir() and now - stale.stat().st_mtime > STALE_TMP_S:
+                shutil.rmtree(stale, ignore_errors=True)
+        except OSError:
+            pass
+
+
 def _build_in_subprocess(ext: Extension) -> ModuleType | None:
-    """Build ``ext`` in a child process under a file lock (another process may be building it)."""
+    """Build ``ext`` in a child process under a file lock (another process may be building it).
+
+    A build that exits with an error leaves a ``.failed`` marker with its output: later processes use the
+    JIT without trying again for :data:`FAILED_RETRY_S`. A build killed by a signal or past
+    :data:`BUILD_TIMEOUT_S` leaves none (the next plan tries again).
+    """
     lib = path(ext)
     assert lib is not None
     marker = _failed_marker(lib)
-    if marker.is_file():
+    if _failed_recently(marker):
         _warn(ext, f"an earlier build failed, see {marker}")
         return None
     lib.parent.mkdir(parents=True, exist_ok=True)
-    with _Lock(lib.parent / f"{ext.name}.lock"):
-        if not lib.is_file() and not marker.is_file():
+    with _Lock(lock_path(ext, lib.parent)):
+        _remove_stale_build_folders(ext, lib.parent)
+        if not lib.is_file() and not _failed_recently(marker):
             log.info("kernels %s: building the ahead-of-time extension (once per install)", ext.name)
             started = time.perf_counter()
             root = str(Path(__file__).resolve().parents[2])  # the folder holding the planner package
             paths = [root, *(p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p)]
-            env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+            env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths), LOCK_HELD_ENV: "1"}
             run = subprocess.run(
                 [sys.executable, "-m", ext.builder_module],
                 env=env,
@@ -238,14 +286,25 @@ def _build_in_subprocess(ext: Extension) -> ModuleType | None:
             )
             if run.returncode != 0 or not lib.is_file():
                 reason = (run.stderr or run.stdout).strip().splitlines()[-1:] or ["no output"]
-                marker.write_text(run.stderr[-20000:] + run.stdout[-5000:], encoding="utf-8")
-                _warn(ext, f"the build failed: {reason[0]}")
+                if run.returncode > 0:  # an error, not a signal: the next build would fail the same way
+                    marker.write_text(
+                        f"exit code {run.returncode} at {time.strftime('%Y-%m-%dT%H:%M:%S%z')}\n"
+                        + run.stderr[-20000:]
+                        + run.stdout[-5000:],
+                        encoding="utf-8",
+                    )
+                _warn(ext, f"the build failed (exit code {run.returncode}): {reason[0]}")
                 return None
             log.info("kernels %s: built in %.0f s", ext.name, time.perf_counter() - started)
-    if marker.is_file():
+    if _failed_recently(marker):
         _warn(ext, f"the build failed, see {marker}")
         return None
     return load(ext)
+
+
+def lock_path(ext: Extension, where: Path) -> Path:
+    """The lock file that serialises the builds of ``ext`` in the folder ``where``."""
+    return where / f"{ext.name}.lock"
 
 
 class _Lock:
@@ -296,13 +355,27 @@ def build(ext: Extension) -> Path:
         cc.verbose = False
         for entry in ext.entries:
             dispatcher = getattr(kernels_module, entry.name)
-            cc.export(entry.name, signature(entry))(dispatcher.py_func)
+            cc.export(entry.name, signature(entry))(_trampoline(dispatcher, len(entry.args)))
         cc.compile()
         built = next(Path(tmp).glob(f"{ext.name}*{_suffix()}"))
         os.replace(built, lib)
     _failed_marker(lib).unlink(missing_ok=True)
     prune(lib.parent, (f"{ext.name}-*{_suffix()}",))
     return lib
+
+
+def _trampoline(dispatcher: Any, n_args: int) -> Any:
+    """A plain function of ``n_args`` arguments that only calls the ``@njit`` ``dispatcher``.
+
+    ``numba.pycc`` compiles an exported function with its default options, not the dispatcher's: exported
+    directly, an entry's own body would run under Python's error model (a division by zero raises) where
+    the JIT kernel has ``error_model="numpy"`` (inf or NaN). Exporting this call instead compiles the
+    kernel with its own options, as the JIT does (``tests/test_aot.py`` compares edge inputs).
+    """
+    names = ", ".join(f"a{i}" for i in range(n_args))
+    namespace: dict[str, Any] = {"kernel": dispatcher}
+    exec(f"def entry({names}):\n    return kernel({names})\n", namespace)  # noqa: S102 - fixed template
+    return namespace["entry"]
 
 
 @contextlib.contextmanager
@@ -373,30 +446,57 @@ def _type(code: str) -> Any:
 F8, I8, B1 = _DTYPES["f8"], _DTYPES["i8"], _DTYPES["b1"]
 
 
-def check_array(value: object, name: str, dtype: np.dtype[Any], ndim: int, out: bool = False) -> np.ndarray:
-    """``value`` if it is a C-contiguous ``ndim``-D array of ``dtype`` (and writable, for an ``out``).
+def check_array(
+    value: object,
+    name: str,
+    dtype: np.dtype[Any],
+    ndim: int,
+    out: bool = False,
+    shape: tuple[int | None, ...] | None = None,
+) -> np.ndarray:
+    """``value`` if it is a C-contiguous ``ndim``-D array of ``dtype`` of the entry's shape.
+
+    ``out``: it must also be writable. ``shape``: the sizes it must have (None leaves a dimension free).
 
     Raises:
         TypeError: naming ``name``, when it is not: an extension entry would read it wrongly.
+        ValueError: naming ``name``, when its shape is not ``shape``: an entry would read or write past it.
     """
-    if (
+    if not (
         isinstance(value, np.ndarray)
         and value.dtype == dtype
         and value.ndim == ndim
         and value.flags.c_contiguous
         and (not out or value.flags.writeable)
     ):
-        return value
-    got = (
-        f"{value.dtype} array of shape {value.shape} (C-contiguous {value.flags.c_contiguous}, "
-        f"writable {value.flags.writeable})"
-        if isinstance(value, np.ndarray)
-        else type(value).__name__
-    )
-    what = "a writable" if out else "a"
-    raise TypeError(f"{name}: {what} C-contiguous {ndim}-D {dtype} array expected, got {got}")
+        got = (
+            f"{value.dtype} array of shape {value.shape} (C-contiguous {value.flags.c_contiguous}, "
+            f"writable {value.flags.writeable})"
+            if isinstance(value, np.ndarray)
+            else type(value).__name__
+        )
+        what = "a writable" if out else "a"
+        raise TypeError(f"{name}: {what} C-contiguous {ndim}-D {dtype} array expected, got {got}")
+    if shape is not None and any(
+        want is not None and have != want for have, want in zip(value.shape, shape, strict=True)
+    ):
+        wanted = "(" + ", ".join("*" if w is None else str(w) for w in shape) + ")"
+        raise ValueError(f"{name}: shape {wanted} expected, got {value.shape}")
+    return value
 
 
 def main(ext: Extension) -> None:
-    """``python -m <builder module>``: build ``ext`` into the cache folder and print where."""
-    sys.stdout.write(f"{build(ext)}\n")
+    """``python -m <builder module>``: build ``ext`` into the cache folder and print where.
+
+    Under the build lock of :func:`_build_in_subprocess` (which a plan's first-use build already holds
+    for its child, saying so in ``$CABINPLAN_AOT_LOCK_HELD``), so a build by hand and one at first use
+    never write at once.
+    """
+    where = folder()
+    if where is None or os.environ.get(LOCK_HELD_ENV) == "1":
+        sys.stdout.write(f"{build(ext)}\n")
+        return
+    where.mkdir(parents=True, exist_ok=True)
+    with _Lock(lock_path(ext, where)):
+        _remove_stale_build_folders(ext, where)
+        sys.stdout.write(f"{build(ext)}\n")

@@ -67,10 +67,10 @@ def acceleration_limited(
     b = check_array(np.ascontiguousarray(b, dtype=float), "b", F8, 2)
     x_max = check_array(np.ascontiguousarray(x_max, dtype=float), "x_max", F8, 1)
     n = len(x_max)
-    if not (cx.shape == cy.shape == b.shape and cx.shape[0] == n and len(ds) >= n - 1):
+    if not (n >= 1 and cx.shape == cy.shape == b.shape and cx.shape[0] == n and len(ds) >= n - 1):
         raise ValueError(
             f"acceleration_limited: shapes ds {ds.shape}, cx {cx.shape}, cy {cy.shape}, b {b.shape}, "
-            f"x_max {x_max.shape} do not fit (N,), (N + 1, R) x 3, (N + 1,)"
+            f"x_max {x_max.shape} do not fit (N,), (N + 1, R) x 3, (N + 1,) with N >= 0"
         )
     return np.asarray(kernels(implementation)._forward_backward(ds, cx, cy, b, x_max))
 

@@ -102,10 +102,17 @@ class Cover:
     start: IntArray  # (B,)
 
     def __post_init__(self) -> None:
-        """The arrays the kernels read have their entry types (:func:`planner.core.aot.check_array`)."""
-        check_array(self.body, "cover.body", I8, 1)
-        check_array(self.local, "cover.local", F8, 2)
-        check_array(self.frac, "cover.frac", F8, 1)
+        """The arrays the kernels read have their entry types and shapes, and are frozen (read-only).
+
+        Checked once here (:func:`planner.core.aot.check_array`), so the entries need not check them on
+        every call; read-only, so nothing can change them after the check.
+        """
+        s = len(self.radii)
+        check_array(self.body, "cover.body", I8, 1, shape=(s,))
+        check_array(self.local, "cover.local", F8, 2, shape=(s, 3))
+        check_array(self.frac, "cover.frac", F8, 1, shape=(s,))
+        for arr in (self.body, self.local, self.frac, self.radii, self.start):
+            arr.setflags(write=False)
 
     @property
     def table(self) -> tuple[IntArray, Array, Array]:
@@ -169,18 +176,44 @@ class KernelData:
     pair_rigid: BoolArray  # (P, n_joints) joint j moves both bodies of pair p rigidly
 
     def __post_init__(self) -> None:
-        """The arrays the kernels read have their entry types (:func:`planner.core.aot.check_array`)."""
-        for name, value, dtype, ndim in (
-            ("fbuf", self.fbuf, F8, 1),
-            ("ibuf", self.ibuf, I8, 1),
-            ("grid", self.grid, F8, 1),
-            ("pair_a", self.pair_a, I8, 1),
-            ("pair_b", self.pair_b, I8, 1),
-            ("link_mask", self.link_mask, B1, 1),
-            ("rho", self.rho, F8, 2),
-            ("pair_rigid", self.pair_rigid, B1, 2),
+        """The arrays the kernels read have their entry types and shapes, and are frozen (read-only).
+
+        Checked once here (:func:`planner.core.aot.check_array`), so the entries (:mod:`.entries`) need not
+        check them on every call; read-only, so nothing can change them (the counts in ``ibuf`` above all)
+        after the check.
+        """
+        check_array(self.ibuf, "kernel data ibuf", I8, 1)
+        b, p = self.n_bodies, len(self.pair_a)
+        for name, value, dtype, ndim, shape in (
+            ("fbuf", self.fbuf, F8, 1, None),
+            ("grid", self.grid, F8, 1, None),
+            ("pair_a", self.pair_a, I8, 1, (p,)),
+            ("pair_b", self.pair_b, I8, 1, (p,)),
+            ("link_mask", self.link_mask, B1, 1, (b,)),
+            ("rho", self.rho, F8, 2, (b, None)),
+            ("pair_rigid", self.pair_rigid, B1, 2, (p, self.n_joints)),
         ):
-            check_array(value, f"kernel data {name}", dtype, ndim)
+            check_array(value, f"kernel data {name}", dtype, ndim, shape=shape)
+        if self.ibuf[5]:  # has_grid: the flat grid holds every node of the packed grid shape
+            check_array(self.grid, "kernel data grid", F8, 1, shape=(int(np.prod(self.ibuf[7:10])),))
+        frozen = (self.fbuf, self.ibuf, self.grid, self.pair_a, self.pair_b, self.exact_pair, self.link_mask)
+        for arr in (*frozen, self.c_lo, self.c_hi, self.rho, self.pair_rigid):
+            arr.setflags(write=False)
+
+    @property
+    def n_bodies(self) -> int:
+        """B, the number of bodies (the packed header's first count)."""
+        return int(self.ibuf[0])
+
+    @property
+    def n_joints(self) -> int:
+        """The robot's number of joints (the columns of ``rho``)."""
+        return int(self.rho.shape[1])
+
+    @property
+    def n_constraints(self) -> int:
+        """m, the length of the admissibility vector c(q)."""
+        return len(self.c_lo)
 
 
 def build(

@@ -18,6 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from planner.collision.kernels import codes
 from planner.collision.kernels.buffers import Cover, KernelData
 from planner.core import aot
 from planner.core.aot import F8, I8, Entry, check_array
@@ -92,7 +93,7 @@ class Kernels:
         """:func:`.state.packed_check` on a world's data: (code, poses (B, 13), cabin (B,), pairs (P,))."""
         d = _data(d)
         return self.module.packed_check(
-            check_array(q, "q", F8, 1),
+            check_array(q, "q", F8, 1, shape=(d.n_joints,)),
             d.fbuf,
             d.ibuf,
             d.grid,
@@ -104,45 +105,61 @@ class Kernels:
     def packed_state(self, q: Array, d: KernelData, threshold: float) -> tuple[Array, Array, Array, bool]:
         """:func:`.state.packed_state`: (poses (B, 13), cabin bounds (B,), pair bounds (P,), admissible)."""
         d = _data(d)
-        q = check_array(q, "q", F8, 1)
+        q = check_array(q, "q", F8, 1, shape=(d.n_joints,))
         return self.module.packed_state(q, d.fbuf, d.ibuf, d.grid, float(threshold))
 
     def packed_poses(self, qs: Array, d: KernelData, poses: Array, c: Array) -> None:
         """:func:`.state.packed_poses`: poses (N, B, 13) and c(q) (N, m) of (N, n) joints, in place."""
         d = _data(d)
+        qs = check_array(qs, "qs", F8, 2, shape=(None, d.n_joints))
+        n = qs.shape[0]
         self.module.packed_poses(
-            check_array(qs, "qs", F8, 2),
+            qs,
             d.fbuf,
             d.ibuf,
-            check_array(poses, "poses", F8, 3, out=True),
-            check_array(c, "c", F8, 2, out=True),
+            check_array(poses, "poses", F8, 3, out=True, shape=(n, d.n_bodies, 13)),
+            check_array(c, "c", F8, 2, out=True, shape=(n, d.n_constraints)),
         )
 
     def cover_centres_batch(self, poses: Array, cover: Cover) -> Array:
         """:func:`.bounds.cover_centres_batch`: world centres (N, S, 3) of a cover for poses (N, B, 13)."""
         if not isinstance(cover, Cover):
             raise TypeError(f"cover: Cover expected, got {type(cover).__name__}")
-        poses = check_array(poses, "poses", F8, 3)
+        bodies = len(cover.start)  # the cover's bodies index the poses' second axis
+        poses = check_array(poses, "poses", F8, 3, shape=(None, bodies, 13))
         return self.module.cover_centres_batch(poses, cover.body, cover.local, cover.frac)
 
     def run_extent(self, qs: Array, i: int, j: int, rho: Array, max_extra: float) -> tuple[int, float]:
-        """:func:`.walk.run_extent`: (last sample, extra clearance) of the run from sample i."""
-        return self.module.run_extent(
-            check_array(qs, "qs", F8, 2), int(i), int(j), check_array(rho, "rho", F8, 1), float(max_extra)
-        )
+        """:func:`.walk.run_extent`: (last sample, extra clearance) of the run from sample i to at most j."""
+        qs = check_array(qs, "qs", F8, 2)
+        rho = check_array(rho, "rho", F8, 1, shape=(qs.shape[1],))
+        i, j = int(i), int(j)
+        if not 0 <= i <= j < qs.shape[0]:
+            raise ValueError(f"run_extent: samples 0 <= i <= j < {qs.shape[0]} expected, got i={i}, j={j}")
+        return self.module.run_extent(qs, i, j, rho, float(max_extra))
 
     def first_inadmissible(self, q_a: Array, dq: Array, n_fine: int, d: KernelData) -> int:
         """:func:`.walk.first_inadmissible`: the first failing limit sample, -1: none."""
         d = _data(d)
+        n_fine = int(n_fine)
+        if n_fine < 1:
+            raise ValueError(f"first_inadmissible: n_fine >= 1 expected, got {n_fine}")
         return self.module.first_inadmissible(
-            check_array(q_a, "q_a", F8, 1), check_array(dq, "dq", F8, 1), int(n_fine), d.fbuf, d.ibuf
+            check_array(q_a, "q_a", F8, 1, shape=(d.n_joints,)),
+            check_array(dq, "dq", F8, 1, shape=(d.n_joints,)),
+            n_fine,
+            d.fbuf,
+            d.ibuf,
         )
 
     def end_ratio(self, q_a: Array, q_b: Array, d: KernelData) -> float:
         """:func:`.walk.end_ratio`: the largest slope ratio at the two ends."""
         d = _data(d)
         return self.module.end_ratio(
-            check_array(q_a, "q_a", F8, 1), check_array(q_b, "q_b", F8, 1), d.fbuf, d.ibuf
+            check_array(q_a, "q_a", F8, 1, shape=(d.n_joints,)),
+            check_array(q_b, "q_b", F8, 1, shape=(d.n_joints,)),
+            d.fbuf,
+            d.ibuf,
         )
 
     def segment_reach(self, d: KernelData, k: float, h: float, adq: Array) -> tuple[Array, Array]:
@@ -156,7 +173,7 @@ class Kernels:
             d.pair_a,
             d.pair_b,
             d.pair_rigid,
-            check_array(adq, "adq", F8, 1),
+            check_array(adq, "adq", F8, 1, shape=(d.n_joints,)),
         )
 
     def motion_walk(
@@ -174,23 +191,38 @@ class Kernels:
         cabin: Array,
         pairs: Array,
     ) -> int:
-        """:func:`.walk.motion_walk` on a world's data (resumable; the state store is written in place)."""
+        """:func:`.walk.motion_walk` on a world's data (resumable; the state store is written in place).
+
+        Besides the types and shapes, the walk's own bookkeeping is checked before it resumes: ``slot_of``
+        has a slot for each of the n + 1 states (n = ``ci[CI_N]`` >= 1), the store holds the states used
+        so far, and every recorded slot lies inside the store.
+        """
         d = _data(d)
+        b, p, n_j = d.n_bodies, len(d.pair_a), d.n_joints
+        ci = check_array(ci, "ci", I8, 1, out=True, shape=(codes.CI_SIZE,))
+        poses = check_array(poses, "poses", F8, 3, out=True, shape=(None, b, 13))
+        cap = poses.shape[0]
+        n = int(ci[codes.CI_N])
+        slot_of = check_array(slot_of, "slot_of", I8, 1, out=True, shape=(n + 1,))
+        if n < 1 or not 0 <= int(ci[codes.CI_COUNT]) <= cap or int(slot_of.max()) >= int(ci[codes.CI_COUNT]):
+            raise ValueError(
+                f"motion_walk: inconsistent walk state (n={n}, count={int(ci[codes.CI_COUNT])}, store {cap})"
+            )
         return self.module.motion_walk(
-            check_array(ci, "ci", I8, 1, out=True),
-            check_array(cf, "cf", F8, 1, out=True),
-            check_array(q_a, "q_a", F8, 1),
-            check_array(q_b, "q_b", F8, 1),
-            check_array(dq, "dq", F8, 1),
-            check_array(reach, "reach", F8, 1),
-            check_array(pair_reach, "pair_reach", F8, 1),
+            ci,
+            check_array(cf, "cf", F8, 1, out=True, shape=(codes.CF_SIZE,)),
+            check_array(q_a, "q_a", F8, 1, shape=(n_j,)),
+            check_array(q_b, "q_b", F8, 1, shape=(n_j,)),
+            check_array(dq, "dq", F8, 1, shape=(n_j,)),
+            check_array(reach, "reach", F8, 1, shape=(b,)),
+            check_array(pair_reach, "pair_reach", F8, 1, shape=(p,)),
             d.fbuf,
             d.ibuf,
             d.grid,
-            check_array(slot_of, "slot_of", I8, 1, out=True),
-            check_array(poses, "poses", F8, 3, out=True),
-            check_array(cabin, "cabin", F8, 2, out=True),
-            check_array(pairs, "pairs", F8, 2, out=True),
+            slot_of,
+            poses,
+            check_array(cabin, "cabin", F8, 2, out=True, shape=(cap, b)),
+            check_array(pairs, "pairs", F8, 2, out=True, shape=(cap, p)),
         )
 
 
