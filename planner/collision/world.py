@@ -363,15 +363,17 @@ class CollisionWorld(Generic[RobotT]):
         return PathReport(True, checks, n - 1, None, ())
 
     # ------------------------------------------------------------- distances
-    def min_distance(self, q: Array, include_self: bool = True) -> Distance:
+    def min_distance(self, q: Array, include_self: bool = True, include_cabin: bool = True) -> Distance:
         """Smallest distance from any body to the cabin (and between non-adjacent bodies), with witnesses.
 
         Distances are exact FCL queries on the un-grown shapes; candidates whose certified lower bound
         already exceeds the best distance found are skipped (branch and bound). Penetration gives <= 0.
+        ``include_self=False``: the cabin only; ``include_cabin=False``: the robot's body pairs only (an
+        infinite distance when there is nothing to measure).
         """
         st = self._state(_joints(q, self.model.n_joints))
         candidates: list[tuple[float, bool, int]] = []
-        if self._probes.cabin_obj is not None:
+        if include_cabin and self._probes.cabin_obj is not None:
             candidates += [(float(lb), True, b) for b, lb in enumerate(st.cabin_lb)]
         if include_self:
             candidates += [(float(lb), False, k) for k, lb in enumerate(st.pair_lb)]

@@ -26,14 +26,15 @@ from planner.plan.goals import (
     force_evidence,
     limit_evidence,
 )
-from planner.plan.motion import MIN_MARGIN_M, path_clear
+from planner.plan.motion import MIN_MARGIN_M, certify_motion, path_clear, spare_clearance
 
 #: Rejected candidates explained in a refusal (each explanation costs a few exact distance queries).
 EXPLAINED_CANDIDATES = 6
-#: Largest joint step [m or rad] between the states sampled along a rejected line to find what blocks it.
-EXPLAIN_STEP = 0.01
-#: Most states sampled along one rejected line.
-EXPLAIN_STATES = 60
+#: Largest joint step [m or rad] between the states sampled along a rejected line to find what blocks it
+#: (the motion walk checks limits every 5 mm; the certified walk itself locates a clearance failure).
+EXPLAIN_STEP = 0.005
+#: Most states sampled along one segment of a rejected line.
+EXPLAIN_STATES = 200
 
 
 def compensate_targets(
@@ -100,43 +101,57 @@ def _accepted(ctx: PlanContext, path: Array) -> bool:
 def explain_rejection(ctx: PlanContext, path: Array) -> dict[str, Any] | None:
     """Why a moved goal (one configuration, or an approach line ending at the goal) was rejected.
 
-    The first that applies: a limit or margin outside its bound at a row of ``path``; a row closer to the
-    cabin (or a pair of bodies closer) than the planner's clearance, or a row whose static forces exceed the
-    allowed fraction; then, along the line sampled every :data:`EXPLAIN_STEP`, the state of the largest
-    static force ratio if it is over, else the state of the smallest exact distance, against the clearance
-    a motion needs there (the planner's clearance + the certified walk's smallest margin). None when every
-    check passes now (nothing to report).
+    The first that applies, as the planner's own checks found it: a limit or margin outside its bound at a
+    row of ``path`` or at a state sampled along it every :data:`EXPLAIN_STEP`; a row closer to the cabin (or
+    a robot pair closer) than the planner's clearance, or a row whose static forces exceed the allowed
+    fraction; along the line, the state of the largest static force ratio if it is over; then the first
+    segment whose certified motion check (with its adaptive margin) fails, at the state where it failed,
+    against the clearance a motion needs there (the planner's clearance, or the self-clearance, + the
+    walk's smallest margin). Where the walk gives no state, the sampled state with the smallest spare
+    clearance. "Where" is the share of the insertion line still ahead of the goal, measured along the tool's
+    path. None when every check passes now (nothing to report).
     """
     world, c = ctx.world, ctx.clearances
-    path = np.atleast_2d(path)
-    steps = np.r_[0.0, np.cumsum(np.max(np.abs(np.diff(path, axis=0)), axis=1))] if len(path) > 1 else [0.0]
-    total = float(steps[-1])
+    path = np.atleast_2d(np.asarray(path, dtype=float))
+    tool = np.array([ctx.robot.fk(q)[:3, 3] for q in path])
+    along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(tool, axis=0), axis=1))]
+    total = float(along[-1])
 
-    def where(done: float) -> str:
+    def where(k: int, t: float = 0.0) -> str:
+        done = along[k] + (t * (along[k + 1] - along[k]) if k + 1 < len(along) else 0.0)
         remaining = 1.0 - done / total if total > 0.0 else 0.0
         if remaining <= 1e-9:
             return "at the compensated goal"
         return f"{100 * remaining:.0f}% of the compensated insertion line before the goal"
 
-    for k, q in enumerate(path):
+    # The rows, then states every EXPLAIN_STEP (largest joint change) along each segment, with their place.
+    states: list[tuple[Array, int, float]] = [(q, k, 0.0) for k, q in enumerate(path)]
+    for k in range(len(path) - 1):
+        n = int(min(EXPLAIN_STATES, max(1, np.ceil(np.max(np.abs(path[k + 1] - path[k])) / EXPLAIN_STEP))))
+        states += [(path[k] + t * (path[k + 1] - path[k]), k, t) for t in np.arange(1, n) / n]
+    for q, k, t in states:
         violations = ctx.robot.violations(q)
         if violations:
-            return limit_evidence(violations, q, where(float(steps[k])))
+            return limit_evidence(violations, q, where(k, t))
     for k in reversed(range(len(path))):  # the goal first
         q = path[k]
         if not world.is_valid(q, c.planner_m):
-            return collision_evidence(world, q, c.planner_m, where(float(steps[k])))
+            return collision_evidence(world, q, c.planner_m, where(k))
         if not ctx.forces.ok(q):
-            return force_evidence(ctx.forces, q, where(float(steps[k])))
+            return force_evidence(ctx.forces, q, where(k))
     if len(path) == 1:
         return None
-    n = int(min(EXPLAIN_STATES, max(2, np.ceil(total / EXPLAIN_STEP) + 1)))
-    s = np.linspace(0.0, total, n)
-    dense = np.stack([np.interp(s, steps, path[:, j]) for j in range(path.shape[1])], axis=1)
-    ratios = ctx.forces.ratios(dense)
-    k = int(np.argmax(ratios))
-    if ratios[k] > ctx.forces.fraction:
-        return force_evidence(ctx.forces, dense[k], where(float(s[k])))
-    distances = [world.min_distance(q).distance_m for q in dense]
-    k = int(np.argmin(distances))
-    return collision_evidence(world, dense[k], c.planner_m + MIN_MARGIN_M, where(float(s[k])))
+    ratios = ctx.forces.ratios(np.array([q for q, _, _ in states]))
+    i = int(np.argmax(ratios))
+    if ratios[i] > ctx.forces.fraction:
+        q, k, t = states[i]
+        return force_evidence(ctx.forces, q, where(k, t))
+    for k in range(len(path) - 1):
+        motion = certify_motion(world, path[k], path[k + 1], c.planner_m, c.motion_margin_m)
+        if not motion.valid and motion.report.t_fail is not None:
+            t = float(motion.report.t_fail)
+            q = path[k] + t * (path[k + 1] - path[k])
+            return collision_evidence(world, q, c.planner_m, where(k, t), margin_m=MIN_MARGIN_M)
+    spare = [spare_clearance(world, q, c.planner_m) for q, _, _ in states]
+    q, k, t = states[int(np.argmin(spare))]
+    return collision_evidence(world, q, c.planner_m, where(k, t), margin_m=MIN_MARGIN_M)

@@ -78,22 +78,36 @@ class GoalCandidate:
     clearance_m: float = float("nan")
 
 
-def collision_evidence(world: CollisionWorld, q: Array, required_m: float, where: str) -> dict[str, Any]:
-    """What blocks configuration q: the closest bodies, their exact distance and the distance required.
+def collision_evidence(
+    world: CollisionWorld, q: Array, required_m: float, where: str, margin_m: float = 0.0
+) -> dict[str, Any]:
+    """What blocks configuration q: the bodies furthest short of their required distance, with figures.
 
-    ``required_m`` is the clearance the planner must certify there (the requested clearance, its slack and,
-    for a motion, the certified walk's smallest margin); a pair of robot bodies is held to the world's
-    self-clearance instead.
+    A body and the cabin must keep ``required_m`` + ``margin_m`` (``required_m``: the clearance the
+    planner certifies there, the requested clearance and its slack; ``margin_m``: for a motion, the
+    certified walk's smallest margin); a pair of robot bodies the world's self-clearance + ``margin_m``.
+    The record is that of the kind with the smaller spare distance (exact FCL distances), so a robot pair
+    that passes never hides a cabin distance that fails, nor the other way round.
     """
-    d = world.min_distance(q)
-    if d.bodies[1] != "cabin":
-        required_m = world.self_clearance
+    cabin_required = float(required_m) + margin_m
+    pair_required = world.self_clearance + margin_m
+    closest = world.min_distance(q)  # the smallest distance of either kind
+    if closest.bodies[1] == "cabin":
+        records = [(closest, cabin_required)]
+        # Every pair is at least that far: it can be further short only of a larger requirement.
+        if pair_required > cabin_required:
+            records.append((world.min_distance(q, include_cabin=False), pair_required))
+    else:
+        records = [(closest, pair_required)]
+        if world.cabin is not None:
+            records.append((world.min_distance(q, include_self=False), cabin_required))
+    d, required = min(records, key=lambda r: r[0].distance_m - r[1])
     return {
         "cause": "clearance",
         "where": where,
         "bodies": list(d.bodies),
         "distance_m": float(d.distance_m),
-        "required_m": float(required_m),
+        "required_m": float(required),
         "q": [float(v) for v in q],
     }
 
@@ -170,9 +184,13 @@ def describe(evidence: dict[str, Any]) -> str:
         return (
             f"{a} in contact with {other} {evidence['where']}, {1e3 * evidence['required_m']:.1f} mm required"
         )
+    distance_mm, required_mm = 1e3 * evidence["distance_m"], 1e3 * evidence["required_m"]
+    digits = 1
+    while digits < 4 and f"{distance_mm:.{digits}f}" == f"{required_mm:.{digits}f}":
+        digits += 1  # as many decimals as it takes to tell the two apart
     return (
-        f"{a} {1e3 * evidence['distance_m']:.1f} mm from {other} {evidence['where']}, "
-        f"{1e3 * evidence['required_m']:.1f} mm required"
+        f"{a} {distance_mm:.{digits}f} mm from {other} {evidence['where']}, "
+        f"{required_mm:.{digits}f} mm required"
     )
 
 
@@ -313,7 +331,9 @@ def approach_lines(
             if evidence is not None and motion.report.t_fail is not None:
                 t = float(motion.report.t_fail)
                 q_at = q_pre + t * (q_goal - q_pre)
-                evidence.append(collision_evidence(world, q_at, clearance + MIN_MARGIN_M, _along(1.0 - t)))
+                evidence.append(
+                    collision_evidence(world, q_at, clearance, _along(1.0 - t), margin_m=MIN_MARGIN_M)
+                )
             continue
         line = np.stack([q_pre, q_goal])
         out.append(GoalCandidate(q_goal, float(worst[i]), line, np.array([0.0, distance_m])))
@@ -379,7 +399,7 @@ def track_approach(
                     if back_m >= 5e-4
                     else "at the goal"
                 )
-                evidence.append(collision_evidence(world, q_at, clearance + MIN_MARGIN_M, where))
+                evidence.append(collision_evidence(world, q_at, clearance, where, margin_m=MIN_MARGIN_M))
             return None
         if not forces.segment_ok(qs[-1], q):
             if evidence is not None:

@@ -212,3 +212,44 @@ def test_a_limit_refusal_names_the_limit_furthest_outside_and_by_how_much(robot)
     nan = limit_evidence(not_finite, q, "here")
     assert nan["excess"] is None and describe(nan) == "finite is not finite here"
     assert dominant([nan, e]) is e
+
+
+class _Distances:
+    """A stand-in world whose exact distances are given: the cabin's, and the robot pairs'."""
+
+    def __init__(self, cabin_m: float, pair_m: float, self_clearance: float = 0.005) -> None:
+        from planner.collision.reports import Distance
+
+        nan3 = np.full(3, np.nan)
+        self.cabin = object()
+        self.self_clearance = self_clearance
+        self._cabin = Distance(cabin_m, ("payload", "cabin"), nan3, nan3)
+        self._pair = Distance(pair_m, ("link_ef", "platform"), nan3, nan3)
+
+    def min_distance(self, q: np.ndarray, include_self: bool = True, include_cabin: bool = True):  # noqa: ANN201
+        options = ([self._cabin] if include_cabin else []) + ([self._pair] if include_self else [])
+        return min(options, key=lambda d: d.distance_m)
+
+
+@pytest.mark.parametrize(
+    ("cabin_m", "pair_m", "self_clearance", "blocking"),
+    [
+        (0.009, 0.008, 0.005, "cabin"),  # the closer pair passes (8 > 5.5 mm); the cabin fails (9 < 10.5)
+        (0.020, 0.0052, 0.005, "platform"),  # the pair fails its 5.5 mm
+        (0.009, 0.0052, 0.005, "cabin"),  # both fail: the cabin by more
+        (0.009, 0.012, 0.015, "platform"),  # self-clearance above the clearance: the farther pair fails more
+    ],
+)
+def test_collision_evidence_reports_the_kind_furthest_short(
+    cabin_m: float, pair_m: float, self_clearance: float, blocking: str
+) -> None:
+    """A robot pair that passes never hides a cabin distance that fails, nor the other way round."""
+    from planner.plan.goals import collision_evidence
+
+    world = _Distances(cabin_m, pair_m, self_clearance)
+    e = collision_evidence(world, np.zeros(8), 0.010, "at the goal", margin_m=0.0005)  # type: ignore[arg-type]
+    assert e["bodies"][1] == blocking
+    if blocking == "cabin":
+        assert e["distance_m"] == cabin_m and e["required_m"] == pytest.approx(0.0105)
+    else:
+        assert e["distance_m"] == pair_m and e["required_m"] == pytest.approx(self_clearance + 0.0005)
