@@ -462,27 +462,27 @@ def check_array(
         TypeError: naming ``name``, when it is not: an extension entry would read it wrongly.
         ValueError: naming ``name``, when its shape is not ``shape``: an entry would read or write past it.
     """
-    if not (
+    if (
         isinstance(value, np.ndarray)
         and value.dtype == dtype
         and value.ndim == ndim
         and value.flags.c_contiguous
         and (not out or value.flags.writeable)
     ):
-        got = (
-            f"{value.dtype} array of shape {value.shape} (C-contiguous {value.flags.c_contiguous}, "
-            f"writable {value.flags.writeable})"
-            if isinstance(value, np.ndarray)
-            else type(value).__name__
-        )
-        what = "a writable" if out else "a"
-        raise TypeError(f"{name}: {what} C-contiguous {ndim}-D {dtype} array expected, got {got}")
-    if shape is not None and any(
-        want is not None and have != want for have, want in zip(value.shape, shape, strict=True)
-    ):
+        if shape is None or value.shape == shape:  # the hot path: one tuple comparison
+            return value
+        if None in shape and all(w is None or h == w for h, w in zip(value.shape, shape, strict=True)):
+            return value
         wanted = "(" + ", ".join("*" if w is None else str(w) for w in shape) + ")"
         raise ValueError(f"{name}: shape {wanted} expected, got {value.shape}")
-    return value
+    got = (
+        f"{value.dtype} array of shape {value.shape} (C-contiguous {value.flags.c_contiguous}, "
+        f"writable {value.flags.writeable})"
+        if isinstance(value, np.ndarray)
+        else type(value).__name__
+    )
+    what = "a writable" if out else "a"
+    raise TypeError(f"{name}: {what} C-contiguous {ndim}-D {dtype} array expected, got {got}")
 
 
 def main(ext: Extension) -> None:

@@ -20,6 +20,7 @@ What the buffers hold, per body b (B bodies), sphere s and checked pair k:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -200,20 +201,25 @@ class KernelData:
         for arr in (*frozen, self.c_lo, self.c_hi, self.rho, self.pair_rigid):
             arr.setflags(write=False)
 
-    @property
+    @cached_property
     def n_bodies(self) -> int:
         """B, the number of bodies (the packed header's first count)."""
         return int(self.ibuf[0])
 
-    @property
+    @cached_property
     def n_joints(self) -> int:
         """The robot's number of joints (the columns of ``rho``)."""
         return int(self.rho.shape[1])
 
-    @property
+    @cached_property
     def n_constraints(self) -> int:
         """m, the length of the admissibility vector c(q)."""
         return len(self.c_lo)
+
+    @cached_property
+    def joint_shape(self) -> tuple[int]:
+        """(n_joints,): the shape of a joint vector (checked on every call of an entry)."""
+        return (self.n_joints,)
 
 
 def build(

@@ -93,7 +93,7 @@ class Kernels:
         """:func:`.state.packed_check` on a world's data: (code, poses (B, 13), cabin (B,), pairs (P,))."""
         d = _data(d)
         return self.module.packed_check(
-            check_array(q, "q", F8, 1, shape=(d.n_joints,)),
+            check_array(q, "q", F8, 1, shape=d.joint_shape),
             d.fbuf,
             d.ibuf,
             d.grid,
@@ -105,7 +105,7 @@ class Kernels:
     def packed_state(self, q: Array, d: KernelData, threshold: float) -> tuple[Array, Array, Array, bool]:
         """:func:`.state.packed_state`: (poses (B, 13), cabin bounds (B,), pair bounds (P,), admissible)."""
         d = _data(d)
-        q = check_array(q, "q", F8, 1, shape=(d.n_joints,))
+        q = check_array(q, "q", F8, 1, shape=d.joint_shape)
         return self.module.packed_state(q, d.fbuf, d.ibuf, d.grid, float(threshold))
 
     def packed_poses(self, qs: Array, d: KernelData, poses: Array, c: Array) -> None:
@@ -145,8 +145,8 @@ class Kernels:
         if n_fine < 1:
             raise ValueError(f"first_inadmissible: n_fine >= 1 expected, got {n_fine}")
         return self.module.first_inadmissible(
-            check_array(q_a, "q_a", F8, 1, shape=(d.n_joints,)),
-            check_array(dq, "dq", F8, 1, shape=(d.n_joints,)),
+            check_array(q_a, "q_a", F8, 1, shape=d.joint_shape),
+            check_array(dq, "dq", F8, 1, shape=d.joint_shape),
             n_fine,
             d.fbuf,
             d.ibuf,
@@ -156,8 +156,8 @@ class Kernels:
         """:func:`.walk.end_ratio`: the largest slope ratio at the two ends."""
         d = _data(d)
         return self.module.end_ratio(
-            check_array(q_a, "q_a", F8, 1, shape=(d.n_joints,)),
-            check_array(q_b, "q_b", F8, 1, shape=(d.n_joints,)),
+            check_array(q_a, "q_a", F8, 1, shape=d.joint_shape),
+            check_array(q_b, "q_b", F8, 1, shape=d.joint_shape),
             d.fbuf,
             d.ibuf,
         )
@@ -173,7 +173,7 @@ class Kernels:
             d.pair_a,
             d.pair_b,
             d.pair_rigid,
-            check_array(adq, "adq", F8, 1, shape=(d.n_joints,)),
+            check_array(adq, "adq", F8, 1, shape=d.joint_shape),
         )
 
     def motion_walk(
