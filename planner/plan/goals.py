@@ -141,6 +141,7 @@ def limit_evidence(violations: list[dict[str, Any]], q: Array, where: str) -> di
         return float(max(lo - value, value - hi))
 
     worst = max(violations, key=lambda v: excess(v) / _span(v))
+    over = excess(worst)
     return {
         "cause": "limit",
         "where": where,
@@ -148,7 +149,7 @@ def limit_evidence(violations: list[dict[str, Any]], q: Array, where: str) -> di
         "value": worst["value"],
         "lower": worst["lower"],
         "upper": worst["upper"],
-        "excess": excess(worst) if np.isfinite(excess(worst)) else None,
+        "excess": over if np.isfinite(over) else None,
         "span": _span(worst),
         "q": [float(v) for v in q],
     }
