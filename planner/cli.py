@@ -487,7 +487,7 @@ def profile(
         Path | None, typer.Option("--plot", help="also plot the drive displacements (PNG)")
     ] = None,
 ) -> None:
-    """Pose path -> validated drive profile (TOPP-RA under the drive limits), or exit 3 with the reason."""
+    """Pose path -> validated drive profile (timed under the drive limits), or exit 3 with the reason."""
     if robot != "pprs6":
         load_robot(robot)
         _fail(

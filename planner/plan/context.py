@@ -19,14 +19,11 @@ from planner.core.exceptions import NoPathFound, NoPathWithinBudget
 from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.gate.requirements import timing_of
 from planner.kinematics import chain
 from planner.plan.goals import StaticForceCheck
 from planner.plan.motion import motion_clear
-from planner.timing import reference
-from planner.timing.jerk import JerkLimitedStage
-from planner.timing.stage import TimingFactory, TimingStage
-from planner.timing.toppra import ToppraStage
+from planner.timing import reference, stages
+from planner.timing.stage import TimingFactory
 
 if TYPE_CHECKING:
     from planner.robots.cabin8 import Cabin8
@@ -45,19 +42,12 @@ TIME_RESERVE = 0.15
 
 
 def timing_factory(sc: ResolvedScenario) -> TimingFactory:
-    """The scenario's timing stage (``options.timing``, :func:`~planner.gate.requirements.timing_of`).
+    """The scenario's timing stage (:func:`planner.timing.stages.select`) at its controller period.
 
-    ``jerk_limited``: :class:`~planner.timing.jerk.JerkLimitedStage` checked at the scenario's controller
-    period; ``acceleration_limited``: :class:`~planner.timing.toppra.ToppraStage`.
+    Raises:
+        InvalidInput: a stage the robot cannot run (jerk-limited without jerk limits).
     """
-    if timing_of(sc) == "acceleration_limited":
-        return ToppraStage
-    period = float(sc.options.sample_period_s)
-
-    def jerk_stage(robot: Any, payload: Any, safety: tuple[float, float, float]) -> TimingStage:
-        return JerkLimitedStage(robot, payload, safety, sample_period_s=period)
-
-    return jerk_stage
+    return stages.select(sc.options.timing, sc.robot).factory(float(sc.options.sample_period_s))
 
 
 @dataclass(frozen=True)

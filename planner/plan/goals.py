@@ -44,7 +44,7 @@ class StaticForceCheck:
     """Static drive forces (holding the payload at rest) within ``fraction`` of the force limits.
 
     A state the drives cannot hold is useless to plan through; the margin (1 - fraction) is left for the
-    dynamic forces, which TOPP-RA keeps within the limits along the path.
+    dynamic forces, which the timing stage keeps within the limits along the path.
     """
 
     dynamics: Cabin8Dynamics

@@ -108,8 +108,8 @@ class Planner:
     Args:
         scenario: The resolved scenario.
         progress: Called with (stage name, fraction done) as the stages start.
-        timing: Factory of the timing stage, ``(robot, payload, safety) -> TimingStage`` (default:
-            :class:`~planner.timing.toppra.ToppraStage`).
+        timing: Factory of the timing stage, ``(robot, payload, safety) -> TimingStage`` (default: the
+            scenario's stage from :mod:`planner.timing.stages`, jerk-limited when the robot has jerk limits).
         preset: The search preset (:data:`~planner.plan.context.PRODUCT`; the benchmark's baseline is
             :data:`~planner.plan.context.BASELINE`).
     """

@@ -1,8 +1,9 @@
 """The timing-and-gate stage: time every leg, sample at the controller period, gate; re-time on a limit.
 
-The timing stage comes from the context's factory (:class:`~planner.timing.stage.TimingStage`, TOPP-RA by
-default); a gate failure of a limit check (velocity, acceleration, force, consistency) re-times with that
-limit tightened to the next of :data:`SAFETY_LEVELS`; any other failure refuses.
+The timing stage comes from the context's factory (:class:`~planner.timing.stage.TimingStage`, the
+scenario's stage from :mod:`planner.timing.stages`: jerk-limited by default when the robot has jerk limits);
+a gate failure of a limit check (velocity, acceleration, force, consistency) re-times with that limit
+tightened to the next of :data:`SAFETY_LEVELS`; any other failure refuses.
 """
 
 from __future__ import annotations

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from planner.core.description import Hybrid8Description, description_hash, jerk_limits, load_description
 from planner.core.exceptions import InvalidInput, LimitViolation
+from planner.core.timing_names import default_timing
 from planner.core.types import Array
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
@@ -370,7 +371,7 @@ class Cabin8(RobotModel):
             "serial_chain_mdh": [link.model_dump() for link in self.desc.serial_chain],
             "masses_kg": self.desc.masses.model_dump(),
             "home_drives": self.drives_dict(self.home_drives),
-            "default_timing": "jerk_limited" if self.limits.j_max is not None else "acceleration_limited",
+            "default_timing": default_timing(self.limits.j_max is not None),
         }
 
     def summary(self) -> dict[str, Any]:

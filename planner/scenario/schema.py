@@ -38,6 +38,7 @@ from pydantic_core import ErrorDetails
 
 from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Pose, StrictFinite
+from planner.core.timing_names import TimingName
 from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload
 
@@ -255,7 +256,7 @@ class PlanOptions(BaseModel):
         "Default (null): true when a payload is given.",
     )
 
-    timing: Literal["jerk_limited", "acceleration_limited"] | None = Field(
+    timing: TimingName | None = Field(
         None,
         description="Time law of the drive profile: 'jerk_limited' (every drive's jerk within its limit, "
         "the path kept exactly) or 'acceleration_limited' (TOPP-RA alone: acceleration steps). Default "

@@ -68,6 +68,7 @@ except ImportError:  # pragma: no cover
     _core = None
 
 from planner.core.exceptions import RetimingFailed
+from planner.core.timing_names import JERK_LIMITED
 from planner.core.types import Array
 from planner.dynamics.models import drive_dynamics
 from planner.dynamics.payload import RigidPayload
@@ -259,7 +260,7 @@ class JerkLimitedStage:
     grid_step: float = 0.15
     min_points: int = 24
     max_points: int = 3000
-    name: str = "jerk_limited"
+    name: str = JERK_LIMITED
 
     def __post_init__(self) -> None:
         if self.robot.limits.j_max is None:
