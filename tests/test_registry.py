@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 import types
-from typing import Any
+from typing import Any, cast
 
 import pytest
 from typer.testing import CliRunner
@@ -13,7 +13,10 @@ from typer.testing import CliRunner
 import planner.robots.registry as registry
 import planner.tools as tools_registry
 from planner.cli import app
-from planner.core.exceptions import UnknownRobot
+from planner.core.exceptions import InvalidInput, UnknownRobot
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.models import drive_dynamics
+from planner.robots.base import KinematicsTools
 
 
 @pytest.fixture
@@ -29,8 +32,9 @@ def toy(monkeypatch: pytest.MonkeyPatch) -> str:
 
     module.fk, module.ik = fk, ik  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "toy_tools", module)
-    monkeypatch.setitem(registry._FACTORIES, "toy", registry._FACTORIES["cabin8"])
-    monkeypatch.setitem(tools_registry._TOOLS, "toy", "toy_tools")
+    cabin8 = registry.entry("cabin8")
+    monkeypatch.setitem(registry._ENTRIES, "toy", registry.RobotEntry("toy", cabin8.kind, cabin8.model))
+    registry.register_tools("toy", lambda: cast(KinematicsTools, module))
     return "toy"
 
 
@@ -41,6 +45,24 @@ def test_builtin_tools_follow_the_protocol() -> None:
     with pytest.raises(UnknownRobot) as info:
         tools_registry.kinematics_tools("r2d2")
     assert info.value.details["field"] == "robot"
+
+
+def test_one_entry_holds_model_tools_and_force_model(toy: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    assert set(registry.available_robots()) == {"cabin8", "pprs6", "toy"}
+    assert tools_registry.kinematics_tools("cabin8").fk is not tools_registry.kinematics_tools("pprs6").fk
+    # The force model follows the mechanism kind of the model object: cabin8's Lagrange model, none for
+    # pprs6 (no masses), and the toy robot (cabin8's model under another name) gets cabin8's.
+    cabin8 = registry.load_robot("cabin8")
+    assert isinstance(drive_dynamics(cabin8), Cabin8Dynamics)
+    assert drive_dynamics(registry.load_robot("pprs6")) is None
+    assert drive_dynamics(registry.load_robot(toy)) is drive_dynamics(registry.load_robot(toy))
+    assert isinstance(drive_dynamics(registry.load_robot(toy)), Cabin8Dynamics)
+    # A robot without tools is refused by name, not by a lookup error.
+    bare = registry.entry("pprs6")
+    monkeypatch.setitem(registry._ENTRIES, "bare", registry.RobotEntry("bare", bare.kind, bare.model))
+    with pytest.raises(InvalidInput) as info:
+        tools_registry.kinematics_tools("bare")
+    assert info.value.details["field"] == "robot" and "no kinematics tools" in info.value.message
 
 
 def test_a_registered_robot_reaches_the_cli_and_the_api(toy: str, tmp_path) -> None:
