@@ -213,7 +213,7 @@ def _toy(tmp_path: Path, builder: str) -> aot.Extension:
     source.write_text("# toy\n")
     return aot.Extension(
         "cabinplan_toy_kernels",
-        "planner.timing.reference_kernels",
+        reference.EXTENSION.kernels_module,
         builder,
         (source,),
         reference.EXTENSION.entries,

@@ -13,6 +13,7 @@ reference: the LP (HiGHS) decides the law under every constraint, conservatively
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -21,11 +22,19 @@ from planner.core import aot
 from planner.core.aot import F8, Entry, check_array
 from planner.core.types import Array
 
+
+def _jit_module() -> ModuleType:
+    """The ``@njit`` integration (:mod:`planner.timing.reference_kernels`; importing it imports numba)."""
+    from planner.timing import reference_kernels
+
+    return reference_kernels
+
+
 #: The extension of the integration (:mod:`planner.timing.reference_kernels`), built ahead of time by
 #: :mod:`planner.core.aot` (``python -m planner.timing.reference``; at first use otherwise).
 EXTENSION = aot.Extension(
     name="cabinplan_timing_kernels",
-    kernels_module="planner.timing.reference_kernels",
+    kernels_module=_jit_module,
     builder_module="planner.timing.reference",
     sources=(Path(__file__).resolve().parent / "reference_kernels.py",),
     entries=(Entry("_forward_backward", ("f8[1]", "f8[2]", "f8[2]", "f8[2]", "f8[1]"), "f8[1]w"),),

@@ -16,6 +16,7 @@ of the entry's signature, every scalar converted; a world's constant arrays are 
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from planner.collision.kernels import codes
@@ -27,6 +28,14 @@ from planner.core.types import Array, IntArray
 _HERE = Path(__file__).resolve().parent
 _ROBOTS = _HERE.parent.parent / "robots"
 
+
+def _jit_module() -> ModuleType:
+    """The ``@njit`` kernels (:mod:`.jit`; importing it imports numba)."""
+    from planner.collision.kernels import jit
+
+    return jit
+
+
 #: Inputs of a world's constant data: packed buffers (floats, ints) and the flat clearance grid.
 _DATA = ("f8[1]", "i8[1]")
 _GRID = "f8[1]"
@@ -34,7 +43,7 @@ _GRID = "f8[1]"
 #: The collision kernels' extension: compiled from every module of this folder and the robots' kernels.
 EXTENSION = aot.Extension(
     name="cabinplan_collision_kernels",
-    kernels_module="planner.collision.kernels.jit",
+    kernels_module=_jit_module,
     builder_module="planner.collision.kernels.build",
     sources=(
         *sorted(_HERE.glob("*.py")),
