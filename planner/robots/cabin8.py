@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from functools import cache, cached_property
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -36,9 +36,7 @@ from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
 from planner.kinematics.native import native
 from planner.robots.base import DriveLimits, RobotModel
-
-if TYPE_CHECKING:
-    from planner.robots.cabin8_geometry import Cabin8CollisionModel
+from planner.robots.cabin8_geometry import Cabin8CollisionModel
 
 #: Indices of the stage coordinates in q (x, y, gamma) and in u (x1, x2, x3).
 STAGE = slice(1, 4)
@@ -324,8 +322,6 @@ class Cabin8(RobotModel):
 
     @cached_property
     def _collision_model(self) -> Cabin8CollisionModel:
-        from planner.robots.cabin8_geometry import Cabin8CollisionModel
-
         return Cabin8CollisionModel(self)
 
     # --------------------------------------------------------------- summary

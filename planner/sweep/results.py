@@ -124,8 +124,6 @@ def outcome_from_document(
     table columns are read from it: ``report.duration_ratio``, ``min_clearance_m``, the gate's peak effort
     ratio and ``report.planning_time_s`` of a profile, ``details`` (the evidence) of a refusal.
     """
-    from planner.sweep.task import MAX_EVIDENCE_CHARS
-
     out: dict[str, Any] = {"status": status, "reason": reason, "message": message, "document": document}
     doc = json.loads(document) if document else None
     if not isinstance(doc, dict):
@@ -140,11 +138,18 @@ def outcome_from_document(
             planning_time_s=report.get("planning_time_s"),
         )
     elif doc.get("details") is not None:
-        evidence = json.dumps(doc["details"], separators=(",", ":"))
-        out["evidence"] = (
-            evidence if len(evidence) <= MAX_EVIDENCE_CHARS else evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
-        )
+        out["evidence"] = evidence_text(doc["details"])
     return out
+
+
+#: Longest refusal evidence kept in the table [characters of JSON]; the whole document is in the profile.
+MAX_EVIDENCE_CHARS = 4000
+
+
+def evidence_text(details: Any) -> str:
+    """A refusal's evidence as the table keeps it: compact JSON, cut to :data:`MAX_EVIDENCE_CHARS`."""
+    evidence = json.dumps(details, separators=(",", ":"))
+    return evidence if len(evidence) <= MAX_EVIDENCE_CHARS else evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
 
 
 def atomic_write(path: Path, text: str | bytes) -> None:
@@ -276,10 +281,12 @@ __all__ = [
     "CSV_FILE",
     "JOURNAL",
     "MACHINE_COLUMNS",
+    "MAX_EVIDENCE_CHARS",
     "PARQUET_FILE",
     "Journal",
     "atomic_write",
     "csv_text",
+    "evidence_text",
     "make_row",
     "outcome_from_document",
     "parquet_bytes",

@@ -16,11 +16,9 @@ from pathlib import Path
 from typing import Any
 
 from planner.core.exceptions import PlannerError
+from planner.sweep.results import atomic_write, evidence_text
 
 _LOG = logging.getLogger(__name__)
-
-#: Longest refusal evidence kept in the table [characters of JSON]; the whole document is in the profile.
-MAX_EVIDENCE_CHARS = 4000
 
 
 def _resolver(meshes: dict[str, Any] | None) -> Any:
@@ -84,10 +82,7 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         result = planner.plan()
     except PlannerError as exc:
         doc = refusal_document(exc, sc, name=task["scenario"].get("name"))
-        evidence = json.dumps(doc.get("details", {}), separators=(",", ":"))
-        if len(evidence) > MAX_EVIDENCE_CHARS:
-            evidence = evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
-        out.update(reason=exc.reason, message=exc.message, evidence=evidence)
+        out.update(reason=exc.reason, message=exc.message, evidence=evidence_text(doc.get("details", {})))
         _deliver(out, task, json.dumps(doc))
         out["task_time_s"] = time.perf_counter() - t0
         return out
@@ -118,8 +113,6 @@ def _deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
     if not path:
         out["document"] = document
         return
-    from planner.sweep.results import atomic_write
-
     try:
         atomic_write(Path(path), document + "\n")
     except OSError as exc:  # the driver writes it then (and reports a lasting error itself)
@@ -146,4 +139,4 @@ def warm_up(task: dict[str, Any] | None, meshes: dict[str, Any] | None = None) -
     return time.perf_counter() - t0
 
 
-__all__ = ["MAX_EVIDENCE_CHARS", "plan_outcome", "warm_up"]
+__all__ = ["plan_outcome", "warm_up"]

@@ -8,6 +8,7 @@ processes competing for the two cores); a search that spends its motion-check bu
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import time
 from pathlib import Path
@@ -16,8 +17,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-import planner.plan.connect as connect
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
+from planner.plan.context import BASELINE, PRODUCT
 from planner.plan.pipeline import Planner
 from planner.scenario import load_scenario_file, resolve_scenario, scenario_from_dict
 
@@ -57,14 +58,13 @@ def test_the_clock_ends_a_search_as_a_time_limit_refusal() -> None:
     assert "options.time_limit_s" in info.value.message
 
 
-def test_the_work_budget_ends_a_search_the_same_way_on_every_run(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_work_budget_ends_a_search_the_same_way_on_every_run() -> None:
     # Small budgets, so that the work budget (not the generous clock) ends the hopeless search in seconds.
-    monkeypatch.setattr(connect, "QUICK_MOTION_CHECKS", 60)
-    monkeypatch.setattr(connect, "FULL_MOTION_CHECKS", 150)
+    preset = dataclasses.replace(PRODUCT, quick_motion_checks=60, full_motion_checks=150)
     outcomes = []
     for _ in range(2):
         sc = _bulky_hatch(seed=3, time_limit_s=120.0)
-        planner = Planner(sc)
+        planner = Planner(sc, preset=preset)
         with pytest.raises(NoPathWithinBudget) as info:
             planner.plan()
         assert info.value.reason == "no_path_within_budget"
@@ -72,6 +72,28 @@ def test_the_work_budget_ends_a_search_the_same_way_on_every_run(monkeypatch: py
         assert info.value.details["elapsed_s"] < 0.85 * 120.0
         outcomes.append((info.value.message, planner.report.get("search_attempts")))
     assert outcomes[0] == outcomes[1]
+
+
+@pytest.mark.parametrize("base", [PRODUCT, BASELINE], ids=["product", "baseline"])
+def test_a_refusal_reports_the_work_budget_in_force(base: Any) -> None:
+    """The budget a refusal names is the sum of the budgets of the attempts the search ran (issue 26).
+
+    The baseline preset makes one full attempt: its refusal names the full budget alone, not the
+    product's quick + full (it named 41 500 for a search that could spend at most 40 000).
+    """
+    preset = dataclasses.replace(base, quick_motion_checks=40, full_motion_checks=110)
+    planner = Planner(_bulky_hatch(seed=3, time_limit_s=120.0), preset=preset)
+    with pytest.raises(NoPathWithinBudget) as info:
+        planner.plan()
+    attempts = [a for a in planner.report["search_attempts"] if a["method"] == "ompl"]
+    granted = sum(a["max_checks"] for a in attempts)
+    assert info.value.details["motion_check_budget"] == granted
+    assert f"({granted} motion checks," in info.value.message
+    if base is BASELINE:
+        assert attempts == [{"method": "ompl", "max_checks": 110}]
+    else:
+        assert attempts[0] == {"method": "ompl", "max_checks": 40} and attempts[-1]["max_checks"] == 110
+        assert granted >= 150
 
 
 @pytest.mark.slow
