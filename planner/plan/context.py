@@ -1,14 +1,18 @@
 """What every planning stage shares: one plan's context, its clearances, its search preset and its clock.
 
 A stage is a function of the context (and of what the previous stage returned); it records what it did in
-``context.report`` and reads its settings from the context, never from loose floats. The context is built
-once per plan by :meth:`PlanContext.build`.
+``context.report`` and reads its settings from the context, never from loose floats: the clearances
+(:class:`Clearances`), the search's steps and work budgets (:class:`SearchPreset`), the time limit. The
+context is built once per plan by :meth:`PlanContext.build`; the pipeline runs each stage inside
+:meth:`PlanContext.stage`, the stopwatch that announces it to the progress callback and records its run
+time in ``report["stages_s"]``.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -129,6 +133,14 @@ BASELINE = SearchPreset(
 
 
 @dataclass
+class Stopwatch:
+    """The run time of one stage (:meth:`PlanContext.stage`), set when the stage ends [s]."""
+
+    name: str
+    seconds: float = 0.0
+
+
+@dataclass
 class PlanContext:
     """One plan's shared state: scenario, robot, world, forces, clearances, preset, clock and report.
 
@@ -163,6 +175,7 @@ class PlanContext:
     report: dict[str, Any] = field(default_factory=lambda: {"stages_s": {}})
     last_tick: float = 0.0
     motion_checks_granted: int = 0
+    ticking: tuple[str, float, float] | None = None
 
     @classmethod
     def build(
@@ -233,13 +246,46 @@ class PlanContext:
         """Time left for search [s], keeping :data:`TIME_RESERVE` of the limit for timing and validation."""
         return self.opts.time_limit_s * (1.0 - TIME_RESERVE) - self.elapsed()
 
+    @contextmanager
+    def stage(self, name: str, at: float | None = None, until: float | None = None) -> Iterator[Stopwatch]:
+        """Run one stage: announce it, time it into ``report["stages_s"][name]`` when it ends normally.
+
+        Args:
+            name: The stage's name (the progress callback's and the report's).
+            at: The fraction of the plan done when it starts, announced to the progress callback (None:
+                not announced, e.g. one try of a repeated stage).
+            until: The fraction done when it ends: the stage's work then reports its progress in between
+                (:meth:`tick`: the elapsed share of the search's time budget).
+
+        Yields:
+            The stage's :class:`Stopwatch` (its ``seconds`` set once the stage ends). A stage that raises
+            (a refusal) is not recorded.
+        """
+        if at is not None:
+            self.progress(name, at)
+        ticking = self.ticking
+        if at is not None and until is not None:
+            self.ticking = (name, at, until)
+        watch = Stopwatch(name)
+        t_start = time.perf_counter()
+        try:
+            yield watch
+        finally:
+            self.ticking = ticking
+        watch.seconds = time.perf_counter() - t_start
+        self.report["stages_s"][name] = round(watch.seconds, 6)
+
     def tick(self) -> None:
-        """Report the search's progress at most twice a second: the elapsed share of its time budget."""
+        """Report a ticking stage's progress at most twice a second: the elapsed share of the time budget.
+
+        Only a stage run with ``until`` ticks (the search, between its start and the smoothing's).
+        """
         now = time.perf_counter()
-        if now - self.last_tick >= 0.5:
+        if self.ticking is not None and now - self.last_tick >= 0.5:
             self.last_tick = now
+            name, at, until = self.ticking
             budget = self.opts.time_limit_s * (1.0 - TIME_RESERVE)
-            self.progress("search", 0.15 + 0.55 * min(1.0, self.elapsed() / budget))
+            self.progress(name, at + (until - at) * min(1.0, self.elapsed() / budget))
 
     def out_of_time(self) -> bool:
         """The deadline of the search's steps: raises the time-limit refusal once the time is up.
@@ -285,10 +331,6 @@ class PlanContext:
             elapsed_s=elapsed,
             planner=planner,
         )
-
-    def stage_done(self, name: str, t_start: float) -> None:
-        """Record a stage's run time (from ``t_start``, a ``time.perf_counter`` reading) in the report."""
-        self.report["stages_s"][name] = round(time.perf_counter() - t_start, 6)
 
     # ----------------------------------------------------------------- checks
     def state_ok(self, q: Array) -> bool:

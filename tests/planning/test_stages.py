@@ -105,3 +105,48 @@ def test_retime_passes_the_gate_and_a_stage_that_ignores_limits_is_refused(ctx: 
     if isinstance(info.value, ValidationFailed):
         failed = {c["name"] for c in info.value.details["report"]["checks"] if not c["passed"]}
         assert failed & {"velocity", "acceleration", "effort"}
+
+
+def test_the_pipeline_runs_its_stages_in_order_each_timed_and_announced(scenario: ResolvedScenario) -> None:
+    """The stopwatch: every stage of the docstring's list announced in order, timed in stages_s."""
+    from planner.plan.pipeline import Planner
+
+    events: list[tuple[str, float]] = []
+    planner = Planner(scenario, progress=lambda name, fraction: events.append((name, fraction)))
+    result = planner.plan()
+    assert list(result.report["stages_s"]) == [
+        "check_start",
+        "goals",
+        "search",
+        "smooth",
+        "timing_0",
+        "validate_0",
+    ]
+    assert all(s >= 0.0 for s in result.report["stages_s"].values())
+    assert result.report["timing"]["stage_s"] == result.report["stages_s"]["timing_0"]
+    fractions = [f for _, f in events]
+    assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] == 1.0
+    names = [n for n, _ in events]
+    first = [n for i, n in enumerate(names) if n not in names[:i]]
+    assert first == ["check_start", "goals", "search", "smooth", "timing", "sample", "validate", "done"]
+    # Ticks (the search's progress between 0.15 and 0.7) come from the search only.
+    assert all(0.15 <= f <= 0.7 for n, f in events if n == "search")
+
+
+def test_a_stage_that_raises_is_not_recorded_and_ticks_only_inside_a_ticking_stage(ctx: PlanContext) -> None:
+    events: list[tuple[str, float]] = []
+    quiet = dataclasses.replace(ctx, progress=lambda n, f: events.append((n, f)), report={"stages_s": {}})
+    quiet.last_tick = -1e9
+    quiet.tick()  # outside any stage: nothing to report
+    assert events == []
+    with pytest.raises(RuntimeError), quiet.stage("boom", 0.3):
+        raise RuntimeError("refused")
+    assert "boom" not in quiet.report["stages_s"] and events == [("boom", 0.3)]
+    with quiet.stage("walk", 0.2, until=0.6) as watch:
+        quiet.last_tick = -1e9
+        quiet.tick()
+    assert events[-1][0] == "walk" and 0.2 <= events[-1][1] <= 0.6
+    assert quiet.report["stages_s"]["walk"] == round(watch.seconds, 6) and watch.seconds > 0.0
+    quiet.last_tick = -1e9
+    quiet.tick()  # the ticking stage has ended
+    assert events[-1][0] == "walk" and len(events) == 3
