@@ -18,14 +18,8 @@ from planner.core.types import Array
 from planner.dynamics.stiffness import Compensation, compensate_goals, stiffness_model
 from planner.gate.requirements import compensates_deflection
 from planner.plan.context import PlanContext
-from planner.plan.goals import (
-    GoalCandidate,
-    collision_evidence,
-    describe,
-    dominant,
-    force_evidence,
-    limit_evidence,
-)
+from planner.plan.evidence import collision_evidence, describe, dominant, force_evidence, limit_evidence
+from planner.plan.goals import GoalCandidate
 from planner.plan.motion import MIN_MARGIN_M, certify_motion, path_clear, spare_clearance
 
 #: Rejected candidates explained in a refusal (each explanation costs a few exact distance queries).

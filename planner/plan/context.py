@@ -21,10 +21,10 @@ import numpy as np
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
 from planner.core.types import Array
+from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain
-from planner.plan.goals import StaticForceCheck
 from planner.plan.motion import motion_clear
 from planner.timing import reference, stages
 from planner.timing.stage import TimingFactory

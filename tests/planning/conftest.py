@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from planner.collision.world import CollisionWorld
+from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.plan.context import PLANNER_SLACK_M
-from planner.plan.goals import StaticForceCheck
 from planner.scenario.resolve import ResolvedScenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

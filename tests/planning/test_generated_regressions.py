@@ -176,7 +176,7 @@ def test_a_compensation_refusal_names_what_blocks_each_rejected_goal(tmp_path: P
     exact distance.
     """
     from planner.core.exceptions import DeflectionNotCompensated
-    from planner.plan.goals import describe
+    from planner.plan.evidence import describe
     from planner.plan.pipeline import run_stages
 
     sc, meta = _scenario(3, 28, tmp_path)

@@ -6,14 +6,9 @@ import numpy as np
 import pytest
 
 from planner.collision.world import CollisionWorld
+from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
-from planner.plan.goals import (
-    GoalCandidate,
-    StaticForceCheck,
-    approach_lines,
-    goal_configurations,
-    line_speed_bounds,
-)
+from planner.plan.goals import GoalCandidate, approach_lines, goal_configurations, line_speed_bounds
 from planner.plan.motion import certify_motion
 from planner.redundancy.ik import normalised_margin
 from planner.scenario.resolve import ResolvedScenario, load_scenario
@@ -186,7 +181,7 @@ def test_line_speed_bounds_hold_the_planned_line_and_the_rail(
 
 def test_a_limit_refusal_names_the_limit_furthest_outside_and_by_how_much(robot) -> None:  # noqa: ANN001
     """limit_evidence picks the worst violation relative to its range; describe and dominant read it."""
-    from planner.plan.goals import describe, dominant, limit_evidence
+    from planner.plan.evidence import describe, dominant, limit_evidence
 
     q = admissible_joints(robot, 1, 0)[0]
     q[0] = robot.limits.upper[0] + 0.05  # the rail 50 mm past its end
@@ -244,7 +239,7 @@ def test_collision_evidence_reports_the_kind_furthest_short(
     cabin_m: float, pair_m: float, self_clearance: float, blocking: str
 ) -> None:
     """A robot pair that passes never hides a cabin distance that fails, nor the other way round."""
-    from planner.plan.goals import collision_evidence
+    from planner.plan.evidence import collision_evidence
 
     world = _Distances(cabin_m, pair_m, self_clearance)
     e = collision_evidence(world, np.zeros(8), 0.010, "at the goal", margin_m=0.0005)  # type: ignore[arg-type]

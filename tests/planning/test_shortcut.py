@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from planner.collision.world import CollisionWorld
+from planner.dynamics.holding import StaticForceCheck
 from planner.kinematics import chain
-from planner.plan.goals import StaticForceCheck
 from planner.plan.motion import certify_motion, motion_clear
 from planner.plan.shortcut import MIN_GAIN_S, cut_corners, segment_times
 from planner.robots.cabin8 import Cabin8

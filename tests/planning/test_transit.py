@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from planner.collision.world import CollisionWorld
-from planner.plan.goals import StaticForceCheck
+from planner.dynamics.holding import StaticForceCheck
 from planner.plan.motion import certify_motion
 from planner.plan.shortcut import segment_times
 from planner.plan.transit import Transit, compactness, find_transit
