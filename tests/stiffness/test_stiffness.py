@@ -11,16 +11,21 @@ import yaml
 from planner.core.description import Section
 from planner.core.exceptions import DeflectionNotCompensated, InvalidRobotDescription
 from planner.core.so3 import pose_error
-from planner.dynamics.frame_fe import element_stiffness, fe_deflection
-from planner.dynamics.payload import RigidPayload, box_inertia
-from planner.dynamics.stiffness import (
-    StiffnessModel,
+from planner.dynamics.beams import (
     beam_compliance,
     beam_frame,
-    compensate_goal,
     deflected_pose,
     map_compliance,
     section_properties,
+)
+from planner.dynamics.frame_fe import element_stiffness, fe_deflection
+from planner.dynamics.payload import RigidPayload, box_inertia
+from planner.dynamics.stiffness import (
+    LoadCase,
+    StiffnessModel,
+    compensate_goal,
+    deflection_twist,
+    payload_deflection_change,
 )
 from planner.kinematics.closed_form import redundant_family
 from planner.robots.cabin8 import Cabin8, default_description_path
@@ -95,7 +100,7 @@ def test_stiffness_is_symmetric_positive_definite(model: StiffnessModel, samples
 
 def test_compliance_moves_between_frames_as_a_rigid_body(model: StiffnessModel, samples: np.ndarray) -> None:
     """Payload-frame compliance = the tool-frame compliance seen through the rigid grasp offset."""
-    from planner.dynamics.stiffness import twist_transfer
+    from planner.dynamics.beams import twist_transfer
 
     Ct = model.compliance(samples)
     Cp = model.compliance(samples, GRASP)
@@ -136,10 +141,10 @@ def test_gravity_does_positive_work(model: StiffnessModel, samples: np.ndarray) 
     """A force at the frame origin moves the point along itself: f . delta = f^T C f > 0."""
     rng = np.random.default_rng(3)
     w = np.concatenate([rng.normal(size=(50, 3)) * 500, np.zeros((50, 3))], axis=1)
-    x = model.deflection_batch(samples, T_tool_frame=GRASP, wrench=w, gravity=False)
+    x = model.deflections(samples, LoadCase(None, GRASP, w, gravity=False))
     assert np.all(np.einsum("ni,ni->n", w, x) > 0)
     # A heavy payload sags: its frame goes down (gravity is -y).
-    xg = model.deflection_batch(samples, PAYLOAD, GRASP)
+    xg = model.deflections(samples, LoadCase(PAYLOAD, GRASP))
     assert np.all(xg[:, 1] < 0)
 
 
@@ -152,7 +157,7 @@ def test_fe_route_agrees_like_table2(robot: Cabin8, model: StiffnessModel, sampl
     """
     rng = np.random.default_rng(11)
     wrenches = np.concatenate([rng.uniform(0, 1000, (50, 3)), rng.uniform(0, 1, (50, 3))], axis=1)
-    an = model.deflection_batch(samples, T_tool_frame=GRASP, wrench=wrenches, gravity=False)
+    an = model.deflections(samples, LoadCase(None, GRASP, wrenches, gravity=False))
     fe = np.array(
         [
             fe_deflection(robot, q, T_tool_frame=GRASP, wrench=w, gravity=False)
@@ -172,11 +177,35 @@ def test_fe_route_bounds_the_gravity_lumping(
     robot: Cabin8, model: StiffnessModel, samples: np.ndarray
 ) -> None:
     """Under gravity the analytical route lumps the stage links at the platform centre: still within 15%."""
-    an = model.deflection_batch(samples[:20], PAYLOAD, GRASP)
+    an = model.deflections(samples[:20], LoadCase(PAYLOAD, GRASP))
     fe = np.array([fe_deflection(robot, q, PAYLOAD, GRASP) for q in samples[:20]])
     rel = np.linalg.norm(an[:, :3] - fe[:, :3], axis=1) / np.linalg.norm(fe[:, :3], axis=1)
     assert rel.max() < 0.15
     assert rel.max() < 0.02  # measured: below 0.5%
+
+
+def test_the_payload_change_is_its_weight_as_a_wrench_and_the_thin_forms_agree(
+    robot: Cabin8, model: StiffnessModel, samples: np.ndarray
+) -> None:
+    """Attaching the payload moves the frame by the deflection under its weight alone (superposition).
+
+    An independent route: the payload's weight m g at its centre of mass, moved to the frame origin as a
+    wrench (f, (c - p) x f), with gravity off; and the thin forms give the model's numbers.
+    """
+    q = samples[:12]
+    change = payload_deflection_change(robot, q, PAYLOAD, GRASP)
+    T_frame = robot.fk_batch(q) @ GRASP
+    com = (robot.fk_batch(q) @ np.append(PAYLOAD.com_tool, 1.0))[:, :3]
+    f = np.broadcast_to(PAYLOAD.mass * np.asarray(robot.desc.gravity_m_s2), (len(q), 3))
+    wrench = np.concatenate([f, np.cross(com - T_frame[:, :3, 3], f)], axis=1)
+    direct = model.deflections(q, LoadCase(None, GRASP, wrench, gravity=False))
+    assert np.max(np.abs(change - direct)) <= 1e-12 * np.max(np.abs(direct))
+    assert np.all(change[:, 1] < 0)  # a payload pulls the frame down (gravity -y)
+    with_payload = deflection_twist(robot, q, PAYLOAD, GRASP)
+    assert np.array_equal(with_payload, model.deflections(q, LoadCase(PAYLOAD, GRASP)))
+    assert np.array_equal(deflection_twist(robot, q[3], PAYLOAD, GRASP), with_payload[3])
+    assert np.array_equal(model.deflection(q[3], PAYLOAD, GRASP).twist, with_payload[3])
+    assert np.array_equal(model.deflection_along(q, PAYLOAD, GRASP), with_payload)
 
 
 def test_deflection_along_is_the_pointwise_deflection(model: StiffnessModel, samples: np.ndarray) -> None:
