@@ -23,7 +23,7 @@ from planner.collision.world import CollisionWorld
 from planner.core import aot
 from planner.robots.cabin8 import Cabin8
 from planner.scenario import load_scenario
-from planner.timing import reference
+from planner.timing import acc_reference
 from planner.timing.jerk import JerkLimitedStage
 from planner.timing.path import JointPath, LinePiece, segment_time_length
 from tests.conftest import admissible_joints, plan_in_a_fresh_process
@@ -137,7 +137,7 @@ def test_build_and_jit_give_the_same_reference_speed() -> None:
 
     def record(*args: np.ndarray, **kw: Any) -> np.ndarray:
         rows.append(tuple(np.array(a) for a in args))
-        return reference.acceleration_limited(*args, **kw)
+        return acc_reference.acceleration_limited(*args, **kw)
 
     home = robot.joints_from_drives(robot.home_drives)
     stage = JerkLimitedStage(robot, None, sample_period_s=0.004)
@@ -150,11 +150,11 @@ def test_build_and_jit_give_the_same_reference_speed() -> None:
                 q1[j] += v
             stage.time_path(JointPath((LinePiece(home, q1, segment_time_length(robot, home, q1)),)))
     assert rows
-    built, jit = _built(reference.EXTENSION), aot.jit_kernels(reference.EXTENSION)
+    built, jit = _built(acc_reference.EXTENSION), aot.jit_kernels(acc_reference.EXTENSION)
     for args in rows:
         _same(
-            reference.acceleration_limited(*args, implementation=built),
-            reference.acceleration_limited(*args, implementation=jit),
+            acc_reference.acceleration_limited(*args, implementation=built),
+            acc_reference.acceleration_limited(*args, implementation=jit),
             "acceleration_limited",
         )
 
@@ -191,15 +191,15 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
             call()
     ds, x = np.full(4, 0.1), np.ones((5, 2))
     with pytest.raises(TypeError, match="^cx: "):
-        reference.acceleration_limited(ds, x[:, 0], x, x, np.ones(5))
+        acc_reference.acceleration_limited(ds, x[:, 0], x, x, np.ones(5))
     with pytest.raises(ValueError, match="do not fit"):
-        reference.acceleration_limited(ds, x, x, x[:4], np.ones(5))
+        acc_reference.acceleration_limited(ds, x, x, x[:4], np.ones(5))
 
 
 def test_a_plan_served_by_the_build_never_imports_numba(tmp_path: Path) -> None:
     """A ``cabinplan plan`` with the build in the cache folder imports neither numba nor llvmlite."""
     _built(EXTENSION)
-    _built(reference.EXTENSION)
+    _built(acc_reference.EXTENSION)
     scenario = SCENARIOS / "aisle-transfer.yaml"
     env = {k: v for k, v in os.environ.items() if k != "CABINPLAN_KERNELS"}
     _, loaded = plan_in_a_fresh_process(scenario, tmp_path / "out.json", ("numba", "llvmlite"), env)
@@ -213,10 +213,10 @@ def _toy(tmp_path: Path, builder: str) -> aot.Extension:
     source.write_text("# toy\n")
     return aot.Extension(
         "cabinplan_toy_kernels",
-        reference.EXTENSION.kernels_module,
+        acc_reference.EXTENSION.kernels_module,
         builder,
         (source,),
-        reference.EXTENSION.entries,
+        acc_reference.EXTENSION.entries,
     )
 
 
@@ -264,14 +264,14 @@ def test_a_missing_build_is_built_at_first_use(tmp_path: Path, monkeypatch: pyte
     """No build in the cache folder: the first use builds it (a child process, under the lock), loads it."""
     monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("CABINPLAN_KERNELS", raising=False)
-    lib = aot.path(reference.EXTENSION)
+    lib = aot.path(acc_reference.EXTENSION)
     assert lib is not None and not lib.exists()
-    module = aot.kernels(reference.EXTENSION)
+    module = aot.kernels(acc_reference.EXTENSION)
     assert lib.is_file() and module.__file__ == str(lib)
     rows = np.ones((3, 1)), np.zeros((3, 1)), np.ones((3, 1))
-    x = reference.acceleration_limited(np.full(2, 0.5), *rows, np.ones(3), implementation=module)
-    jit = reference.acceleration_limited(
-        np.full(2, 0.5), *rows, np.ones(3), implementation=aot.jit_kernels(reference.EXTENSION)
+    x = acc_reference.acceleration_limited(np.full(2, 0.5), *rows, np.ones(3), implementation=module)
+    jit = acc_reference.acceleration_limited(
+        np.full(2, 0.5), *rows, np.ones(3), implementation=aot.jit_kernels(acc_reference.EXTENSION)
     )
     assert x.tobytes() == jit.tobytes() and x[0] == x[-1] == 0.0
 
@@ -368,14 +368,14 @@ def test_a_build_that_does_not_load_is_set_aside_and_built_again(
 ) -> None:
     monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("CABINPLAN_KERNELS", raising=False)
-    lib = aot.path(reference.EXTENSION)
+    lib = aot.path(acc_reference.EXTENSION)
     assert lib is not None
     lib.parent.mkdir(parents=True)
     lib.write_bytes(b"not an extension module")
-    stale = lib.parent / f"{reference.EXTENSION.name}-build-left-by-a-killed-build"
+    stale = lib.parent / f"{acc_reference.EXTENSION.name}-build-left-by-a-killed-build"
     stale.mkdir()
     os.utime(stale, (time.time() - 3600.0, time.time() - 3600.0))
-    module = aot.kernels(reference.EXTENSION)
+    module = aot.kernels(acc_reference.EXTENSION)
     assert module.__file__ == str(lib)
     assert lib.with_name(lib.name + ".bad").read_bytes() == b"not an extension module"
     assert not stale.exists()

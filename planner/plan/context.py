@@ -26,7 +26,7 @@ from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain
 from planner.plan.motion import motion_clear
-from planner.timing import reference, stages
+from planner.timing import acc_reference, stages
 from planner.timing.stage import TimingFactory
 
 if TYPE_CHECKING:
@@ -235,7 +235,7 @@ class PlanContext:
         self.world.check_path(np.stack([q, q_b, q]), c.requested_m, c.motion_margin_m)
         if self.world.cabin is not None:
             self.world.min_distance(q, include_self=False)
-        reference.kernels()
+        acc_reference.kernels()
 
     # ------------------------------------------------------------------ clock
     def elapsed(self) -> float:

@@ -28,7 +28,7 @@ Rows that cannot bind (their largest value over the bounds the other rows imply 
 are dropped before the solve: per grid point one or two drives bind, and HiGHS's time grows with the rows.
 
 **Reference speed.** The time-optimal acceleration-limited law on the same grid
-(:func:`planner.timing.reference.acceleration_limited`, the forward-backward pass) averaged in time over
+(:func:`planner.timing.acc_reference.acceleration_limited`, the forward-backward pass) averaged in time over
 one acceleration ramp a_max / j_max (a box filter: on a straight line that cruises this is the
 time-optimal jerk-limited law, Biagiotti & Melchiorri, *Trajectory Planning for Automatic Machines and
 Robots*, 2008, sec. 4.2.3). Where the jerk binds elsewhere (blends, moves too short to cruise) the LP
@@ -73,8 +73,8 @@ from planner.core.types import Array
 from planner.dynamics.models import drive_dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.robots.base import RobotModel
+from planner.timing.acc_reference import acceleration_limited
 from planner.timing.path import JointPath, LinePiece
-from planner.timing.reference import acceleration_limited
 from planner.timing.toppra import ToppraStage, ToppraTimedPath
 
 log = logging.getLogger(__name__)

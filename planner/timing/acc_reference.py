@@ -24,19 +24,19 @@ from planner.core.types import Array
 
 
 def _jit_module() -> ModuleType:
-    """The ``@njit`` integration (:mod:`planner.timing.reference_kernels`; importing it imports numba)."""
-    from planner.timing import reference_kernels
+    """The ``@njit`` integration (:mod:`planner.timing.acc_reference_kernels`; importing it imports numba)."""
+    from planner.timing import acc_reference_kernels
 
-    return reference_kernels
+    return acc_reference_kernels
 
 
-#: The extension of the integration (:mod:`planner.timing.reference_kernels`), built ahead of time by
-#: :mod:`planner.core.aot` (``python -m planner.timing.reference``; at first use otherwise).
+#: The extension of the integration (:mod:`planner.timing.acc_reference_kernels`), built ahead of time by
+#: :mod:`planner.core.aot` (``python -m planner.timing.acc_reference``; at first use otherwise).
 EXTENSION = aot.Extension(
     name="cabinplan_timing_kernels",
     kernels_module=_jit_module,
-    builder_module="planner.timing.reference",
-    sources=(Path(__file__).resolve().parent / "reference_kernels.py",),
+    builder_module="planner.timing.acc_reference",
+    sources=(Path(__file__).resolve().parent / "acc_reference_kernels.py",),
     entries=(Entry("_forward_backward", ("f8[1]", "f8[2]", "f8[2]", "f8[2]", "f8[1]"), "f8[1]w"),),
 )
 

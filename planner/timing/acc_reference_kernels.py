@@ -1,7 +1,7 @@
-"""The compiled forward-backward integration of :mod:`planner.timing.reference` (numba).
+"""The compiled forward-backward integration of :mod:`planner.timing.acc_reference` (numba).
 
-Reached through :func:`planner.timing.reference.acceleration_limited`, which checks the arguments and runs
-the ahead-of-time build of these functions (:data:`planner.timing.reference.EXTENSION`) or, without one,
+Reached through :func:`planner.timing.acc_reference.acceleration_limited`, which checks the arguments and runs
+the ahead-of-time build of these functions (:data:`planner.timing.acc_reference.EXTENSION`) or, without one,
 numba's JIT.
 """
 
