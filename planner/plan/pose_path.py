@@ -224,7 +224,7 @@ def build_profile(
         )
     check_path(robot, path)
     entry = stages.default_stage(robot)
-    stage = entry.build(robot, None, None, sample_period_s=period, grid_points=grid_points)
+    stage = entry.build(robot, None, sample_period_s=period, grid_points=grid_points)
     timed = [stage.time_path(leg) for leg in leg_paths(path)]
     profile, leg = sample_legs(robot, timed, period, None)
     gate, poses = validate(robot, path, profile, leg, period)

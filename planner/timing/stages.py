@@ -9,18 +9,17 @@ both robot models all read it from here or from the names beside the rule. A new
 one entry of :data:`STAGES` (plus its name in :data:`~planner.core.timing_names.TimingName`; this module
 refuses to load when the two disagree).
 
-========================  ==========================================  ===========  ====================
-name                      stage                                        binds jerk   needs jerk limits
-========================  ==========================================  ===========  ====================
-``jerk_limited``          :class:`~planner.timing.jerk.JerkLimitedStage`  yes          yes
-``acceleration_limited``  :class:`~planner.timing.toppra.ToppraStage`     no           no
-========================  ==========================================  ===========  ====================
+- ``jerk_limited``: :class:`~planner.timing.jerk.JerkLimitedStage`, checked at the controller period;
+  binds the jerk limits and needs them in the robot description.
+- ``acceleration_limited``: :class:`~planner.timing.toppra.ToppraStage` (TOPP-RA alone); the jerk check
+  reports the peak and passes.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol, get_args
+from typing import Any, get_args
 
 from planner.core.exceptions import InvalidInput
 from planner.core.timing_names import ACCELERATION_LIMITED, JERK_LIMITED, TimingName, default_timing
@@ -33,96 +32,71 @@ from planner.timing.toppra import ToppraStage
 Safety = tuple[float, float, float]
 
 
-class StageBuilder(Protocol):
-    """Builds one stage for a robot and payload.
-
-    Args:
-        robot: The robot model.
-        payload: The carried payload (None: empty gripper).
-        safety: Fractions of the (velocity, acceleration, force) limits the stage may use (None: the
-            stage's own default, (0.995, 0.97, 0.97) for both stages).
-        sample_period_s: The controller period the profile is sampled at [s].
-        grid_points: A fixed number of grid intervals per leg (None: the stage's spacing rule).
-    """
-
-    def __call__(
-        self,
-        robot: RobotModel,
-        payload: RigidPayload | None,
-        safety: Safety | None,
-        *,
-        sample_period_s: float,
-        grid_points: int | None,
-    ) -> TimingStage:
-        """The stage (see the class docstring for the arguments)."""
-        ...
-
-
-def _grid(grid_points: int | None) -> dict[str, int]:
-    return {} if grid_points is None else {"min_points": grid_points, "max_points": grid_points}
-
-
-def _jerk_limited(
-    robot: RobotModel,
-    payload: RigidPayload | None,
-    safety: Safety | None,
-    *,
-    sample_period_s: float,
-    grid_points: int | None,
-) -> TimingStage:
-    """The jerk-limited LP, its jerk checked at the controller period."""
-    kw: dict[str, Any] = {"sample_period_s": sample_period_s, **_grid(grid_points)}
-    if safety is not None:
-        kw["safety"] = safety
-    return JerkLimitedStage(robot, payload, **kw)
-
-
-def _acceleration_limited(
-    robot: RobotModel,
-    payload: RigidPayload | None,
-    safety: Safety | None,
-    *,
-    sample_period_s: float,
-    grid_points: int | None,
-) -> TimingStage:
-    """TOPP-RA alone (the controller period only matters to the sampler)."""
-    kw: dict[str, Any] = dict(_grid(grid_points))
-    if safety is not None:
-        kw["safety"] = safety
-    return ToppraStage(robot, payload, **kw)
-
-
 @dataclass(frozen=True)
 class StageEntry:
     """One registered timing stage.
 
     Attributes:
         name: Its name (``options.timing``).
-        build: Builds the stage (:class:`StageBuilder`).
+        stage: The stage's class (a :class:`~planner.timing.stage.TimingStage` built from the robot, the
+            payload and keyword settings: ``safety``, ``min_points`` / ``max_points``, ``sample_period_s``).
         binds_jerk: Whether the gate holds its profiles to the drive jerk limits (else the jerk check
             reports the peak and passes).
         needs_jerk_limits: Whether the robot description must give jerk limits for it.
+        checked_at_period: Whether the stage checks its law at the controller period (it is then given
+            ``sample_period_s``; the jerk-limited stage's jerk is the change of the sampled acceleration).
     """
 
     name: TimingName
-    build: StageBuilder
+    stage: Callable[..., TimingStage]
     binds_jerk: bool
     needs_jerk_limits: bool
+    checked_at_period: bool
+
+    def build(
+        self,
+        robot: RobotModel,
+        payload: RigidPayload | None,
+        safety: Safety | None = None,
+        *,
+        sample_period_s: float,
+        grid_points: int | None = None,
+    ) -> TimingStage:
+        """The stage for a robot and payload.
+
+        Args:
+            robot: The robot model.
+            payload: The carried payload (None: empty gripper).
+            safety: Fractions of the (velocity, acceleration, force) limits the stage may use (None: the
+                stage's own default, (0.995, 0.97, 0.97) for both stages).
+            sample_period_s: The controller period the profile is sampled at [s].
+            grid_points: A fixed number of grid intervals per leg (None: the stage's spacing rule).
+        """
+        kw: dict[str, Any] = {}
+        if safety is not None:
+            kw["safety"] = safety
+        if grid_points is not None:
+            kw.update(min_points=grid_points, max_points=grid_points)
+        if self.checked_at_period:
+            kw["sample_period_s"] = sample_period_s
+        return self.stage(robot, payload, **kw)
 
     def factory(self, sample_period_s: float) -> TimingFactory:
         """The plan's factory ``(robot, payload, safety) -> TimingStage`` at the controller period."""
 
         def build(robot: Any, payload: Any, safety: Safety) -> TimingStage:
-            return self.build(robot, payload, safety, sample_period_s=sample_period_s, grid_points=None)
+            return self.build(robot, payload, safety, sample_period_s=sample_period_s)
 
         return build
 
 
 #: Every timing stage, by name.
 STAGES: dict[str, StageEntry] = {
-    JERK_LIMITED: StageEntry(JERK_LIMITED, _jerk_limited, binds_jerk=True, needs_jerk_limits=True),
+    JERK_LIMITED: StageEntry(
+        JERK_LIMITED, JerkLimitedStage, binds_jerk=True, needs_jerk_limits=True, checked_at_period=True
+    ),
     ACCELERATION_LIMITED: StageEntry(
-        ACCELERATION_LIMITED, _acceleration_limited, binds_jerk=False, needs_jerk_limits=False
+        ACCELERATION_LIMITED, ToppraStage, binds_jerk=False, needs_jerk_limits=False, checked_at_period=False
     ),
 }
 if set(STAGES) != set(get_args(TimingName)):  # pragma: no cover - a registry edited without its names
