@@ -329,20 +329,3 @@ class ObstacleSet:
         """True when every checked pair keeps ``clearance`` at the state."""
         lb = self.lower_bounds(flat, clearance)
         return not any(self.hit(flat, int(b), int(o), clearance) for b, o in zip(*np.nonzero(lb <= clearance), strict=True))
-
-    def pair_distance(self, flat: Array, b: int, o: int, lb: float, clearance: float, margin: float) -> float:
-        """A distance of the pair good enough for the walk: its lower bound when that proves the margin,
-        else the exact FCL distance."""
-        if lb >= clearance + margin:
-            return lb
-        return self.distance(flat, b, o)[0]
-
-
-@dataclass(frozen=True)
-class ObstacleWalk:
-    """The outcome of the obstacle part of a certified motion: clear, or where and which pair failed."""
-
-    valid: bool
-    states_checked: int
-    t_fail: float | None = None
-    pair: tuple[int, int] | None = None

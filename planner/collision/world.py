@@ -363,8 +363,7 @@ class CollisionWorld(Generic[RobotT]):
                 q = q_a + t * dq
                 flat = self.flat_poses(q)
                 states += 1
-                lb = float(obs.lower_bounds(flat, clearance + margin)[b, o])
-                d = obs.pair_distance(flat, b, o, lb, clearance, margin)
+                d = obs.distance(flat, b, o)[0]  # exact: the longest certified step
                 if d < clearance + margin:
                     contact = obstacle_contact(self.names[b], obs.names[o], clearance + margin)
                     queries = rep.fcl_queries + obs.queries - queries0
@@ -454,21 +453,26 @@ class CollisionWorld(Generic[RobotT]):
                     d, (self.names[a], "cabin" if other < 0 else self.names[other]), p_body, p_other
                 )
         if include_cabin and self.obstacles is not None:
-            best = min(best, self.obstacle_distance(st.flat), key=lambda x: x.distance_m)
+            found = self.obstacle_distance(st.flat, bound=best.distance_m)
+            if found.distance_m < best.distance_m:
+                best = found
         return best
 
-    def obstacle_distance(self, flat: Array, obstacle: str | None = None, body: str | None = None) -> Distance:
+    def obstacle_distance(
+        self, flat: Array, obstacle: str | None = None, body: str | None = None, bound: float = np.inf
+    ) -> Distance:
         """Smallest exact distance of a body to an obstacle at the body poses ``flat`` (B, 13).
 
         ``obstacle`` / ``body``: only that obstacle / body (an allowed pair too: its distance is what a
         report of the allowed pair shows). Pairs this world allows are left out otherwise. Branch and bound
-        on the sphere lower bounds, as :meth:`min_distance`; +inf without a pair to measure.
+        on the sphere lower bounds, as :meth:`min_distance`; pairs certainly farther than ``bound`` [m] are
+        not measured (+inf when none is nearer, or without a pair to measure).
         """
         obs = self.obstacles
         best = Distance(np.inf, ("", ""), np.full(3, np.nan), np.full(3, np.nan))
         if obs is None:
             return best
-        lb = obs.lower_bounds(flat)
+        lb = obs.lower_bounds(flat, bound)
         if obstacle is not None or body is not None:
             keep = np.ones_like(obs.active)
             if obstacle is not None:
@@ -479,7 +483,7 @@ class CollisionWorld(Generic[RobotT]):
             lb = np.where(keep, allowed_lb, np.inf)
         for k in np.argsort(lb, axis=None).tolist():
             b, o = divmod(k, lb.shape[1])
-            if not np.isfinite(lb[b, o]) or lb[b, o] >= best.distance_m:
+            if not np.isfinite(lb[b, o]) or lb[b, o] >= min(best.distance_m, bound):
                 break
             d, p_body, p_obstacle = obs.distance(flat, b, o)
             if d < best.distance_m:
