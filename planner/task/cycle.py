@@ -254,7 +254,7 @@ def plan_cycle(
 
     report_progress("validate", 0.9)
     profile, leg_of, legs = join_legs(cyc, pieces, dynamics)
-    req = cycle_requirements(cyc, legs, q_commanded_bay=q_release)
+    req = cycle_requirements(cyc, legs)
     gate = validate_cycle(profile, robot, req, dynamics)
     if not gate.passed:
         raise ValidationFailed(f"validation gate (cycle): {gate.summary()}", report=gate.to_dict())
@@ -514,9 +514,7 @@ def join_legs(
     return profile, leg_of, tuple(legs)
 
 
-def cycle_requirements(
-    cyc: ResolvedCycle, legs: tuple[LegTiming, ...], q_commanded_bay: Array | None = None
-) -> CycleRequirements:
+def cycle_requirements(cyc: ResolvedCycle, legs: tuple[LegTiming, ...]) -> CycleRequirements:
     """What the whole-cycle gate demands: each leg's world, load and line, the grasp, bay and park goals."""
     robot = cyc.robot
     sc_bay = leg_scenario(cyc, leg("insertion"), cyc.park_q, T_base_unit_goal=cyc.T_base_unit_bay)
