@@ -70,6 +70,7 @@ if TYPE_CHECKING:
     from planner.collision.world import CollisionWorld
     from planner.core.exceptions import InvalidInput, PlannerError, PlanRefused, ValidationFailed
     from planner.core.schemas import Pose
+    from planner.documents.cycle import cycle_document
     from planner.documents.output import refusal_document, result_document
     from planner.gate.check_profile import check_profile
     from planner.gate.checks import GateReport, validate_profile
@@ -84,7 +85,6 @@ if TYPE_CHECKING:
     from planner.task.cycle import CycleResult, plan_cycle
     from planner.task.resolve import ResolvedCycle, load_cycle, resolve_cycle
     from planner.task.schema import Cycle, cycle_from_dict
-    from planner.documents.cycle import cycle_document
     from planner.timing.profile import DriveProfile
     from planner.tools import kinematics_tools
 

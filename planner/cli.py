@@ -312,8 +312,10 @@ def cycle(
     csv: Annotated[Path | None, typer.Option("--csv", help="also write the profile as CSV")] = None,
     plot: Annotated[Path | None, typer.Option("--plot", help="also plot the profile (PNG)")] = None,
 ) -> None:
-    """Plan an assembly cycle: one certified drive profile with its legs and events (exit 0), or a refusal
-    with its reason and the leg that refused (exit 3).
+    """Plan an assembly cycle.
+
+    one certified drive profile with its legs and events (exit 0), or a refusal with its reason and the leg
+    that refused (exit 3).
 
     The JSON written to --output is the cycle profile on success and the refusal document otherwise.
     """
@@ -475,8 +477,9 @@ def check(
         Path, typer.Argument(help="drive profile JSON (as written by `plan`)", dir_okay=False)
     ],
 ) -> None:
-    """Run the validation gate on a drive profile for a scenario (or a cycle profile for its cycle file);
-    the report goes to stdout.
+    """Run the validation gate on a drive profile for a scenario; the report goes to stdout.
+
+    A cycle profile (``kind: cycle``) is checked against its cycle file instead.
 
     Exit 0 when every check passes, 3 when any fails.
     """

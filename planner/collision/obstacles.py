@@ -55,7 +55,9 @@ def _box_mesh(size: tuple[float, float, float]) -> fcl.BVHModel:
 def _bvh(vertices: Array, faces: IntArray) -> fcl.BVHModel:
     model = fcl.BVHModel()
     model.beginModel(len(vertices), len(faces))
-    model.addSubModel(np.ascontiguousarray(vertices, dtype=float), np.ascontiguousarray(faces, dtype=np.int32))
+    model.addSubModel(
+        np.ascontiguousarray(vertices, dtype=float), np.ascontiguousarray(faces, dtype=np.int32)
+    )
     model.endModel()
     return model
 
@@ -95,7 +97,9 @@ class Obstacle:
             v = np.array(self.vertices, dtype=float)
             f = np.array(self.faces, dtype=np.int64)
             if v.ndim != 2 or v.shape[1] != 3 or len(v) < 4 or f.ndim != 2 or f.shape[1] != 3 or len(f) < 1:
-                raise InvalidInput(f"{self.name}: a mesh of vertices (V, 3) and faces (F, 3)", field=self.name)
+                raise InvalidInput(
+                    f"{self.name}: a mesh of vertices (V, 3) and faces (F, 3)", field=self.name
+                )
             v.setflags(write=False)
             f.setflags(write=False)
             object.__setattr__(self, "vertices", v)
@@ -108,8 +112,10 @@ class Obstacle:
 
     @property
     def bound(self) -> tuple[Array, Array]:
-        """(T_base_bound (4, 4), half extents (3,)): a box containing the obstacle (its own, or the mesh's
-        bounding box in the obstacle frame)."""
+        """(T_base_bound (4, 4), half extents (3,)).
+
+        a box containing the obstacle (its own, or the mesh's bounding box in the obstacle frame).
+        """
         if self.size is not None:
             return self.T_base_obstacle, 0.5 * np.array(self.size)
         assert self.vertices is not None
@@ -191,14 +197,19 @@ class ObstacleSet:
     """
 
     def __init__(
-        self, obstacles: tuple[Obstacle, ...], bodies: BodySet, allowed: frozenset[tuple[str, str]] = frozenset()
+        self,
+        obstacles: tuple[Obstacle, ...],
+        bodies: BodySet,
+        allowed: frozenset[tuple[str, str]] = frozenset(),
     ) -> None:
         names = [o.name for o in obstacles]
         if len(set(names)) != len(names):
             raise InvalidInput(f"obstacles: names must be unique, got {names}", field="obstacles")
         unknown = [p for p in allowed if p[0] not in bodies.names or p[1] not in names]
         if unknown:
-            raise InvalidInput(f"allowed pairs name unknown bodies or obstacles: {sorted(unknown)}", field="allowed")
+            raise InvalidInput(
+                f"allowed pairs name unknown bodies or obstacles: {sorted(unknown)}", field="allowed"
+            )
         self.obstacles = obstacles
         self.names = tuple(names)
         self.bodies = bodies
@@ -216,7 +227,9 @@ class ObstacleSet:
         self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
         # The bodies' fine sphere covers: box bodies by local centre, capsules by a fraction of the length.
         sb, local, frac, radii = [], [], [], []
-        for b, (shape, c, r) in enumerate(zip(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii, strict=True)):
+        for b, (shape, c, r) in enumerate(
+            zip(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii, strict=True)
+        ):
             sb.append(np.full(len(r), b))
             radii.append(r)
             if shape.kind == "capsule":
@@ -268,7 +281,11 @@ class ObstacleSet:
         sel = np.flatnonzero(np.isin(self._sphere_body, near))
         b = self._sphere_body[sel]
         Rb = R[b]
-        centres = p[b] + np.einsum("sij,sj->si", Rb, self._local[sel]) + Rb[:, :, 2] * (self._frac[sel] * length[b])[:, None]
+        centres = (
+            p[b]
+            + np.einsum("sij,sj->si", Rb, self._local[sel])
+            + Rb[:, :, 2] * (self._frac[sel] * length[b])[:, None]
+        )
         d = self._box_distance(centres) - self._radii[sel, None]  # (S', O)
         fine = np.full(self.active.shape, -np.inf)
         fine[near] = np.inf
@@ -291,13 +308,17 @@ class ObstacleSet:
 
     def _body(self, flat: Array, b: int, margin: float) -> fcl.CollisionObject:
         R = flat[b, :9].reshape(3, 3).T
-        return fcl.CollisionObject(self._geometry(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12]))
+        return fcl.CollisionObject(
+            self._geometry(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12])
+        )
 
     def hit(self, flat: Array, b: int, o: int, margin: float) -> bool:
         """Body b grown by ``margin`` touches obstacle o (one FCL collision query)."""
         self.queries += 1
         return bool(
-            fcl.collide(self._body(flat, b, margin), self._objects[o], fcl.CollisionRequest(), fcl.CollisionResult())
+            fcl.collide(
+                self._body(flat, b, margin), self._objects[o], fcl.CollisionRequest(), fcl.CollisionResult()
+            )
             > 0
         )
 
@@ -314,7 +335,9 @@ class ObstacleSet:
         return d, np.array(p_body), np.array(p_obstacle)
 
     # ---------------------------------------------------------------- checks
-    def state_contacts(self, flat: Array, names: tuple[str, ...], clearance: float, all_contacts: bool) -> list[Contact]:
+    def state_contacts(
+        self, flat: Array, names: tuple[str, ...], clearance: float, all_contacts: bool
+    ) -> list[Contact]:
         """The obstacle contacts at one state: every checked pair within ``clearance`` (or the first)."""
         lb = self.lower_bounds(flat, clearance)
         out: list[Contact] = []
@@ -328,4 +351,7 @@ class ObstacleSet:
     def clear(self, flat: Array, clearance: float) -> bool:
         """True when every checked pair keeps ``clearance`` at the state."""
         lb = self.lower_bounds(flat, clearance)
-        return not any(self.hit(flat, int(b), int(o), clearance) for b, o in zip(*np.nonzero(lb <= clearance), strict=True))
+        return not any(
+            self.hit(flat, int(b), int(o), clearance)
+            for b, o in zip(*np.nonzero(lb <= clearance), strict=True)
+        )

@@ -346,8 +346,11 @@ class CollisionWorld(Generic[RobotT]):
     def _obstacle_walk(
         self, q_a: Array, q_b: Array, clearance: float, margin: float, rep: MotionReport
     ) -> MotionReport:
-        """Certify the segment against the obstacles (see :mod:`.obstacles`): each pair advanced by its
-        proven spare clearance over the body's displacement bound D_b = rho_b . |q_b - q_a|."""
+        """Certify the segment against the obstacles (see :mod:`.obstacles`).
+
+        each pair advanced by its proven spare clearance over the body's displacement bound D_b = rho_b .
+        |q_b - q_a|.
+        """
         obs = self.obstacles
         assert obs is not None
         dq = q_b - q_a
@@ -491,8 +494,10 @@ class CollisionWorld(Generic[RobotT]):
         return best
 
     def is_environment(self, name: str) -> bool:
-        """True when ``name`` (the second body of a :class:`Distance`) is the cabin or an obstacle, whose
-        distance is held to the clearance, not to the self-clearance."""
+        """True when ``name`` (a :class:`Distance`'s second body) is the cabin or an obstacle.
+
+        Their distances are held to the clearance, a robot pair's to the self-clearance.
+        """
         return name == "cabin" or (self.obstacles is not None and name in self.obstacles.names)
 
     def clearance_profile(self, qs: Array, include_self: bool = True) -> Array:

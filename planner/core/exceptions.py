@@ -190,7 +190,9 @@ class UnitNotHoldable(PlanRefused):
 
 
 class ReleaseInCollision(PlanRefused):
-    """At an assembly cycle's release the tool's spring-back (the load change) brings a body within the
-    clearance: ``details`` name the bodies and their distance."""
+    """At a cycle's release the tool's spring-back (the load change) brings a body within the clearance.
+
+    ``details`` name the bodies and their distance.
+    """
 
     reason = "release_in_collision"

@@ -73,8 +73,10 @@ def cycle_refusal_document(exc: PlannerError, cyc: ResolvedCycle) -> dict[str, A
 
 
 def cycle_png(cyc: ResolvedCycle, result: CycleResult) -> bytes:
-    """PNG bytes of a cycle's drive profile against its limits (:func:`~planner.documents.plot.profile_png`),
-    the legs and events in the title."""
+    """PNG bytes of a cycle's drive profile against its limits, the legs and events in the title.
+
+    The plot is :func:`~planner.documents.plot.profile_png`'s.
+    """
     from planner.documents.plot import profile_png
 
     legs = " | ".join(f"{x.name} {x.t_start_s:.1f}" for x in result.legs)

@@ -132,7 +132,9 @@ def validate_cycle(
         names = ", ".join(v["name"] for v in admissibility.violations(q[i]))
         checks.append(Check("workspace", False, f"sample {i} violates {names}", None, i))
     else:
-        checks.append(Check("workspace", True, "stage on its working branch with every margin at every sample"))
+        checks.append(
+            Check("workspace", True, "stage on its working branch with every margin at every sample")
+        )
     # Forces, each leg with its own load.
     dyn = dynamics or drive_dynamics(robot)
     assert dyn is not None, "the cycle gate needs the robot's force model"
@@ -151,7 +153,8 @@ def validate_cycle(
             Check(
                 "effort",
                 chk.passed and mismatch <= LIMIT_TOLERANCE,
-                chk.detail + f"; reported vs recomputed (each leg's load) differ by {100 * mismatch:.2f}% of the limit",
+                chk.detail
+                + f"; reported vs recomputed (each leg's load) differ by {100 * mismatch:.2f}% of the limit",
                 chk.worst,
                 chk.sample,
             )
@@ -164,7 +167,11 @@ def validate_cycle(
     for name, before, after in (("grasp", None, req.unit_payload), ("release", req.unit_payload, None)):
         leg = next(x for x in req.legs if x.name == name)
         q_event = q[max(0, leg.sample_start - 1)]
-        checks.append(jump_check(robot, leg.world, q_event, before, after, req.T_tool_unit, req.clearance_m, name, leg.labels))
+        checks.append(
+            jump_check(
+                robot, leg.world, q_event, before, after, req.T_tool_unit, req.clearance_m, name, leg.labels
+            )
+        )
     checks.extend(_allowed_checks(q, req))
     min_c = float("inf")
     for leg in req.legs:
@@ -223,7 +230,9 @@ def _collision_checks(robot: Cabin8, q: Array, req: CycleRequirements) -> list[C
     for leg in req.legs:
         rows = q[leg.rows()]
         first = leg.rows().start
-        rep = leg.world.check_path(rows, req.clearance_m, GATE_MOTION_MARGIN_M, GATE_MAX_RUN, GATE_MAX_EXTRA_M)
+        rep = leg.world.check_path(
+            rows, req.clearance_m, GATE_MOTION_MARGIN_M, GATE_MAX_RUN, GATE_MAX_EXTRA_M
+        )
         runs += rep.motion_checks
         if not rep.valid:
             what = "; ".join(_label(leg, c.detail) for c in rep.contacts) or "not certified"
@@ -234,13 +243,21 @@ def _collision_checks(robot: Cabin8, q: Array, req: CycleRequirements) -> list[C
             continue
         q_def, sag = deflected_joints(robot, rows, leg.payload, req.T_tool_unit)
         worst_sag = max(worst_sag, sag)
-        rep = leg.world.check_path(q_def, req.clearance_m, GATE_MOTION_MARGIN_M, GATE_MAX_RUN, GATE_MAX_EXTRA_M)
+        rep = leg.world.check_path(
+            q_def, req.clearance_m, GATE_MOTION_MARGIN_M, GATE_MAX_RUN, GATE_MAX_EXTRA_M
+        )
         runs += rep.motion_checks
         if not rep.valid:
             what = "; ".join(_label(leg, c.detail) for c in rep.contacts) or "not certified"
             bad = None if rep.first_bad is None else first + rep.first_bad
             failures.append(
-                Check("collision", False, f"{leg.name}, sagging ({1e3 * sag:.2f} mm): from sample {bad}: {what}", None, bad)
+                Check(
+                    "collision",
+                    False,
+                    f"{leg.name}, sagging ({1e3 * sag:.2f} mm): from sample {bad}: {what}",
+                    None,
+                    bad,
+                )
             )
     if failures:
         return failures
@@ -248,8 +265,9 @@ def _collision_checks(robot: Cabin8, q: Array, req: CycleRequirements) -> list[C
         Check(
             "collision",
             True,
-            f"certified clearance >= {req.clearance_m} m over {runs} runs in each leg's world (installed units, "
-            f"fixture, the unit where it rests), rigid and sagging (up to {1e3 * worst_sag:.2f} mm) alike",
+            f"certified clearance >= {req.clearance_m} m over {runs} runs in each leg's world (installed "
+            f"units, fixture, the unit where it rests), rigid and sagging (up to {1e3 * worst_sag:.2f} mm) "
+            "alike",
         )
     ]
 
@@ -293,7 +311,8 @@ def _goal_checks(robot: Cabin8, q: Array, T_unit: Array, u: Array, req: CycleReq
         Check(
             "grasp",
             dp <= GOAL_POSITION_TOL_M and da <= GOAL_ANGLE_TOL_RAD,
-            f"at the grasp the unit frame is off the dock pose by {1e3 * dp:.3f} mm, {np.rad2deg(da):.4f} deg",
+            f"at the grasp the unit frame is off the dock pose by {1e3 * dp:.3f} mm, "
+            f"{np.rad2deg(da):.4f} deg",
             dp,
             grasp_end,
         )
@@ -306,13 +325,16 @@ def _goal_checks(robot: Cabin8, q: Array, T_unit: Array, u: Array, req: CycleReq
         dp, da = _pose_error(deflected_pose(T_unit[bay_end], x), req.T_base_unit_bay)
         ok = dp <= COMPENSATION_TOL_M and da <= COMPENSATION_TOL_RAD
         detail = (
-            f"the unit's predicted deflected pose ({1e3 * float(np.linalg.norm(x[:3])):.3f} mm sag) is off the bay "
-            f"pose by {1e3 * dp:.4f} mm, {da:.2e} rad"
+            f"the unit's predicted deflected pose ({1e3 * float(np.linalg.norm(x[:3])):.3f} mm sag) is off "
+            f"the bay pose by {1e3 * dp:.4f} mm, {da:.2e} rad"
         )
     else:
         dp, da = _pose_error(T_unit[bay_end], req.T_base_unit_bay)
         ok = dp <= GOAL_POSITION_TOL_M and da <= GOAL_ANGLE_TOL_RAD
-        detail = f"the unit frame is off the bay pose by {1e3 * dp:.3f} mm, {np.rad2deg(da):.4f} deg (not compensated)"
+        detail = (
+            f"the unit frame is off the bay pose by {1e3 * dp:.3f} mm, {np.rad2deg(da):.4f} deg "
+            "(not compensated)"
+        )
     out.append(Check("bay", ok, detail, dp, bay_end))
     e = float(np.max(np.abs(u[-1] - req.park_u)))
     out.append(Check("park", e <= 1e-6, f"final drives off the park posture by {e:.3g}", e, len(u) - 1))
@@ -330,10 +352,13 @@ def jump_check(
     what: str,
     labels: dict[str, str] | None = None,
 ) -> Check:
-    """The load change at ``q``: the tool's jump, and the sagging robot before and after it and the straight
-    motion between them certified to keep ``clearance_m`` in ``world`` (the gate's margin).
+    """The load change at ``q``.
 
-    ``worst`` is the jump of the ``T_tool_frame`` origin [m] (:func:`~planner.dynamics.load_change.load_change`).
+    the tool's jump, and the sagging robot before and after it and the straight motion between them
+    certified to keep ``clearance_m`` in ``world`` (the gate's margin).
+
+    ``worst`` is the jump of the ``T_tool_frame`` origin [m]
+    (:func:`~planner.dynamics.load_change.load_change`).
     A failure names the bodies and their exact distance after the jump.
     """
     change = load_change(robot, q, before, after, T_tool_frame)
@@ -373,7 +398,8 @@ def _allowed_checks(q: Array, req: CycleRequirements) -> list[Check]:
         rows = q[leg.rows()]
         probe = clearance_probe_indices(len(rows))
         d = min(
-            leg.world.obstacle_distance(leg.world.flat_poses(r), obstacle=obstacle, body=body).distance_m for r in rows[probe]
+            leg.world.obstacle_distance(leg.world.flat_poses(r), obstacle=obstacle, body=body).distance_m
+            for r in rows[probe]
         )
         best, legs = out.get(leg.allowed, (np.inf, []))
         out[leg.allowed] = (min(best, d), [*legs, leg.name])

@@ -90,7 +90,9 @@ class ResolvedScenario:
 
     def world(self) -> CollisionWorld:
         """The collision world of this scenario: robot, payload, cabin and its obstacles."""
-        return CollisionWorld(self.robot, self.cabin, self.payload, obstacles=self.obstacles, allowed=self.allowed_pairs)
+        return CollisionWorld(
+            self.robot, self.cabin, self.payload, obstacles=self.obstacles, allowed=self.allowed_pairs
+        )
 
     def __post_init__(self) -> None:
         for name in (

@@ -1,5 +1,6 @@
-"""The independent re-check of a cycle profile document: the one use case behind ``cabinplan check`` on a
-cycle (and, later, the service's validation route).
+"""The independent re-check of a cycle profile document.
+
+the one use case behind ``cabinplan check`` on a cycle (and, later, the service's validation route).
 
 The gate trusts nothing the planner computed: each leg's world, load and line are rebuilt from the cycle
 (:mod:`planner.task.legs`), the samples and the legs' ranges are read from the document, and
@@ -32,8 +33,8 @@ def check_cycle(cyc: ResolvedCycle, document: dict[str, Any]) -> GateReport:
         )
     if document.get("kind") != "cycle":
         raise InvalidInput(
-            "profile.kind: not a cycle profile (expected kind 'cycle'; a plan's profile is checked against its "
-            "scenario)",
+            "profile.kind: not a cycle profile (expected kind 'cycle'; a plan's profile is checked "
+            "against its scenario)",
             field="profile.kind",
         )
     claimed = (document.get("cycle") or {}).get("sha256") if isinstance(document.get("cycle"), dict) else None
@@ -51,7 +52,9 @@ def check_cycle(cyc: ResolvedCycle, document: dict[str, Any]) -> GateReport:
 def _legs(cyc: ResolvedCycle, data: Any, n: int) -> tuple[LegTiming, ...]:
     """The document's legs, checked against the cycle's: names in order, payload states, integer ranges."""
     if not isinstance(data, list) or len(data) != len(LEG_NAMES):
-        raise InvalidInput(f"profile.legs: expected the {len(LEG_NAMES)} legs {list(LEG_NAMES)}", field="profile.legs")
+        raise InvalidInput(
+            f"profile.legs: expected the {len(LEG_NAMES)} legs {list(LEG_NAMES)}", field="profile.legs"
+        )
     out = []
     for i, (entry, name) in enumerate(zip(data, LEG_NAMES, strict=True)):
         where = f"profile.legs[{i}]"
@@ -68,8 +71,20 @@ def _legs(cyc: ResolvedCycle, data: Any, n: int) -> tuple[LegTiming, ...]:
         try:
             s, e = int(entry["sample_start"]), int(entry["sample_end"])
         except (KeyError, TypeError, ValueError):
-            raise InvalidInput(f"{where}: sample_start and sample_end must be integers", field=where) from None
+            raise InvalidInput(
+                f"{where}: sample_start and sample_end must be integers", field=where
+            ) from None
         if not 0 <= s <= e <= n:
             raise InvalidInput(f"{where}: samples [{s}, {e}) outside the profile's {n}", field=where)
-        out.append(LegTiming(name, state.kind, payload, float(entry.get("t_start_s", 0.0)), float(entry.get("t_end_s", 0.0)), s, e))
+        out.append(
+            LegTiming(
+                name,
+                state.kind,
+                payload,
+                float(entry.get("t_start_s", 0.0)),
+                float(entry.get("t_end_s", 0.0)),
+                s,
+                e,
+            )
+        )
     return tuple(out)

@@ -211,18 +211,24 @@ def plan_cycle(
 
     report_progress("pre_grasp", 0.1)
     with _in_leg("pre_grasp"):
-        res = plan_scenario(leg_scenario(cyc, leg("pre_grasp"), cyc.park_q, goal_q=q_pre), None, timing, preset)
+        res = plan_scenario(
+            leg_scenario(cyc, leg("pre_grasp"), cyc.park_q, goal_q=q_pre), None, timing, preset
+        )
     pieces.append(_Piece(leg("pre_grasp"), q_pre, res.profile, report=_leg_report(res)))
 
     with _in_leg("grasp_line"):
-        line_ctx = PlanContext.build(leg_scenario(cyc, leg("grasp_line"), q_pre, goal_q=q_grasp), None, timing, preset)
-        line_ctx.report["grasp"] = grasp_ctx.report.get("grasp")
+        line_ctx = PlanContext.build(
+            leg_scenario(cyc, leg("grasp_line"), q_pre, goal_q=q_grasp), None, timing, preset
+        )
+        line_ctx.report["grasp"] = grasp_ctx.report.get("grasp", {})
         pieces.append(_line_leg(line_ctx, leg("grasp_line"), q_pre, q_grasp))
     pieces.append(_Piece(leg("grasp"), q_grasp, dwell_s=cyc.grasp_dwell_s))
 
     report_progress("lift_off", 0.3)
     with _in_leg("lift_off"):
-        lift_ctx = PlanContext.build(leg_scenario(cyc, leg("lift_off"), q_grasp, goal_q=q_lift), None, timing, preset)
+        lift_ctx = PlanContext.build(
+            leg_scenario(cyc, leg("lift_off"), q_grasp, goal_q=q_lift), None, timing, preset
+        )
         pieces.append(_line_leg(lift_ctx, leg("lift_off"), q_grasp, q_lift))
 
     report_progress("transit", 0.4)
@@ -234,7 +240,9 @@ def plan_cycle(
     transit, insertion = _split_insertion(res)
     q_release = insertion.joints[-1]
     pieces.append(_Piece(leg("transit"), transit.joints[-1], transit, report=_leg_report(res)))
-    pieces.append(_Piece(leg("insertion"), q_release, insertion, report={"compensated": compensates_deflection(sc)}))
+    pieces.append(
+        _Piece(leg("insertion"), q_release, insertion, report={"compensated": compensates_deflection(sc)})
+    )
     pieces.append(_Piece(leg("release"), q_release, dwell_s=cyc.release_dwell_s))
 
     report_progress("retract", 0.7)
@@ -249,7 +257,9 @@ def plan_cycle(
 
     report_progress("park", 0.8)
     with _in_leg("park"):
-        res = plan_scenario(leg_scenario(cyc, leg("park"), q_retract, goal_q=cyc.park_q), None, timing, preset)
+        res = plan_scenario(
+            leg_scenario(cyc, leg("park"), q_retract, goal_q=cyc.park_q), None, timing, preset
+        )
     pieces.append(_Piece(leg("park"), cyc.park_q, res.profile, report=_leg_report(res)))
 
     report_progress("validate", 0.9)
@@ -303,8 +313,15 @@ def _grasp_line(
     evidence: list[dict[str, Any]] = []
     line = cyc.grasp_line
     lines, stats = approach_lines(
-        ctx.world, T_tool_grasp, line.direction, line.distance_m, c.planner_m, c.motion_margin_m, ctx.forces,
-        max_lines=6, evidence=evidence,
+        ctx.world,
+        T_tool_grasp,
+        line.direction,
+        line.distance_m,
+        c.planner_m,
+        c.motion_margin_m,
+        ctx.forces,
+        max_lines=6,
+        evidence=evidence,
     )
     for e in evidence:  # approach_lines speaks of an insertion line: here it is the grasp line
         e["where"] = str(e.get("where", "")).replace("insertion line", "grasp line")
@@ -322,8 +339,12 @@ def _grasp_line(
             candidates=heavy,
         )
     lines = held
-    pre_ctx = PlanContext.build(leg_scenario(cyc, leg("pre_grasp"), cyc.park_q, goal_q=cyc.park_q), None, timing, preset)
-    lift_ctx = PlanContext.build(leg_scenario(cyc, leg("lift_off"), cyc.park_q, goal_q=cyc.park_q), None, timing, preset)
+    pre_ctx = PlanContext.build(
+        leg_scenario(cyc, leg("pre_grasp"), cyc.park_q, goal_q=cyc.park_q), None, timing, preset
+    )
+    lift_ctx = PlanContext.build(
+        leg_scenario(cyc, leg("lift_off"), cyc.park_q, goal_q=cyc.park_q), None, timing, preset
+    )
     carry_world = leg_world(cyc, leg("transit"))
     for cand in lines:
         assert cand.line is not None
@@ -336,22 +357,26 @@ def _grasp_line(
             if not lift_ctx.forces.ok(q_lift):
                 evidence.append(force_evidence(lift_ctx.forces, q_lift, "at the end of the lift-off"))
             else:
-                evidence.append(collision_evidence(lift_ctx.world, q_lift, c.planner_m, "along the lift-off line"))
+                evidence.append(
+                    collision_evidence(lift_ctx.world, q_lift, c.planner_m, "along the lift-off line")
+                )
             continue
         if not carry_world.is_valid(q_lift, c.planner_m):
             evidence.append(
-                collision_evidence(carry_world, q_lift, c.planner_m, "at the end of the lift-off (dock.lift.distance)")
+                collision_evidence(
+                    carry_world, q_lift, c.planner_m, "at the end of the lift-off (dock.lift.distance)"
+                )
             )
             continue
         ctx.report["grasp"] = {"lines": len(lines), **stats}
         return q_pre, q_grasp, ctx
-    best = dominant(evidence)
-    cause = f"; closest: {describe(best)}" if best is not None else ""
+    closest = dominant(evidence)
+    cause = f"; closest: {describe(closest)}" if closest is not None else ""
     raise ApproachInfeasible(
         f"no clear grasp line onto {cyc.unit_name} on its dock ({len(lines)} lines of fixed redundancy "
         f"tried){cause}",
         **stats,
-        best=best,
+        best=closest,
         candidates=evidence,
     )
 
@@ -370,7 +395,9 @@ def _line_leg(ctx: PlanContext, state: LegState, q_a: Array, q_b: Array) -> _Pie
         if not ctx.forces.segment_ok(q_a, q_b):
             ev = force_evidence(ctx.forces, q_at, f"{100 * t:.0f}% along the line")
         else:
-            ev = collision_evidence(ctx.world, q_at, c.planner_m, f"{100 * t:.0f}% along the line", margin_m=MIN_MARGIN_M)
+            ev = collision_evidence(
+                ctx.world, q_at, c.planner_m, f"{100 * t:.0f}% along the line", margin_m=MIN_MARGIN_M
+            )
         raise ApproachInfeasible(f"the straight {state.name} line is not clear: {describe(ev)}", best=ev)
     path = JointPath((LinePiece(q_a, q_b, segment_time_length(ctx.robot, q_a, q_b)),))
     profile, gate, _ = time_and_validate(ctx, [path], requirements_for(ctx.sc, ctx.payload))
@@ -406,7 +433,14 @@ def _check_release(cyc: ResolvedCycle, ctx: PlanContext, q_release: Array) -> No
     from planner.gate.cycle import jump_check
 
     chk = jump_check(
-        ctx.robot, ctx.world, q_release, cyc.unit_payload, None, cyc.T_tool_unit, ctx.clearances.requested_m, "release"
+        ctx.robot,
+        ctx.world,
+        q_release,
+        cyc.unit_payload,
+        None,
+        cyc.T_tool_unit,
+        ctx.clearances.requested_m,
+        "release",
     )
     if not chk.passed:
         raise ReleaseInCollision(
@@ -474,7 +508,9 @@ def join_legs(
             u_parts.append(np.repeat(u[None, :], n, axis=0))
             v_parts.append(np.zeros((n, robot.n_drives)))
             a_parts.append(np.zeros((n, robot.n_drives)))
-            tau = dynamics.drive_forces_batch(q, np.zeros_like(q), np.zeros_like(q), payload_inertia(cyc, p.state))
+            tau = dynamics.drive_forces_batch(
+                q, np.zeros_like(q), np.zeros_like(q), payload_inertia(cyc, p.state)
+            )
             e_parts.append(np.asarray(tau).reshape(n, robot.n_drives))
             q_parts.append(q)
             counts.append(n)
@@ -558,9 +594,13 @@ def cycle_requirements(cyc: ResolvedCycle, legs: tuple[LegTiming, ...]) -> Cycle
     )
 
 
-def cycle_events(cyc: ResolvedCycle, profile: DriveProfile, legs: tuple[LegTiming, ...]) -> tuple[CycleEvent, ...]:
-    """The attach (start of the grasp dwell) and detach (start of the release dwell) events, with the
-    tool's jump at the unit frame (:func:`~planner.dynamics.load_change.load_change`)."""
+def cycle_events(
+    cyc: ResolvedCycle, profile: DriveProfile, legs: tuple[LegTiming, ...]
+) -> tuple[CycleEvent, ...]:
+    """The attach (start of the grasp dwell) and detach (start of the release dwell) events.
+
+    Each with the tool's jump at the unit frame (:func:`~planner.dynamics.load_change.load_change`).
+    """
     from planner.dynamics.load_change import load_change
 
     out = []

@@ -48,7 +48,7 @@ Allowed = Literal["gripper_dock", "unit_fixture", "gripper_bay"] | None
 
 @dataclass(frozen=True)
 class LegState:
-    """What one leg is: its name, motion or dwell, whether the unit is held, the cabin and the allowed pair."""
+    """What one leg is: name, motion or dwell, whether the unit is held, the cabin, the allowed pair."""
 
     name: str
     kind: LegKind

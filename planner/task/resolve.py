@@ -43,7 +43,7 @@ class Line:
 
     @property
     def offset(self) -> Array:
-        """direction * distance (3,) [m]."""
+        """Direction * distance (3,) [m]."""
         return self.direction * self.distance_m
 
 
@@ -107,8 +107,10 @@ class ResolvedCycle:
 
     @property
     def gripper_body(self) -> str:
-        """The world body that meets the unit at the grasp and the release: the gripper (the empty tool's
-        payload body), or without one the robot's body fixed to the tool."""
+        """The world body that meets the unit at the grasp and the release.
+
+        the gripper (the empty tool's payload body), or without one the robot's body fixed to the tool.
+        """
         if self.gripper is not None:
             return PAYLOAD
         model = self.robot.collision_model()
@@ -150,7 +152,8 @@ def resolve_cycle(
     base = resolve_scenario(base_spec, base_dir, mesh_resolver, mesh_limits)
     if base.robot.desc.stiffness is None:
         raise InvalidInput(
-            f"robot: {spec.robot!r} has no stiffness data; a cycle models the spring-back at grasp and release",
+            f"robot: {spec.robot!r} has no stiffness data; a cycle models the spring-back at grasp and "
+            "release",
             field="robot",
         )
 
@@ -166,9 +169,9 @@ def resolve_cycle(
         return obb.size, obb.T_payload_box, mesh
 
     installed = []
-    for i, u in enumerate(spec.installed):
-        size, T_box, _ = geometry(u, f"installed[{i}]")
-        installed.append(Obstacle.box(f"unit {u.id}", size, u.pose.matrix() @ T_box))
+    for i, inst in enumerate(spec.installed):
+        size, T_box, _ = geometry(inst, f"installed[{i}]")
+        installed.append(Obstacle.box(f"unit {inst.id}", size, inst.pose.matrix() @ T_box))
     for i, a in enumerate(installed):
         for j in range(i):
             if _overlap(a, installed[j]):
@@ -183,7 +186,11 @@ def resolve_cycle(
     T_tool_unit = u.grasp.matrix()
     com = np.array(u.com if u.com is not None else (0.0, 0.0, 0.0), dtype=float)
     R_ub = T_unit_box[:3, :3]
-    inertia = np.array(u.inertia, dtype=float) if u.inertia is not None else R_ub @ box_inertia(u.mass, size) @ R_ub.T
+    inertia: Array = (
+        np.array(u.inertia, dtype=np.float64)
+        if u.inertia is not None
+        else R_ub @ box_inertia(u.mass, size) @ R_ub.T
+    )
     unit = PayloadGeometry(
         size=size,
         T_tool_payload=T_tool_unit,
@@ -226,7 +233,8 @@ def resolve_cycle(
             )
     if _overlap(dock_unit, fixture):
         raise InvalidInput(
-            f"dock.pose: {name} on its dock is in collision with its fixture (move the dock pose or the fixture)",
+            f"dock.pose: {name} on its dock is in collision with its fixture (move the dock pose or the "
+            "fixture)",
             field="dock.pose",
         )
     for j, other in enumerate(installed):
@@ -278,7 +286,10 @@ def _line(spec: LineSpec, where: str) -> Line:
 
 def _overlap(a: Obstacle, b: Obstacle) -> bool:
     """True when two obstacles touch or overlap (an FCL collision query)."""
-    return bool(fcl.collide(a.collision_object(), b.collision_object(), fcl.CollisionRequest(), fcl.CollisionResult()) > 0)
+    return bool(
+        fcl.collide(a.collision_object(), b.collision_object(), fcl.CollisionRequest(), fcl.CollisionResult())
+        > 0
+    )
 
 
 def _containing(unit: PayloadGeometry, gripper: PayloadGeometry) -> PayloadGeometry:

@@ -62,8 +62,8 @@ class Geometry(BaseModel):
         None,
         min_length=1,
         max_length=1000,
-        description="Mesh file (STL, OBJ, PLY, GLB, glTF) relative to the cycle file, coordinates in the body "
-        "frame, in `units`. Exclusive with box.",
+        description="Mesh file (STL, OBJ, PLY, GLB, glTF) relative to the cycle file, coordinates in the "
+        "body frame, in `units`. Exclusive with box.",
     )
     units: Literal["m", "mm"] = Field("m", description="Length unit of the box size and the mesh file.")
 
@@ -94,17 +94,24 @@ class InstalledUnit(Geometry):
 
 
 class UnitSpec(Geometry):
-    """The unit to install: its shape, inertia and grasp. A mesh unit is held and installed as its oriented
-    bounding box (collision checks), like a scenario's mesh payload."""
+    """The unit to install.
+
+    its shape, inertia and grasp. A mesh unit is held and installed as its oriented bounding box (collision
+    checks), like a scenario's mesh payload.
+    """
 
     id: UnitId = Field(description="Unit id; reports name it 'unit <id>'.")
     mass: Number = Field(gt=0.0, le=MAX_PAYLOAD_MASS_KG, description="Mass in kg.")
-    com: Vector3 | None = Field(None, description="Centre of mass in the unit frame [m] (default: its origin).")
+    com: Vector3 | None = Field(
+        None, description="Centre of mass in the unit frame [m] (default: its origin)."
+    )
     inertia: Matrix3 | None = Field(
         None,
         description="Inertia about the centre of mass in unit axes [kg m^2] (default: a uniform solid box).",
     )
-    grasp: Pose = Field(description="T_tool_unit: the unit frame in the tool frame when held (position in m).")
+    grasp: Pose = Field(
+        description="T_tool_unit: the unit frame in the tool frame when held (position in m)."
+    )
 
     @field_validator("inertia")
     @classmethod
@@ -189,9 +196,7 @@ class Cycle(BaseModel):
 
     model_config = _MODEL_CONFIG
 
-    name: str = Field(
-        min_length=1, max_length=100, pattern=r"^[A-Za-z0-9._-]+$", description="Cycle name."
-    )
+    name: str = Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9._-]+$", description="Cycle name.")
     robot: str = Field("cabin8", min_length=1, max_length=100, description="Registry name of the robot.")
     rail_length: Annotated[Number, Field(gt=0.0, le=50.0)] | None = Field(
         None, description="Rail length in m; replaces the upper limit of drive d1 (default: the model's)."
@@ -201,7 +206,9 @@ class Cycle(BaseModel):
     unit: UnitSpec = Field(description="The unit to install.")
     dock: DockSpec = Field(description="The unit's dock at the cabin entrance.")
     bay: BayGoal = Field(description="The unit's bay: installed pose and insertion line.")
-    retract: LineSpec = Field(description="The retract line: from the release, the empty tool moves along it.")
+    retract: LineSpec = Field(
+        description="The retract line: from the release, the empty tool moves along it."
+    )
     park: ConfigurationSpec = Field(description="The park posture the cycle starts and ends at.")
     dwell: DwellSpec = Field(default_factory=DwellSpec, description="Grasp and release dwell times.")
     gripper: GripperSpec | None = Field(
@@ -215,7 +222,9 @@ class Cycle(BaseModel):
         seen: dict[str, str] = {}
         for i, u in enumerate(self.installed):
             if u.id in seen:
-                raise ValueError(f"installed[{i}].id: unit id {u.id!r} is used twice ({seen[u.id]} and installed[{i}])")
+                raise ValueError(
+                    f"installed[{i}].id: unit id {u.id!r} is used twice ({seen[u.id]} and installed[{i}])"
+                )
             seen[u.id] = f"installed[{i}]"
         if self.unit.id in seen:
             raise ValueError(f"unit.id: {self.unit.id!r} is already installed ({seen[self.unit.id]})")
