@@ -252,3 +252,31 @@ def test_the_document_round_trips_through_the_independent_check(
     doc["position"][k][0] += 1e-3
     bad = check_cycle(cycle, doc)
     assert {c.name for c in bad.failures} >= {"dwell"}
+
+
+def test_a_release_whose_springback_ends_within_the_clearance_is_refused(
+    planned: CycleResult, cycle: ResolvedCycle
+) -> None:
+    """An obstacle 5 mm from the arm at the release (within the 10 mm clearance): refused, bodies and mm."""
+    import dataclasses
+
+    from planner.core.exceptions import ReleaseInCollision
+    from planner.plan.context import PlanContext
+    from planner.task.cycle import _check_release
+    from planner.task.legs import leg_scenario
+
+    q = planned.profile.joints[_rows(planned, "release").stop - 1]
+    sc = leg_scenario(cycle, leg("retract"), q, goal_q=q)
+    world = leg_world(cycle, leg("retract"))
+    _, P, _ = world.poses(q)
+    arm = world.names.index("arm")
+    T = np.eye(4)
+    T[:3, 3] = P[0, arm] + np.array([0.0, 0.07 + 0.005 + 0.005, 0.0])  # 5 mm above the arm capsule
+    probe = Obstacle.box("probe", (0.01, 0.01, 0.01), T)
+    ctx = PlanContext.build(dataclasses.replace(sc, obstacles=(*sc.obstacles, probe)))
+    with pytest.raises(ReleaseInCollision) as exc:
+        _check_release(cycle, ctx, q)
+    assert "probe" in exc.value.message and " mm from probe" in exc.value.message
+    assert exc.value.details["springback_m"] == pytest.approx(
+        next(e for e in planned.events if e.kind == "detach").springback_m, abs=1e-9
+    )
