@@ -31,7 +31,6 @@ the same bounds, and the certified lower bound between samples.
 
 from __future__ import annotations
 
-import heapq
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -61,6 +60,11 @@ from planner.robots.geometry import CollisionModel
 #: least the reported one minus it (the bounds stop the search there; the reported value itself is an
 #: exact FCL distance at a real sample).
 CLEARANCE_TOL_M = 1e-4
+#: Exact distance queries the figure may spend (~0.5 ms each near a wall); where the distance is flat over
+#: more samples than this (a carriage along a straight rail) the tolerance reached is reported instead.
+MAX_EXACT_QUERIES = 200
+#: Collision probes the figure may spend (~10 us each).
+MAX_PROBES = 20_000
 #: The figure's bounds are evaluated at every this-many-th sample up front (the rest on demand).
 BOUND_STRIDE = 4
 #: Spare clearances [m] beyond the clearance plus margin an FCL probe on the grown body tries to prove, the
@@ -93,14 +97,15 @@ class ClearanceAlong:
 
     Attributes:
         distance_m: Exact FCL distance at ``sample`` for ``bodies``: no sample's exact distance of any
-            body to the cabin, or between two checked bodies, is below it by more than the tolerance
-            (:data:`CLEARANCE_TOL_M`).
+            body to the cabin, or between two checked bodies, is below it by more than ``tolerance_m``.
         bound_m: Certified lower bound of every distance along the polyline through the samples (between
             samples included), <= ``distance_m``.
         sample: The sample of ``distance_m``.
         bodies: The body and ``"cabin"``, or the two bodies, of ``distance_m``.
         bound_sample: The sample starting the piece where ``bound_m`` is smallest.
         exact_queries: FCL distance queries the search needed.
+        tolerance_m: No sample's exact distance is below ``distance_m`` by more than this (the requested
+            tolerance, or what the query budget reached where the distances are flat over many samples).
     """
 
     distance_m: float
@@ -109,6 +114,7 @@ class ClearanceAlong:
     bodies: tuple[str, str]
     bound_sample: int
     exact_queries: int
+    tolerance_m: float
 
 
 class AlongPath:
@@ -273,53 +279,80 @@ class AlongPath:
         return AlongReport(True, self.queries, walked)
 
     # ---------------------------------------------------------------- figure
-    def clearance(self, tolerance_m: float = CLEARANCE_TOL_M) -> ClearanceAlong:
+    def clearance(
+        self, tolerance_m: float = CLEARANCE_TOL_M, max_exact: int = MAX_EXACT_QUERIES
+    ) -> ClearanceAlong:
         """The exact minimum distance over the samples (branch and bound) and the bound between samples.
 
-        The certified bounds at every :data:`BOUND_STRIDE`-th sample (one kernel call), spread to the others
-        along the cumulative reach; then, from the smallest bound up, each entry that could be below the
-        best exact distance found by more than ``tolerance_m`` gets its own bounds, an FCL probe on the body
-        grown by that much (which clears most), and the exact distance only where the probe touches.
+        The certified bounds at every :data:`BOUND_STRIDE`-th sample (one kernel call), spread to the
+        others along the cumulative reach. Then, in rounds, every entry whose bound is below the best exact
+        distance found minus ``tolerance_m`` gets its sample's bounds (one kernel call for all), an FCL
+        probe on the body grown by that much (a collision query, which clears most), and, smallest bound
+        first, the exact distance where the probe touches -- at most ``max_exact`` of them in all, after
+        which the tolerance reached is reported instead (likewise after :data:`MAX_PROBES` probes).
         """
         lower, state = self.lower, self.state
         strided = np.unique(np.r_[np.arange(0, self.n, BOUND_STRIDE), self.n - 1]).astype(np.int64)
         self._bounds(strided[(state[strided] == SPREAD).any(axis=1)])
         self._propagate(np.arange(lower.shape[1]))
         exact = state == EXACT
-        if exact.any():
-            best_k, best_t = np.unravel_index(int(np.argmin(np.where(exact, lower, np.inf))), lower.shape)
-            best = float(lower[best_k, best_t])
-        else:
-            best_k, best_t, best = 0, 0, np.inf
-        heap = [(float(lower[k, t]), int(k), int(t)) for k, t in zip(*np.nonzero(lower < best), strict=True)]
-        heapq.heapify(heap)
-        while heap:
-            value, k, t = heapq.heappop(heap)
-            if value >= best - tolerance_m or state[k, t] == EXACT:
-                if value >= best - tolerance_m:
-                    break
+        if not exact.any():
+            k, t = np.unravel_index(int(np.argmin(lower)), lower.shape)
+            self.exact_at(int(k), int(t))
+            exact = state == EXACT
+        best_k, best_t = np.unravel_index(int(np.argmin(np.where(exact, lower, np.inf))), lower.shape)
+        best = float(lower[best_k, best_t])
+        budget, probes = max_exact, MAX_PROBES
+        n_tasks = lower.shape[1]
+        tries, hits = np.zeros(n_tasks, dtype=np.int64), np.zeros(n_tasks, dtype=np.int64)
+        futile = np.zeros(n_tasks, dtype=bool)
+        while True:
+            floor = best - tolerance_m
+            open_ = (lower < floor) & (state != EXACT)
+            if not open_.any():
+                break
+            rows = np.flatnonzero((open_ & (state == SPREAD)).any(axis=1))
+            if len(rows):  # the samples' own bounds, all in one call
+                self._bounds(rows.astype(np.int64))
                 continue
-            if lower[k, t] > value:  # raised by evidence found since: back in order
-                heapq.heappush(heap, (float(lower[k, t]), k, t))
+            probing = open_ & (state == BOUND) & ~futile[None, :]
+            ks, ts = np.nonzero(probing)
+            if len(ks) and probes > 0:  # one collision query each on the body grown to the floor
+                order = np.argsort(lower[ks, ts])[:probes]
+                probes -= len(order)
+                for k, t in zip(ks[order].tolist(), ts[order].tolist(), strict=True):
+                    if futile[t] or lower[k, t] >= floor:
+                        continue
+                    tries[t] += 1
+                    if self.probe_at(k, t, floor, levels=(0.0,)):
+                        self._spread(k, t, float(lower[k, t]), floor)
+                    else:
+                        hits[t] += 1
+                        # A body whose grown box keeps touching where its distance is not below the floor
+                        # (a box's grown corners overstate the growth): its probes prove nothing.
+                        futile[t] = hits[t] >= 32 and hits[t] >= 0.8 * tries[t]
                 continue
-            if state[k, t] == SPREAD:
-                self._bounds(np.array([k], dtype=np.int64))
-            elif state[k, t] < PROBED and np.isfinite(best):
-                self.state[k, t] = PROBED
-                self.probe_at(k, t, best - tolerance_m, levels=(0.0,))
-            else:
+            if budget <= 0:
+                break
+            ks, ts = np.nonzero(open_)
+            order = np.argsort(lower[ks, ts])[:budget]
+            for k, t in zip(ks[order].tolist(), ts[order].tolist(), strict=True):
+                if lower[k, t] >= best - tolerance_m:
+                    continue
                 d = self.exact_at(k, t)
+                budget -= 1
                 if d < best:
                     best, best_k, best_t = d, k, t
-            if lower[k, t] > value:
-                self._spread(k, t, float(lower[k, t]), best - tolerance_m)
-            if state[k, t] != EXACT:
-                heapq.heappush(heap, (float(lower[k, t]), k, t))
+                self._spread(k, t, d, best - tolerance_m)
+        remaining = np.where(state != EXACT, lower, np.inf)
+        reached = max(tolerance_m, best - float(np.min(remaining)))
         a, b = lower[:-1], lower[1:]
         between = np.maximum(0.5 * (a + b - self.reach), np.maximum(a, b) - self.reach)
         kb = int(np.argmin(np.min(between, axis=1)))
         bound = min(float(np.min(between)), best)
-        return ClearanceAlong(best, bound, int(best_k), self.task_name(int(best_t)), kb, self.queries)
+        return ClearanceAlong(
+            best, bound, int(best_k), self.task_name(int(best_t)), kb, self.queries, reached
+        )
 
     def _spread(self, k: int, t: int, d: float, floor: float) -> None:
         """Raise column t around sample k to d - |C(j) - C(k)| where that is above ``floor``."""

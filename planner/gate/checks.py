@@ -290,7 +290,12 @@ def validate_profile(
     c = ctx.clearance
     if c is None:
         return GateReport(tuple(checks), n, float("inf") if ctx.q is not None else float("nan"), peaks)
-    where = {"t_s": float(profile.t[c.sample]), "sample": c.sample, "bodies": list(c.bodies)}
+    where = {
+        "t_s": float(profile.t[c.sample]),
+        "sample": c.sample,
+        "bodies": list(c.bodies),
+        "tolerance_m": c.tolerance_m,
+    }
     return GateReport(tuple(checks), n, c.distance_m, peaks, c.bound_m, where)
 
 

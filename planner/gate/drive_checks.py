@@ -52,7 +52,8 @@ class GateReport:
     peak_ratios: dict[str, float]
     #: Certified lower bound [m] of that distance along the polyline through the samples, between them.
     min_clearance_bound_m: float | None = None
-    #: Where ``min_clearance_m`` is: ``{"t_s", "sample", "bodies": [a, b]}`` (b "cabin" for the cabin).
+    #: Where ``min_clearance_m`` is: ``{"t_s", "sample", "bodies": [a, b], "tolerance_m"}`` (b "cabin" for
+    #: the cabin; no sample's exact distance is below ``min_clearance_m`` by more than ``tolerance_m``).
     min_clearance_at: dict[str, Any] | None = None
 
     @property
