@@ -1,11 +1,12 @@
 """The validation gate's time on the suite's plans (issue 26: <= 50 ms for a 20 s profile at 4 ms).
 
 Every feasible reference scenario is planned once; then the gate
-(:func:`planner.gate.checks.validate_profile`) runs ``--runs`` times on its profile in the same process, and the median is printed with its parts: the
-rigid robot's batched pass (:meth:`CollisionWorld.along`: certificate and the clearance figure), the sagging
-robot's certified walk, and everything else (drive checks, forces, goal, path). ``hatch-bay-insert`` is the
-20 s case: 5291 samples at 4 ms. The machine's load (``uptime``) is printed first and last: the gate shares
-two cores with whatever else runs.
+(:func:`planner.gate.checks.validate_profile`) runs ``--runs`` times on its profile in the same
+process, and the median is printed with its parts: the rigid robot's batched pass
+(:meth:`CollisionWorld.along`: certificate and the clearance figure), the sagging robot's certified
+walk, and everything else (drive checks, forces, goal, path). ``hatch-bay-insert`` is the 20 s case:
+5291 samples at 4 ms. The machine's load is printed first and last: the gate shares two cores with
+whatever else runs.
 
 Run: ``python -m bench.gate [--runs 5] [--scenarios a b]``.
 """
