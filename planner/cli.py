@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
 
 import typer
 from pydantic import ValidationError
@@ -28,6 +28,9 @@ from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8
 from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
+
+if TYPE_CHECKING:
+    from planner.gate.drive_checks import GateReport
 
 app = typer.Typer(
     add_completion=False,
@@ -296,8 +299,7 @@ def plan(
         _write(plot, plan_png(sc, result, planner.world), "--plot")
     typer.echo(
         f"cabinplan: {sc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, "
-        f"{len(result.profile.t)} samples, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm "
-        f"-> {output}",
+        f"{len(result.profile.t)} samples, {clearance_phrase(result.gate)} -> {output}",
         err=True,
     )
 
@@ -345,9 +347,21 @@ def cycle(
     springs = ", ".join(f"{e.kind} {1e3 * e.springback_m:.2f} mm" for e in result.events)
     typer.echo(
         f"cabinplan: {cyc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, {len(result.profile.t)} "
-        f"samples, {len(result.legs)} legs, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm, "
+        f"samples, {len(result.legs)} legs, {clearance_phrase(result.gate)}, "
         f"spring-back {springs} -> {output}",
         err=True,
+    )
+
+
+def clearance_phrase(gate: GateReport) -> str:
+    """The report's clearance in words: the exact minimum over every sample, where, and the bound between."""
+    at = gate.min_clearance_at
+    if at is None or gate.min_clearance_bound_m is None:
+        return f"min clearance {1e3 * gate.min_clearance_m:.1f} mm"
+    a, b = at["bodies"]
+    return (
+        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b} at {at['t_s']:.2f} s; "
+        f">= {1e3 * gate.min_clearance_bound_m:.1f} mm between samples)"
     )
 
 

@@ -38,6 +38,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
+from planner.collision.along import AlongPath
 from planner.collision.bodies import BodySet, PayloadGeometry, robot_bodies, segment_reach_bounds
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
 from planner.collision.kernels import buffers, codes
@@ -430,6 +431,32 @@ class CollisionWorld(Generic[RobotT]):
             else:
                 cap = max(1, (j - i) // 2)  # the run again in halves
         return PathReport(True, checks, n - 1, None, ())
+
+    def along(self, qs: Array) -> AlongPath:
+        """The batched pass over a sampled path (N, n), N >= 2: bounds at every sample in one kernel call.
+
+        The result certifies the polyline (:meth:`AlongPath.certify`, as strict as :meth:`check_path`) and
+        finds its smallest distance (:meth:`AlongPath.clearance`); see :mod:`planner.collision.along`.
+        """
+        qs = np.ascontiguousarray(np.asarray(qs, dtype=float))
+        if qs.ndim != 2 or qs.shape[0] < 2 or qs.shape[1] != self.model.n_joints:
+            raise InvalidInput(
+                f"qs: (N >= 2, {self.model.n_joints}) joint samples expected, got shape {qs.shape}",
+                field="qs",
+            )
+        if not np.all(np.isfinite(qs)):
+            raise InvalidInput("qs: joint samples must be finite", field="qs")
+        poses, c = np.empty((len(qs), self._n_bodies, 13)), np.empty((len(qs), len(self._kernel.c_lo)))
+        self.kernels.packed_poses(qs, self._kernel, poses, c)
+        floor = min(_largest_ratio(c[:, list(self.model.ratio_rows)]) + 0.02, 0.999)
+        threshold = self.self_clearance + 0.06  # exact capsule-pair distances below (as the motion walk)
+
+        def walk(k: int, clearance: float, own: float, margin: float) -> MotionReport:
+            return self._walk(qs[k], qs[k + 1], clearance, margin, own, floor)
+
+        has_cabin = self._probes.cabin_obj is not None
+        kernels = (self.kernels, self._kernel, threshold)
+        return AlongPath(qs, poses, c, has_cabin, self.model, self.bodies, self._probes, kernels, walk)
 
     # ------------------------------------------------------------- distances
     def min_distance(self, q: Array, include_self: bool = True, include_cabin: bool = True) -> Distance:
