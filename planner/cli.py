@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
 
 import typer
 from pydantic import ValidationError
@@ -28,6 +28,9 @@ from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8
 from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
+
+if TYPE_CHECKING:
+    from planner.gate.drive_checks import GateReport
 
 app = typer.Typer(
     add_completion=False,
@@ -296,9 +299,69 @@ def plan(
         _write(plot, plan_png(sc, result, planner.world), "--plot")
     typer.echo(
         f"cabinplan: {sc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, "
-        f"{len(result.profile.t)} samples, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm "
-        f"-> {output}",
+        f"{len(result.profile.t)} samples, {clearance_phrase(result.gate)} -> {output}",
         err=True,
+    )
+
+
+@app.command()
+@handle_errors
+def cycle(
+    cycle_file: Annotated[
+        Path, typer.Argument(metavar="FILE", help="cycle file (.yaml, .yml or .json)", dir_okay=False)
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="cycle profile / refusal JSON")],
+    csv: Annotated[Path | None, typer.Option("--csv", help="also write the profile as CSV")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="also plot the profile (PNG)")] = None,
+) -> None:
+    """Plan an assembly cycle.
+
+    one certified drive profile with its legs and events (exit 0), or a refusal with its reason and the leg
+    that refused (exit 3).
+
+    The JSON written to --output is the cycle profile on success and the refusal document otherwise.
+    """
+    from planner.core.exceptions import PlanRefused
+    from planner.documents.cycle import cycle_document, cycle_png, cycle_refusal_document
+    from planner.documents.output import document_bytes
+    from planner.task.cycle import plan_cycle
+    from planner.task.resolve import load_cycle
+
+    cyc = load_cycle(cycle_file)
+    try:
+        with _Progress(sys.stderr.isatty()) as progress:
+            result = plan_cycle(cyc, progress)
+    except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
+    except InvalidInput:
+        raise
+    except PlannerError as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", 1)
+    _write(output, document_bytes(cycle_document(cyc, result, arrays=True)) + b"\n", "--output")
+    if csv is not None:
+        _write(csv, result.profile.to_csv(), "--csv")
+    if plot is not None:
+        _write(plot, cycle_png(cyc, result), "--plot")
+    springs = ", ".join(f"{e.kind} {1e3 * e.springback_m:.2f} mm" for e in result.events)
+    typer.echo(
+        f"cabinplan: {cyc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, {len(result.profile.t)} "
+        f"samples, {len(result.legs)} legs, {clearance_phrase(result.gate)}, "
+        f"spring-back {springs} -> {output}",
+        err=True,
+    )
+
+
+def clearance_phrase(gate: GateReport) -> str:
+    """The report's clearance in words: the exact minimum over every sample, where, and the bound between."""
+    at = gate.min_clearance_at
+    if at is None or gate.min_clearance_bound_m is None:
+        return f"min clearance {1e3 * gate.min_clearance_m:.1f} mm"
+    a, b = at["bodies"]
+    return (
+        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b} at {at['t_s']:.2f} s; "
+        f">= {1e3 * gate.min_clearance_bound_m:.1f} mm between samples)"
     )
 
 
@@ -430,11 +493,12 @@ def check(
 ) -> None:
     """Run the validation gate on a drive profile for a scenario; the report goes to stdout.
 
+    A cycle profile (``kind: cycle``) is checked against its cycle file instead.
+
     Exit 0 when every check passes, 3 when any fails.
     """
     from planner.gate.check_profile import check_profile
 
-    sc = _load(scenario)
     try:
         data = json.loads(profile.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -443,7 +507,13 @@ def check(
         _fail(f"profile: not valid JSON ({exc.msg} at line {exc.lineno})", EXIT_INVALID)
     except UnicodeDecodeError:
         _fail(f"profile: {profile} is not UTF-8 text (expected the JSON written by plan)", EXIT_INVALID)
-    report = check_profile(sc, data)
+    if isinstance(data, dict) and data.get("kind") == "cycle":
+        from planner.task.check import check_cycle
+        from planner.task.resolve import load_cycle
+
+        report = check_cycle(load_cycle(scenario), data)
+    else:
+        report = check_profile(_load(scenario), data)
     _emit(report.to_dict())
     if not report.passed:
         _fail(f"validation_failed: {report.summary()}", EXIT_INFEASIBLE)

@@ -24,6 +24,7 @@ FLOORS = (
     "scenario",
     "gate",
     "plan",
+    "task",
     "documents",
     "tools",
     "sweep",

@@ -45,9 +45,9 @@ Deflections are small-displacement twists of the reference frame's origin: trans
 
 A load case (:class:`LoadCase`: payload, frame, external wrench, gravity) is one value; the model's
 entry :meth:`StiffnessModel.deflections` takes joint vectors and a load case, and the thin forms of the
-common case (gravity, a payload, a frame) are :meth:`StiffnessModel.deflection`,
-:meth:`StiffnessModel.deflection_along`, :func:`deflection_twist` and :func:`payload_deflection_change`
-(the deflection change when a payload is attached or released).
+common case (gravity, a payload, a frame) are :meth:`StiffnessModel.deflection` (one configuration) and
+:meth:`StiffnessModel.deflection_along` (a trajectory's samples); the deflection change when a payload is
+attached or released is :func:`planner.dynamics.load_change.load_change`.
 
 This module is the math only; the goal compensation is :mod:`planner.dynamics.compensation`, the
 stiffness document of the CLI and the API (payload and wrench inputs, the JSON report)
@@ -398,32 +398,7 @@ def stiffness_model(robot: Cabin8) -> StiffnessModel:
     return model
 
 
-# --------------------------------------------------------------------------------------- thin public forms
-def deflection_twist(
-    robot: Cabin8, q: Array, payload: RigidPayload | None = None, T_tool_frame: Array | None = None
-) -> Array:
-    """Gravity deflection twist of a frame at q with a payload: (6,) for q (8,), (N, 6) for q (N, 8).
-
-    Translation [m] and rotation [rad] of the frame origin (``T_tool_frame`` in the tool frame, default
-    the tool frame; the grasp for the payload frame), base frame; the robot's cached model.
-    """
-    qa = np.asarray(q, dtype=float)
-    x = stiffness_model(robot).deflections(np.atleast_2d(qa), LoadCase(payload, T_tool_frame))
-    return x[0] if qa.ndim == 1 else x
-
-
-def payload_deflection_change(
-    robot: Cabin8, q: Array, payload: RigidPayload, T_tool_frame: Array | None = None
-) -> Array:
-    """How much a frame moves at q when the payload is attached: (6,) or (N, 6), the sag it adds.
-
-    The deflection with the payload minus the deflection without it (the model is linear: the deflection
-    under the payload's weight alone); releasing the payload springs the frame back by its negative.
-    Translation [m] and rotation [rad], base frame, as :func:`deflection_twist`.
-    """
-    return deflection_twist(robot, q, payload, T_tool_frame) - deflection_twist(robot, q, None, T_tool_frame)
-
-
+# ----------------------------------------------------------------------------------------- thin public form
 def compensate_goal(
     model: StiffnessModel,
     T_base_frame_goal: Array,
@@ -448,7 +423,5 @@ __all__ = [
     "StiffnessModel",
     "compensate_goal",
     "deflected_pose",
-    "deflection_twist",
-    "payload_deflection_change",
     "stiffness_model",
 ]

@@ -20,7 +20,7 @@ import numpy as np
 
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
-from planner.core.types import Array
+from planner.core.types import Array, IntArray
 from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
@@ -176,6 +176,8 @@ class PlanContext:
     last_tick: float = 0.0
     motion_checks_granted: int = 0
     ticking: tuple[str, float, float] | None = None
+    #: The leg index (N,) of every sample of the last profile the timing stage sampled (None before).
+    leg_of: IntArray | None = None
 
     @classmethod
     def build(
@@ -191,7 +193,7 @@ class PlanContext:
         ctx = cls(
             sc=sc,
             robot=sc.robot,
-            world=CollisionWorld(sc.robot, sc.cabin, sc.payload),
+            world=sc.world(),
             dynamics=dynamics,
             payload=payload,
             forces=StaticForceCheck(dynamics, payload),

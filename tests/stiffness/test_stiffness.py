@@ -19,14 +19,9 @@ from planner.dynamics.beams import (
     section_properties,
 )
 from planner.dynamics.frame_fe import element_stiffness, fe_deflection
+from planner.dynamics.load_change import load_change
 from planner.dynamics.payload import RigidPayload, box_inertia
-from planner.dynamics.stiffness import (
-    LoadCase,
-    StiffnessModel,
-    compensate_goal,
-    deflection_twist,
-    payload_deflection_change,
-)
+from planner.dynamics.stiffness import LoadCase, StiffnessModel, compensate_goal
 from planner.kinematics.closed_form import redundant_family
 from planner.robots.cabin8 import Cabin8, default_description_path
 from tests.conftest import admissible_joints
@@ -184,26 +179,26 @@ def test_fe_route_bounds_the_gravity_lumping(
     assert rel.max() < 0.02  # measured: below 0.5%
 
 
-def test_the_payload_change_is_its_weight_as_a_wrench_and_the_thin_forms_agree(
+def test_the_load_change_is_the_payload_weight_as_a_wrench_and_the_thin_forms_agree(
     robot: Cabin8, model: StiffnessModel, samples: np.ndarray
 ) -> None:
     """Attaching the payload moves the frame by the deflection under its weight alone (superposition).
 
     An independent route: the payload's weight m g at its centre of mass, moved to the frame origin as a
-    wrench (f, (c - p) x f), with gravity off; and the thin forms give the model's numbers.
+    wrench (f, (c - p) x f), with gravity off; and the thin forms give the load case's numbers.
     """
     q = samples[:12]
-    change = payload_deflection_change(robot, q, PAYLOAD, GRASP)
     T_frame = robot.fk_batch(q) @ GRASP
     com = (robot.fk_batch(q) @ np.append(PAYLOAD.com_tool, 1.0))[:, :3]
     f = np.broadcast_to(PAYLOAD.mass * np.asarray(robot.desc.gravity_m_s2), (len(q), 3))
     wrench = np.concatenate([f, np.cross(com - T_frame[:, :3, 3], f)], axis=1)
     direct = model.deflections(q, LoadCase(None, GRASP, wrench, gravity=False))
-    assert np.max(np.abs(change - direct)) <= 1e-12 * np.max(np.abs(direct))
-    assert np.all(change[:, 1] < 0)  # a payload pulls the frame down (gravity -y)
-    with_payload = deflection_twist(robot, q, PAYLOAD, GRASP)
-    assert np.array_equal(with_payload, model.deflections(q, LoadCase(PAYLOAD, GRASP)))
-    assert np.array_equal(deflection_twist(robot, q[3], PAYLOAD, GRASP), with_payload[3])
+    grasp = np.array([load_change(robot, qi, None, PAYLOAD, GRASP).jump for qi in q])
+    assert np.max(np.abs(grasp - direct)) <= 1e-12 * np.max(np.abs(direct))
+    assert np.all(grasp[:, 1] < 0)  # a payload pulls the frame down (gravity -y); a release springs it up
+    release = load_change(robot, q[3], PAYLOAD, None, GRASP).jump
+    assert np.array_equal(release, -grasp[3])
+    with_payload = model.deflections(q, LoadCase(PAYLOAD, GRASP))
     assert np.array_equal(model.deflection(q[3], PAYLOAD, GRASP).twist, with_payload[3])
     assert np.array_equal(model.deflection_along(q, PAYLOAD, GRASP), with_payload)
 
