@@ -1,8 +1,8 @@
 """OMPL's benchmark log format, so the product's figures sit next to other planners' in Planner Arena.
 
 The grammar is the one ``ompl_benchmark_statistics.py`` reads into SQLite (OMPL's benchmarking docs,
-"Processing the benchmarking log file"). One log file is one experiment -- here one benchmark problem (a scenario);
-every planner configuration that ran on it is an entry with its runs::
+"Processing the benchmarking log file"). One log file is one experiment -- here one benchmark problem
+(a scenario); every planner configuration that ran on it is an entry with its runs::
 
     cabinplan version <version>
     Experiment <name without spaces>
