@@ -48,9 +48,7 @@ def upload_cabin(
     ctx: Ctx,
     principal: CurrentPrincipal,
     response: Response,
-    file: Annotated[
-        UploadFile, File(description="The mesh or STEP file; its extension selects the format.")
-    ],
+    file: Annotated[UploadFile, File(description="The mesh or STEP file; its extension selects the format.")],
     units: Annotated[
         Literal["m", "mm"],
         Form(description="Length unit of the file's coordinates (a STEP file's own units are used)."),

@@ -62,7 +62,12 @@ def get_trajectory(
     media = {"ros2-json": "application/json", "ros2-yaml": "application/yaml", "mcap": "application/x-mcap"}
     if body is None:
         doc: dict[str, Any] = json.loads(text)
-        clearance = exports.clearance_series(_resolved(ctx, row), doc) if format == "mcap" else None
+        clearance = None
+        if format == "mcap":
+            try:  # the exact clearance per frame needs the plan's cabin; a deleted one leaves it out
+                clearance = exports.clearance_series(_resolved(ctx, row), doc)
+            except Problem:
+                clearance = None
         try:
             body, _ = exports.export_bytes(
                 doc, format, spacing_s=spacing_s, clearance=clearance, scratch=ctx.settings.data_dir

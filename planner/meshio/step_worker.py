@@ -45,6 +45,7 @@ _SI_PREFIX = {
     ".KILO.": "km",
 }
 _STRING = re.compile(rb"'(?:[^']|'')*'")
+_COMMENT = re.compile(rb"/\*.*?\*/", re.S)
 _INSTANCE = re.compile(rb"^\s*#(\d+)\s*=(.*)$", re.S)
 _REF = re.compile(rb"#(\d+)")
 
@@ -72,7 +73,7 @@ def _instances(data: bytes) -> dict[int, bytes]:
         _refuse("content", f"not a STEP file: it must start with 'ISO-10303-21;', starts with {first!r}")
     if not data.rstrip().endswith(b"END-ISO-10303-21;"):
         _refuse("truncated", "the file ends before its 'END-ISO-10303-21;' terminator (truncated)")
-    text = _STRING.sub(b"''", data)
+    text = _COMMENT.sub(b" ", _STRING.sub(b"''", data))  # strings first: a string may hold "/*"
     start = re.search(rb"\bDATA\s*(\([^;]*\))?\s*;", text)
     if start is None:
         _refuse("content", "the file has no DATA section")

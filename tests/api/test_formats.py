@@ -49,6 +49,8 @@ def planned(svc: Service, step_cabin: dict[str, Any]) -> dict[str, Any]:
 def test_step_upload_is_tessellated_with_its_units_and_placements(step_cabin: dict[str, Any]) -> None:
     np.testing.assert_allclose(step_cabin["bounds_min_m"], [-1.24, -0.2, -0.54], atol=1e-6)
     np.testing.assert_allclose(step_cabin["bounds_max_m"], [1.24, 1.84, 6.54], atol=1e-6)
+    assert step_cabin["format"] == "step" and step_cabin["file_units"] == "mm"
+    assert 1e-4 <= step_cabin["surface_deviation_m"] < 1.01e-4
 
 
 @pytest.mark.parametrize(

@@ -236,3 +236,12 @@ def test_tolerance_is_refused_for_triangle_formats() -> None:
 def test_tessellate_step_reports_what_it_did() -> None:
     tess = tessellate_step("c.step", _box_file("inch"), 1e-4, MeshLimits())
     assert tess.file_units == ("inch",) and tess.n_triangles == 12 and tess.glb[:4] == b"glTF"
+
+
+def test_comments_and_strings_do_not_fool_the_reference_check() -> None:
+    """A comment or a string holding ``;`` and ``#n`` references is neither an entity nor a reference."""
+    text = _box_file("mm").decode()
+    text = text.replace("DATA;\n", "DATA;\n/* #3=LOOP(#3); a comment; #1 */\n", 1)
+    text = text.replace("PRODUCT('b','b'", "PRODUCT('b;#7=X(#7)','b'", 1)
+    mesh = load_mesh(text.encode(), units="m", name="commented.step")
+    assert mesh.report.n_faces == 12
