@@ -485,6 +485,62 @@ def sweep(
 
 @app.command()
 @handle_errors
+def export(
+    plan_document: Annotated[
+        Path,
+        typer.Argument(
+            help="a succeeded plan or cycle document (JSON, as written by `plan`)", dir_okay=False
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="goal file, or the bag folder for mcap")],
+    fmt: Annotated[
+        str,
+        typer.Option("--format", help="ros2-json | ros2-yaml (FollowJointTrajectory goal) | mcap (rosbag2)"),
+    ] = "ros2-yaml",
+    spacing_s: Annotated[
+        float | None,
+        typer.Option(
+            "--spacing-s", help="thin the trajectory points to this spacing [s] (default: every sample)"
+        ),
+    ] = None,
+    scenario: Annotated[
+        Path | None,
+        typer.Option("--scenario", help="mcap: the plan's scenario, for the exact clearance along the plan"),
+    ] = None,
+) -> None:
+    """Export a plan for a controller or a tool: a FollowJointTrajectory goal (JSON/YAML) or a rosbag2 MCAP.
+
+    Thinning keeps every sample within 1e-5 (m or rad) and the drive limits under the controller's quintic
+    interpolation, adding points where it must. Exit 2 for a document that is not a succeeded plan.
+    """
+    from planner.documents import exports
+
+    if fmt not in exports.FORMATS:
+        _fail(f"--format: must be one of {', '.join(exports.FORMATS)}, got {fmt!r}", EXIT_INVALID)
+    try:
+        doc = json.loads(plan_document.read_text(encoding="utf-8"))
+    except OSError as exc:
+        _fail(f"plan: cannot read {plan_document} ({exc.strerror})", EXIT_INVALID)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        _fail(f"plan: {plan_document} is not a JSON document ({exc})", EXIT_INVALID)
+    if not isinstance(doc, dict):
+        _fail(f"plan: {plan_document} is not a plan document (a JSON object)", EXIT_INVALID)
+    if fmt == "mcap":
+        if output.exists():
+            _fail(f"--output: {output} exists; a rosbag2 bag is a new folder", EXIT_INVALID)
+        exports.profile_of(doc)  # refuse a bad document before anything is computed or written
+        clearance = exports.clearance_series(_load(scenario), doc) if scenario is not None else None
+        exports.write_rosbag(doc, output, spacing_s=spacing_s, clearance=clearance)
+        size = sum(p.stat().st_size for p in output.iterdir())
+    else:
+        data, _ = exports.export_bytes(doc, fmt, spacing_s=spacing_s)
+        _write(output, data, "--output")
+        size = len(data)
+    typer.echo(f"cabinplan: export {fmt}: {size} bytes -> {output}")
+
+
+@app.command()
+@handle_errors
 def check(
     scenario: ScenarioArg,
     profile: Annotated[

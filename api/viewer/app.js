@@ -377,6 +377,8 @@ function figures(job, scene) {
       ? `${gate.min_clearance_at.bodies.join(' – ')} at ${fmt(gate.min_clearance_at.t_s, 2)} s` : '–', ''),
     row('min clearance (these frames)', mm(scene.min_clearance_m)),
     row('requested clearance', mm(scene.clearance_m)),
+    ...(scene.certified_clearance_m > scene.clearance_m
+      ? [row('certified (+ STEP tessellation)', mm(scene.certified_clearance_m))] : []),
     row('planning time', `${fmt(rep.planning_time_s, 2)} s`),
     row('gate', gate.passed ? `passed (${(gate.checks || []).length} checks)` : 'FAILED', ''),
     row('peak velocity / limit', `${fmt(100 * (peaks.velocity || 0), 1)} %`),

@@ -144,7 +144,10 @@ def _context(sc: ResolvedScenario, world: CollisionWorld) -> dict[str, Any]:
         "bodies": _bodies(world),
         "has_cabin": sc.cabin is not None,
         "payload_body": "payload" if "payload" in world.names else None,
-        "clearance_m": float(sc.options.clearance_m),
+        # What the scenario asked for; the gate certified it plus the STEP tessellation's deviation
+        # (``certified_clearance_m``, equal without a STEP mesh) against the loaded triangles.
+        "clearance_m": float(sc.requested_clearance_m),
+        "certified_clearance_m": float(sc.options.clearance_m),
         "start": _pose(T_start),
         "goal": None if T_goal is None else _pose(T_goal),
         "approach": approach,
