@@ -315,7 +315,7 @@ def _trampoline(dispatcher: Any, n_args: int) -> Any:
     ``numba.pycc`` compiles an exported function with its default options, not the dispatcher's: exported
     directly, an entry's own body would run under Python's error model (a division by zero raises) where
     the JIT kernel has ``error_model="numpy"`` (inf or NaN). Exporting this call instead compiles the
-    kernel with its own options, as the JIT does (``tests/test_aot.py`` compares edge inputs).
+    kernel with its own options, as the JIT does (``tests/core/test_aot.py`` compares edge inputs).
     """
     names = ", ".join(f"a{i}" for i in range(n_args))
     namespace: dict[str, Any] = {"kernel": dispatcher}
@@ -332,7 +332,7 @@ def _arrays_boxed_with_a_cached_type() -> Iterator[None]:
     every array it returns (measured: +0.35 us an array, +1 us on a state check returning three). This
     boxes them as numba does, with the type added to the environment's constants like the dtype already
     is (unpickled once, when the extension is imported). Only the boxing of results differs: the compiled
-    arithmetic is the same (``tests/test_aot.py`` compares the bits).
+    arithmetic is the same (``tests/core/test_aot.py`` compares the bits).
     """
     from llvmlite import ir  # type: ignore[import-untyped]  # noqa: PLC0415 - numba only to build
     from numba.core import boxing, cgutils, types  # noqa: PLC0415

@@ -5,7 +5,7 @@ The kernels (:mod:`.state`, :mod:`.walk`, :mod:`.bounds`, compiled with the robo
 install by :mod:`planner.core.aot` (``make`` runs ``python -m planner.collision.kernels.build``; a plan
 that finds no build makes it before its clock starts). A plan served by the build never imports numba;
 without a build (no cache folder, ``CABINPLAN_KERNELS=jit``, no C compiler) the same functions run under
-numba's JIT. Both give the same numbers, bit for bit (``tests/collision/test_aot.py``).
+numba's JIT. Both give the same numbers, bit for bit (``tests/core/test_aot.py``).
 
 The build's entries do not check their arguments, so they are reached only through :class:`Kernels`: every
 array argument is checked for the dtype, number of dimensions, C order (and, for outputs, writability)

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from planner.cli import app
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 
-SCENARIOS = Path(__file__).parent / "scenarios"
+SCENARIOS = Path(__file__).parent.parent / "scenarios"
 EXPECTED = yaml.safe_load((SCENARIOS / "expected.yaml").read_text())
 REFUSALS = sorted(p.stem for p in SCENARIOS.glob("refuse-*.yaml"))
 TRANSFER = SCENARIOS / "aisle-transfer.yaml"

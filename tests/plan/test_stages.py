@@ -23,7 +23,7 @@ from planner.plan.targets import goal_targets
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 from planner.timing.path import BlendPiece
 from planner.timing.toppra import ToppraStage
-from tests.planning.conftest import SCENARIOS
+from tests.plan.conftest import SCENARIOS
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from planner.plan.motion import certify_motion
 from planner.plan.shortcut import segment_times
 from planner.plan.transit import Transit, compactness, find_transit
 from planner.scenario.resolve import ResolvedScenario, load_scenario
-from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
+from tests.plan.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
 HATCH_Z_M = 2.0  # the bulkhead of cabin-hatch
 

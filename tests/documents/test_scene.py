@@ -20,7 +20,7 @@ from planner.gate.checks import clearance_probe_indices
 from planner.robots.pprs6 import Pprs6
 from planner.scenario import load_scenario
 
-SCENARIOS = Path(__file__).resolve().parent / "scenarios"
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
 
 @pytest.mark.parametrize("n", [1, 2, 39, 40, 41, 399, 400, 401, 3977, 12000])

@@ -28,7 +28,7 @@ from planner.timing.jerk import JerkLimitedStage
 from planner.timing.path import JointPath, LinePiece, segment_time_length
 from tests.conftest import admissible_joints, plan_in_a_fresh_process
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "tests" / "scenarios"
 
 

@@ -20,7 +20,7 @@ from planner.plan.goals import approach_lines
 from planner.plan.motion import MIN_MARGIN_M, certify_motion
 from planner.plan.pipeline import Planner
 from planner.scenario.resolve import ResolvedScenario, load_scenario
-from tests.planning.conftest import SCENARIOS
+from tests.plan.conftest import SCENARIOS
 
 FREE_M = 0.0125  # free space around the payload at the tight bay's goal
 

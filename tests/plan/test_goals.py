@@ -13,7 +13,7 @@ from planner.plan.motion import certify_motion
 from planner.redundancy.ik import normalised_margin
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 from tests.conftest import admissible_joints
-from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
+from tests.plan.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
 
 @pytest.fixture(scope="module")

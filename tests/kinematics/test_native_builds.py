@@ -78,7 +78,7 @@ def test_a_failing_compiler_leaves_one_marker_and_the_next_process_uses_the_vm(
         + "out = native([fn], 'policy_probe')[0]\n"
         + "print(out is fn, float(out(ca.DM([0.5, -1.0]))[1]))\n"
     )
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
     res = subprocess.run([sys.executable, "-c", child], env=env, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     is_vm, value = res.stdout.split()
@@ -136,7 +136,7 @@ def test_a_damaged_library_is_set_aside_and_built_again(cache: Path, monkeypatch
         PROBE
         + "from planner.kinematics.native import native\nassert native([fn], 'policy_damaged')[0] is not fn\n"
     )
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
     res = subprocess.run([sys.executable, "-c", child], env=env, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     (lib,) = cache.glob("policy_damaged-*.so")

@@ -14,7 +14,7 @@ from planner.plan.motion import certify_motion, motion_clear
 from planner.plan.shortcut import MIN_GAIN_S, cut_corners, segment_times
 from planner.robots.cabin8 import Cabin8
 from planner.scenario.resolve import ResolvedScenario, load_scenario
-from tests.planning.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
+from tests.plan.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,7 @@ from planner.robots.cabin8 import Cabin8
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 from planner.timing.profile import DriveProfile
 
-SCENARIO = Path(__file__).parent / "scenarios" / "aisle-transfer.yaml"
+SCENARIO = Path(__file__).parent.parent / "scenarios" / "aisle-transfer.yaml"
 ALL_CHECKS = {
     "finite",
     "time",
