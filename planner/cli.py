@@ -30,7 +30,7 @@ from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
 
 if TYPE_CHECKING:
-    from planner.gate.drive_checks import GateReport
+    pass
 
 app = typer.Typer(
     add_completion=False,
@@ -274,7 +274,7 @@ def plan(
     The JSON written to --output is the profile on success and the refusal document otherwise.
     """
     from planner.core.exceptions import PlanRefused
-    from planner.documents.output import document_bytes, refusal_document, result_document
+    from planner.documents.output import clearance_phrase, document_bytes, refusal_document, result_document
     from planner.plan.pipeline import Planner
 
     sc = _load(scenario)
@@ -323,7 +323,7 @@ def cycle(
     """
     from planner.core.exceptions import PlanRefused
     from planner.documents.cycle import cycle_document, cycle_png, cycle_refusal_document
-    from planner.documents.output import document_bytes
+    from planner.documents.output import clearance_phrase, document_bytes
     from planner.task.cycle import plan_cycle
     from planner.task.resolve import load_cycle
 
@@ -350,18 +350,6 @@ def cycle(
         f"samples, {len(result.legs)} legs, {clearance_phrase(result.gate)}, "
         f"spring-back {springs} -> {output}",
         err=True,
-    )
-
-
-def clearance_phrase(gate: GateReport) -> str:
-    """The report's clearance in words: the exact minimum over every sample, where, and the bound between."""
-    at = gate.min_clearance_at
-    if at is None or gate.min_clearance_bound_m is None:
-        return f"min clearance {1e3 * gate.min_clearance_m:.1f} mm"
-    a, b = at["bodies"]
-    return (
-        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b} at {at['t_s']:.2f} s; "
-        f">= {1e3 * gate.min_clearance_bound_m:.1f} mm between samples)"
     )
 
 

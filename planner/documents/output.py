@@ -23,6 +23,7 @@ from planner.core.exceptions import PlannerError
 from planner.core.provenance import code_version
 
 if TYPE_CHECKING:
+    from planner.gate.drive_checks import GateReport
     from planner.meshio.types import LoadedMesh
     from planner.plan.pipeline import PlanResult
     from planner.scenario.resolve import ResolvedScenario
@@ -157,3 +158,19 @@ def refusal_document(
     if sc is not None:
         doc["provenance"] = provenance(sc)
     return _jsonable(doc)
+
+
+def clearance_phrase(gate: GateReport) -> str:
+    """The gate's clearance in words, as the CLI prints it beside the document's ``min_clearance_m``.
+
+    The exact minimum over every sample, where (the bodies and the time), and the certified bound between
+    the samples.
+    """
+    at = gate.min_clearance_at
+    if at is None or gate.min_clearance_bound_m is None:
+        return f"min clearance {1e3 * gate.min_clearance_m:.1f} mm"
+    a, b = at["bodies"]
+    return (
+        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b} at {at['t_s']:.2f} s; "
+        f">= {1e3 * gate.min_clearance_bound_m:.1f} mm between samples)"
+    )
