@@ -368,12 +368,15 @@ def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tm
             got = table[:, 1 + 8 * k : 9 + 8 * k]
             np.testing.assert_allclose(got, np.array(result[name]), rtol=1e-8, atol=1e-12)
         np.testing.assert_allclose(table[:, 0], result["t"], rtol=1e-8, atol=1e-12)
-        # Stored: the packed document and the plot. Served before: the JSON text, the CSV and the plot.
+        # Stored: the packed document and the plot (made on its first request, then kept). Served: the
+        # JSON text, the CSV (made from the document) and the plot.
         ctx = svc.client.app.state.ctx  # type: ignore[attr-defined]
+        plot = ctx.jobs.stored_file(doc["id"], "plot.png")
+        assert plot == png.content and ctx.jobs.stored_file(doc["id"], "profile.csv") is None
         with ctx.db.session() as s:
             row = s.get(Job, doc["id"])
-            stored = len(row.result_packed) + len(row.plot_png)
-            assert row.result_json is None and row.profile_csv is None
+            stored = len(row.result_packed) + len(plot)
+            assert row.result_json is None and row.profile_csv is None and row.plot_png is None
         as_text = len(json.dumps(result).encode()) + len(csv.content) + len(png.content)
         assert as_text / stored >= 5.0, (as_text, stored)
         # DELETE of a finished plan deletes it.
