@@ -30,6 +30,7 @@ from api import problems
 from api.context import AppContext
 from api.db import Database
 from api.jobs import JobRunner, ProcessJobRunner, recover_jobs
+from api.jobstore import JobStore
 from api.metrics import QueueCollector, ServiceMetrics
 from api.openapi import install_openapi
 from api.ratelimit import TenantRateLimiter
@@ -240,11 +241,10 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         limiter=TenantRateLimiter(
             settings.rate_limit, settings.rate_limit_storage_uri, settings.rate_limit_namespace
         ),
+        jobs=JobStore(db),
     )
     service_metrics.registry.register(
-        QueueCollector(
-            lambda: health.queue_counts(db), job_runner.busy, lambda: job_runner.warming() is not None
-        )
+        QueueCollector(ctx.jobs.queue_counts, job_runner.busy, lambda: job_runner.warming() is not None)
     )
     feeder = SweepFeeder(db, settings, job_runner)
 

@@ -22,7 +22,8 @@ from sqlalchemy import delete, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from api.db import ACTIVE_STATES, Database, Job, Mesh, MeshBlob, now_s
+from api.db import Database, Mesh, MeshBlob, now_s
+from api.jobstore import JobStore
 from api.problems import Problem
 from meshes import reference_cabin_path
 from planner.core.exceptions import InvalidInput, InvalidMesh
@@ -265,7 +266,7 @@ class MeshStore:
             if row is None:
                 return False
             path = self.path_of(row)
-            active = s.scalars(select(Job).where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))).all()
+            active = JobStore.active_jobs(s, tenant)
             # Jobs name the file by the path of the instance that took the upload: compare the names.
             users = sorted(j.id for j in active if path.name in _file_names(j.meshes))
             if users:

@@ -9,12 +9,15 @@ version (so a change of the model, the description, the compiler or CasADi gives
 the library with ``casadi.external``.
 
 Every failure falls back to the original functions, which give the same numbers (tests compare both):
-no C compiler (e.g. a slim container), a failed build, a read-only cache, or ``CABINPLAN_NATIVE=0``.
-The builds follow the cache policy of every native build (:mod:`planner.core.builds`): keyed by the
-source's digest, built under a file lock (concurrent processes build once), written to a temporary file
-and renamed into place (never a half-written library), a compiler that fails leaves a failure marker so
-that later processes use the virtual machine at once instead of trying again (for a day), and a library
-that does not load is set aside and built again once.
+no C compiler and no build in the cache, a failed build, a read-only cache, or ``CABINPLAN_NATIVE=0``.
+A build already in the cache is loaded without a compiler: a slim container carries the builds its image's
+build stage made (plain ``-O1`` C, no ``-march``: they load on any machine of the architecture), so the key
+holds what the library's code depends on (the source, the flags, CasADi's version), not the compiler's path.
+The builds follow the cache policy of every native build (:mod:`planner.core.builds`): keyed by that
+digest, built under a file lock (concurrent processes build once), written to a temporary file and renamed
+into place (never a half-written library), a compiler that fails leaves a failure marker so that later
+processes use the virtual machine at once instead of trying again (for a day), and a library that does not
+load is set aside and built again once.
 """
 
 from __future__ import annotations
@@ -72,21 +75,23 @@ def native(functions: Sequence[ca.Function], name: str) -> list[ca.Function]:
         available, the given functions otherwise.
     """
     cc = _compiler()
-    if not native_enabled() or cc is None or builds.folder() is None:
+    folder = builds.folder()
+    if os.environ.get("CABINPLAN_NATIVE", "1") == "0" or folder is None:
+        return list(functions)
+    if cc is None and not any(folder.glob(f"{name}-*.so")):  # nothing to load, nothing to build with
         return list(functions)
     try:
         gen = ca.CodeGenerator(f"{name}.c")
         for fn in functions:
             gen.add(fn)
         source = gen.dump()
-        key = builds.digest((source, cc, repr(CFLAGS), ca.CasadiMeta.version()))
+        key = builds.digest((source, repr(CFLAGS), ca.CasadiMeta.version()))
         place = NativeBuild.of(name, key, ".so")
         if place is None:
             return list(functions)
         for attempt in range(2):
-            if not place.path.is_file() and not builds.build_once(
-                place, lambda: _build(cc, source, place), lambda reason: _warn(name, reason)
-            ):
+            # A build of another source (another version) only, and no compiler to build this one: the VM.
+            if not place.path.is_file() and (cc is None or not _build_once(cc, source, place, name)):
                 return list(functions)
             try:
                 return [ca.external(fn.name(), str(place.path)) for fn in functions]
@@ -98,6 +103,11 @@ def native(functions: Sequence[ca.Function], name: str) -> list[ca.Function]:
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         _warn(name, str(exc))
     return list(functions)
+
+
+def _build_once(cc: str, source: str, place: NativeBuild, name: str) -> bool:
+    """Build ``place`` under the cache policy (:func:`planner.core.builds.build_once`); True if built."""
+    return builds.build_once(place, lambda: _build(cc, source, place), lambda reason: _warn(name, reason))
 
 
 def _build(cc: str, source: str, place: NativeBuild) -> None:
