@@ -43,7 +43,7 @@ ENV CABINPLAN_CACHE_DIR=/opt/cabinplan/cache \
     MPLCONFIGDIR=/opt/cabinplan/cache/matplotlib
 WORKDIR /tmp
 RUN python -m planner.collision.kernels.build \
-    && python -m planner.timing.reference \
+    && python -m planner.timing.acc_reference \
     && python -c "import api.warmup" \
     && python -c "from api.prebuilt import check; check()"
 

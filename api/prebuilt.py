@@ -15,7 +15,7 @@ import sys
 from planner.collision.kernels.entries import EXTENSION as COLLISION_KERNELS
 from planner.core import aot
 from planner.core.cache import cache_dir
-from planner.timing.reference import EXTENSION as TIMING_KERNELS
+from planner.timing.acc_reference import EXTENSION as TIMING_KERNELS
 
 #: The native CasADi libraries a plan of the reference robot loads (``planner.kinematics.native``).
 NATIVE_PREFIXES = ("cabin8_dynamics", "cabin8_drive_path")

@@ -19,7 +19,7 @@ from fastapi import APIRouter, Query, Response
 from api.auth import CurrentPrincipal
 from api.problems import Problem
 from api.routes.deps import Ctx
-from api.routes.plans import result_text
+from api.routes.jobroutes import result_text
 from api.routes.scene import _LRU, _finished_job, _resolved
 from planner.core.exceptions import InvalidInput
 

@@ -77,7 +77,7 @@ def test_a_build_stage_with_a_compiler_builds_the_kernels_portably_and_the_slim_
     assert re.search(r"apt-get install [^&]*\bgcc\b", build_runs)
     for command in (
         "python -m planner.collision.kernels.build",
-        "python -m planner.timing.reference",
+        "python -m planner.timing.acc_reference",
         "import api.warmup",  # plans once: the native CasADi builds, numba's cache, the aisle grid
         "from api.prebuilt import check; check()",  # the stage fails when a build is missing
     ):
@@ -108,7 +108,7 @@ def test_a_portable_build_loads_on_a_machine_that_targets_its_own_cpu(tmp_path, 
     and computes what the JIT computes. On x86-64 the portable code uses no AVX register.
     """
     from planner.core import aot
-    from planner.timing import reference
+    from planner.timing import acc_reference as reference
 
     cache = tmp_path / "cache"
     env = {
@@ -117,7 +117,7 @@ def test_a_portable_build_loads_on_a_machine_that_targets_its_own_cpu(tmp_path, 
         "CABINPLAN_AOT_CPU": "generic",
         "PYTHONPATH": str(ROOT),
     }
-    subprocess.run([sys.executable, "-m", "planner.timing.reference"], env=env, check=True, cwd=tmp_path)
+    subprocess.run([sys.executable, "-m", "planner.timing.acc_reference"], env=env, check=True, cwd=tmp_path)
     monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(cache))
     monkeypatch.delenv("CABINPLAN_AOT_CPU", raising=False)
     monkeypatch.delenv("CABINPLAN_KERNELS", raising=False)
