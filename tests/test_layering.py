@@ -27,6 +27,7 @@ FLOORS = (
     "documents",
     "tools",
     "sweep",
+    "task",
     "cli",
 )
 #: Engines and edge libraries, and the only rooms that may import them.
