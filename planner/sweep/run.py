@@ -40,7 +40,7 @@ from typing import Any, Generic, Protocol, TypeVar
 
 from planner.core.exceptions import InvalidInput
 from planner.sweep.expand import SweepPlan
-from planner.sweep.results import Journal, make_row, write_tables
+from planner.sweep.results import Journal, TaskKey, make_row, write_tables
 from planner.sweep.spec import Limits
 from planner.sweep.task import run_task
 
@@ -67,18 +67,6 @@ def hard_limit_s(plan: SweepPlan, limits: Limits) -> float:
     if limits.wall_time_limit_s is not None:
         limit = min(limit, float(limits.wall_time_limit_s))
     return limit
-
-
-class TaskKey(Protocol):
-    """What the executors need to know of the plan behind a job: a name (logs) and its content hash."""
-
-    @property
-    def name(self) -> str:
-        """A readable name of the plan."""
-
-    @property
-    def sha256(self) -> str:
-        """The plan's content hash (one running job per hash)."""
 
 
 #: The plan behind a job: a sweep's :class:`~planner.sweep.expand.SweepPlan`, a campaign's cycle, ...

@@ -25,7 +25,8 @@ _LOG = logging.getLogger(__name__)
 MAX_EVIDENCE_CHARS = 4000
 
 
-def _resolver(meshes: dict[str, Any] | None) -> Any:
+def mesh_resolver(meshes: dict[str, Any] | None) -> Any:
+    """A mesh resolver over name -> file path or bytes (Ray's object store), or None without meshes."""
     if not meshes:
         return None
 
@@ -80,7 +81,7 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
     try:
         spec = scenario_from_dict(task["scenario"], source="sweep plan")
         base_dir = Path(task["base_dir"]) if task.get("base_dir") else None
-        sc = resolve_scenario(spec, base_dir=base_dir, mesh_resolver=_resolver(meshes))
+        sc = resolve_scenario(spec, base_dir=base_dir, mesh_resolver=mesh_resolver(meshes))
         planner = Planner(sc)
         t_plan = time.perf_counter()
         result = planner.plan()
@@ -90,7 +91,7 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         if len(evidence) > MAX_EVIDENCE_CHARS:
             evidence = evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
         out.update(reason=exc.reason, message=exc.message, evidence=evidence)
-        _deliver(out, task, json.dumps(doc))
+        deliver(out, task, json.dumps(doc))
         out["task_time_s"] = time.perf_counter() - t0
         return out
     except Exception as exc:  # a bug: recorded as the plan's outcome, the sweep goes on
@@ -109,12 +110,12 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         peak_force_ratio=float(result.gate.peak_ratios["effort"]),
         planning_time_s=float(report.get("planning_time_s", time.perf_counter() - t_plan)),
     )
-    _deliver(out, task, json.dumps(doc))
+    deliver(out, task, json.dumps(doc))
     out["task_time_s"] = time.perf_counter() - t0
     return out
 
 
-def _deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
+def deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
     """Write the document to the task's ``profile_path`` if it has one, else put it into the outcome."""
     path = task.get("profile_path")
     if not path:
@@ -203,6 +204,8 @@ __all__ = [
     "MAX_EVIDENCE_CHARS",
     "RUNNER_KEY",
     "Runner",
+    "deliver",
+    "mesh_resolver",
     "plan_outcome",
     "run_task",
     "task_runner",

@@ -59,10 +59,13 @@ __all__ = [
     "CycleJob",
     "UnitStatus",
     "blocking_message",
+    "campaign_meshes",
+    "campaign_sha256",
     "cycle_document",
     "cycle_key",
     "installed_entry",
     "ordinal",
+    "write_outputs",
 ]
 
 #: The executors' runner of one campaign cycle (:func:`planner.sweep.task.task_runner`).
@@ -275,7 +278,8 @@ class CampaignRun:
     Args:
         campaign: The validated campaign.
         out_dir: The output folder (created; a killed run's folder resumes).
-        executor: Where cycles run (embedded workers, Ray, or in process); the caller closes it.
+        executor: Where cycles run (embedded workers, Ray, or in process); the caller closes it. ``None``
+            until it is set (:attr:`executor`): the journal can be read before any worker starts.
         base_dir: Folder the campaign's relative mesh paths refer to.
         progress: Called with every unit's status whenever one changes.
         poll_s: Longest wait for outcomes before the progress is refreshed [s].
@@ -285,7 +289,7 @@ class CampaignRun:
         self,
         campaign: Campaign,
         out_dir: Path,
-        executor: Executor,
+        executor: Executor | None,
         *,
         base_dir: Path | None = None,
         progress: Progress | None = None,
@@ -397,7 +401,8 @@ class CampaignRun:
             self._progress(self.status)
 
         if pending:
-            self._running = {j.plan.sha256 for j in pending}
+            if self.executor is None:
+                raise RuntimeError("campaign: cycles to plan but no executor set")
             drive(pending, self.executor, finished, running_changed=running_changed, poll_s=self.poll_s)
         return [self.journal.rows.get(job.sha256, {}) for job in jobs]
 
@@ -470,7 +475,7 @@ class CampaignRun:
         found: FindResult = find_order(
             self.campaign.ids,
             self.oracle,
-            batch=max(1, int(self.executor.max_in_flight)),
+            batch=max(1, int(self.executor.max_in_flight)) if self.executor is not None else 1,
             max_cycles=self.campaign.search.max_cycles,
         )
         search: dict[str, Any] = {
@@ -568,6 +573,35 @@ class CampaignRun:
 
 
 # ------------------------------------------------------------------------------------------- outputs
+
+
+def campaign_meshes(campaign: Campaign, base_dir: Path | None = None) -> dict[str, bytes]:
+    """Bytes of every mesh file the campaign names (not the packaged reference cabins), read once (Ray).
+
+    Raises:
+        InvalidInput: a mesh file cannot be read (the field named).
+    """
+    from meshes import reference_cabin_path
+
+    names: list[tuple[str, str]] = []
+    if reference_cabin_path(campaign.cabin.mesh) is None:
+        names.append(("cabin.mesh", campaign.cabin.mesh))
+    names += [(f"installed[{k}].mesh", e.mesh) for k, e in enumerate(campaign.installed) if e.mesh]
+    for k, u in enumerate(campaign.units):
+        if u.unit.mesh:
+            names.append((f"units[{k}].unit.mesh", u.unit.mesh))
+        if u.dock.fixture.mesh:
+            names.append((f"units[{k}].dock.fixture.mesh", u.dock.fixture.mesh))
+    out: dict[str, bytes] = {}
+    for where, name in names:
+        if name in out:
+            continue
+        path = Path(name) if Path(name).is_absolute() or base_dir is None else base_dir / name
+        try:
+            out[name] = path.read_bytes()
+        except OSError as exc:
+            raise InvalidInput(f"{where}: cannot read {name} ({exc.strerror})", field=where) from None
+    return out
 
 
 def campaign_sha256(campaign: Campaign) -> str:

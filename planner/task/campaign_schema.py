@@ -28,27 +28,28 @@ campaign's units and the installed ones); every failure is an `InvalidInput` nam
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from planner.core.exceptions import InvalidInput
+from planner.scenario.files import read_document
 from planner.scenario.schema import CabinSpec, ConfigurationSpec, Number, PlanOptions, describe_error
 from planner.sweep.spec import Limits
 from planner.task.schema import BayGoal, DockSpec, DwellSpec, GripperSpec, InstalledUnit, LineSpec, UnitSpec
 
 __all__ = [
+    "MAX_UNITS",
     "Campaign",
     "CampaignUnit",
     "SearchOptions",
-    "UnitId",
     "campaign_from_dict",
+    "load_campaign_file",
 ]
 
 _CONFIG = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 
-#: A unit id: letters, digits, '.', '_' and '-' (it names files and the collision world's obstacle).
-UnitId = Annotated[str, Field(min_length=1, max_length=40, pattern=r"^[A-Za-z0-9._-]+$")]
 #: Most units in one campaign (an exhaustive order search is 2^n states).
 MAX_UNITS = 16
 
@@ -184,3 +185,14 @@ def campaign_from_dict(data: object, source: str = "campaign") -> Campaign:
         raise InvalidInput(
             f"{first['field']}: {first['message']}", field=first["field"], source=source, errors=errors
         ) from None
+
+
+def load_campaign_file(path: Path) -> Campaign:
+    """Read and validate a campaign file (``.yaml``/``.yml``/``.json``, at most 1 MiB).
+
+    Raises:
+        InvalidInput: wrong extension, unreadable or oversized file, a syntax error (line and column), a
+            duplicate key, or a schema violation (the dotted field).
+    """
+    path = Path(path)
+    return campaign_from_dict(read_document(path, "campaign"), source=str(path))

@@ -128,7 +128,7 @@ class _Search:
         self.refused[unit].append(blockers or installed)
 
     def known_refused(self, unit: str, state: frozenset[str]) -> bool:
-        """Whether the unit is known refused in ``state`` (a blocker set it was refused with lies inside it)."""
+        """Whether the unit is known refused in ``state`` (a blocker set of its refusals lies inside it)."""
         return unit in self.never or any(b <= state for b in self.refused[unit])
 
     def is_dead(self, state: frozenset[str]) -> bool:
