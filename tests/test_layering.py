@@ -28,6 +28,7 @@ FLOORS = (
     "tools",
     "sweep",
     "task",
+    "generate",
     "cli",
 )
 #: Engines and edge libraries, and the only rooms that may import them.
