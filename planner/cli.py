@@ -302,6 +302,55 @@ def plan(
     )
 
 
+@app.command()
+@handle_errors
+def cycle(
+    cycle_file: Annotated[
+        Path, typer.Argument(metavar="FILE", help="cycle file (.yaml, .yml or .json)", dir_okay=False)
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="cycle profile / refusal JSON")],
+    csv: Annotated[Path | None, typer.Option("--csv", help="also write the profile as CSV")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="also plot the profile (PNG)")] = None,
+) -> None:
+    """Plan an assembly cycle.
+
+    one certified drive profile with its legs and events (exit 0), or a refusal with its reason and the leg
+    that refused (exit 3).
+
+    The JSON written to --output is the cycle profile on success and the refusal document otherwise.
+    """
+    from planner.core.exceptions import PlanRefused
+    from planner.documents.cycle import cycle_document, cycle_png, cycle_refusal_document
+    from planner.documents.output import document_bytes
+    from planner.task.cycle import plan_cycle
+    from planner.task.resolve import load_cycle
+
+    cyc = load_cycle(cycle_file)
+    try:
+        with _Progress(sys.stderr.isatty()) as progress:
+            result = plan_cycle(cyc, progress)
+    except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
+    except InvalidInput:
+        raise
+    except PlannerError as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", 1)
+    _write(output, document_bytes(cycle_document(cyc, result, arrays=True)) + b"\n", "--output")
+    if csv is not None:
+        _write(csv, result.profile.to_csv(), "--csv")
+    if plot is not None:
+        _write(plot, cycle_png(cyc, result), "--plot")
+    springs = ", ".join(f"{e.kind} {1e3 * e.springback_m:.2f} mm" for e in result.events)
+    typer.echo(
+        f"cabinplan: {cyc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, {len(result.profile.t)} "
+        f"samples, {len(result.legs)} legs, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm, "
+        f"spring-back {springs} -> {output}",
+        err=True,
+    )
+
+
 class _SweepProgress(_Bar):
     """Sweep progress on stderr when it is a terminal (rich: done / failed / running, ETA)."""
 
@@ -430,11 +479,12 @@ def check(
 ) -> None:
     """Run the validation gate on a drive profile for a scenario; the report goes to stdout.
 
+    A cycle profile (``kind: cycle``) is checked against its cycle file instead.
+
     Exit 0 when every check passes, 3 when any fails.
     """
     from planner.gate.check_profile import check_profile
 
-    sc = _load(scenario)
     try:
         data = json.loads(profile.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -443,7 +493,13 @@ def check(
         _fail(f"profile: not valid JSON ({exc.msg} at line {exc.lineno})", EXIT_INVALID)
     except UnicodeDecodeError:
         _fail(f"profile: {profile} is not UTF-8 text (expected the JSON written by plan)", EXIT_INVALID)
-    report = check_profile(sc, data)
+    if isinstance(data, dict) and data.get("kind") == "cycle":
+        from planner.task.check import check_cycle
+        from planner.task.resolve import load_cycle
+
+        report = check_cycle(load_cycle(scenario), data)
+    else:
+        report = check_profile(_load(scenario), data)
     _emit(report.to_dict())
     if not report.passed:
         _fail(f"validation_failed: {report.summary()}", EXIT_INFEASIBLE)
@@ -606,8 +662,8 @@ def campaign(
     Resumable: cycles with a row in OUTPUT's journal (keyed by the cycle's hash) are not planned again.
     Exit 0 when every unit is installed, 3 when a cycle is refused (given order) or no order is found.
     """
+    from planner.campaign.run import CYCLE_RUNNER, CampaignRun, campaign_meshes
     from planner.sweep.run import WARMUP_TIME_LIMIT_S, EmbeddedExecutor, RayExecutor
-    from planner.task.campaign import CYCLE_RUNNER, CampaignRun, campaign_meshes
     from planner.task.campaign_schema import load_campaign_file
 
     camp = load_campaign_file(spec)

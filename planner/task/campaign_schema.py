@@ -34,9 +34,9 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from planner.core.exceptions import InvalidInput
+from planner.core.schemas import Limits
 from planner.scenario.files import read_document
 from planner.scenario.schema import CabinSpec, ConfigurationSpec, Number, PlanOptions, describe_error
-from planner.sweep.spec import Limits
 from planner.task.schema import BayGoal, DockSpec, DwellSpec, GripperSpec, InstalledUnit, LineSpec, UnitSpec
 
 __all__ = [

@@ -1,6 +1,6 @@
 """What one cycle process of a campaign runs: a cycle document in, an outcome out (plain data, JSON-able).
 
-The runner the sweep executors call for a campaign's cycles (:data:`planner.task.campaign.CYCLE_RUNNER`,
+The runner the sweep executors call for a campaign's cycles (:data:`planner.campaign.run.CYCLE_RUNNER`,
 through :func:`planner.sweep.task.run_task`), in an embedded warm worker or a Ray task alike. It is the
 cycle's own planning (:func:`planner.task.cycle.plan_cycle`) with the outcome shape of a sweep's plan
 (:func:`planner.sweep.task.plan_outcome`), so the driver records both the same way.
@@ -37,10 +37,10 @@ def cycle_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) ->
         :data:`~planner.sweep.task.MAX_EVIDENCE_CHARS`), "duration_s", "min_clearance_m",
         "planning_time_s", "task_time_s", "document", "profile_written", "pid"}``.
     """
-    from planner.documents.output import refusal_document
+    from planner.documents.cycle import cycle_document, cycle_refusal_document
+    from planner.documents.output import document_bytes, refusal_document
     from planner.task.cycle import plan_cycle
-    from planner.task.output import cycle_result_document
-    from planner.task.resolve import resolve_cycle
+    from planner.task.resolve import ResolvedCycle, resolve_cycle
     from planner.task.schema import cycle_from_dict
 
     t0 = time.perf_counter()
@@ -58,14 +58,18 @@ def cycle_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) ->
         "pid": os.getpid(),
     }
     name = task["cycle"].get("name")
+    cyc: ResolvedCycle | None = None
     try:
         spec = cycle_from_dict(task["cycle"], source="campaign cycle")
         base_dir = Path(task["base_dir"]) if task.get("base_dir") else None
         cyc = resolve_cycle(spec, base_dir=base_dir, mesh_resolver=mesh_resolver(meshes))
         result = plan_cycle(cyc)
     except PlannerError as exc:
-        doc = refusal_document(exc, None, name=name)
-        doc["kind"] = "cycle"
+        if cyc is not None:
+            doc = cycle_refusal_document(exc, cyc)
+        else:  # refused before it was resolved (its input): the plan document's refusal, named
+            doc = {"kind": "cycle", **refusal_document(exc, None, name=name)}
+            doc["cycle"] = doc.pop("scenario")
         evidence = json.dumps(doc.get("details", {}), separators=(",", ":"))
         if len(evidence) > MAX_EVIDENCE_CHARS:
             evidence = evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
@@ -78,7 +82,7 @@ def cycle_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) ->
         out.update(reason="internal_error", message=f"internal error: {type(exc).__name__}: {exc}")
         out["task_time_s"] = time.perf_counter() - t0
         return out
-    doc = cycle_result_document(cyc, result)
+    doc = cycle_document(cyc, result, arrays=True)
     out.update(
         status="succeeded",
         message=f"{result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
@@ -86,6 +90,6 @@ def cycle_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) ->
         min_clearance_m=float(result.gate.min_clearance_m),
         planning_time_s=float(result.report.get("planning_time_s", time.perf_counter() - t0)),
     )
-    deliver(out, task, json.dumps(doc))
+    deliver(out, task, document_bytes(doc).decode("utf-8"))
     out["task_time_s"] = time.perf_counter() - t0
     return out
