@@ -247,7 +247,14 @@ class CampaignRun:
     # ------------------------------------------------------------- verdicts
     def verdict(self, job: CycleJob, row: dict[str, Any]) -> tuple[Verdict, dict[str, Mention]]:
         """The feasibility verdict of a planned cycle, and the installed units its refusal names."""
-        return verdict_of(row, job.installed, frozenset(self._initial))
+        details = None
+        if row.get("status") != "succeeded" and row.get("profile_file"):
+            try:
+                doc = json.loads((self.out_dir / str(row["profile_file"])).read_text(encoding="utf-8"))
+                details = doc.get("details") if isinstance(doc, dict) else None
+            except (OSError, ValueError):  # the row's own evidence then
+                details = None
+        return verdict_of(row, job.installed, frozenset(self._initial), details)
 
     def oracle(self, queries: Sequence[Query]) -> list[Verdict]:
         """Answer a batch of ``feasible(unit, installed)`` queries (planned in parallel, cached by key)."""

@@ -172,12 +172,11 @@ def ordinal(k: int) -> str:
 
 
 def _where(m: Mention) -> str:
-    if not m.where:
-        return ""
-    text = m.where.replace("_", " ")
-    if text.startswith(("at ", "on ", "in ", "along ", "near ", "during ")):
-        return f" {text}"
-    return f" in the {text}"
+    """`` at the goal of the transit leg`` / `` in the transit leg`` / ``""``."""
+    leg = m.leg.replace("_", " ") if m.leg else None
+    if m.where:
+        return f" {m.where} of the {leg} leg" if leg else f" {m.where}"
+    return f" in the {leg} leg" if leg else ""
 
 
 def blocking_message(unit: str, m: Mention, position: str, fixed: bool) -> str:
@@ -189,7 +188,7 @@ def blocking_message(unit: str, m: Mention, position: str, fixed: bool) -> str:
         position: How it came to be installed (``"installed second"``, ``"installed before the campaign"``).
         fixed: It was installed before the campaign (no order of this campaign moves it).
     """
-    body = "the payload" if m.body in (None, "payload") else m.body
+    body = f"the {m.body or 'payload'}"
     if m.distance_m is None:
         figure = f"is named by the refusal{_where(m)}"
     elif m.distance_m <= 0.0:
@@ -213,7 +212,7 @@ def _row_evidence(row: dict[str, Any]) -> Any:
 
 
 def verdict_of(
-    row: dict[str, Any], installed: frozenset[str], initial: frozenset[str]
+    row: dict[str, Any], installed: frozenset[str], initial: frozenset[str], details: Any = None
 ) -> tuple[Verdict, dict[str, Mention]]:
     """The order search's verdict of a planned cycle, and every installed unit its refusal names.
 
@@ -222,6 +221,8 @@ def verdict_of(
             details as JSON text).
         installed: The campaign units installed before the cycle.
         initial: The units installed before the campaign (no order of the campaign moves them).
+        details: The refusal's whole ``details`` (its document), when at hand: the row's evidence is cut
+            at the journal's length.
 
     Returns:
         The verdict (blockers: the campaign units named; ``fixed`` when only bodies that are there in every
@@ -230,7 +231,8 @@ def verdict_of(
     """
     if row.get("status") == "succeeded":
         return Verdict(True, message=str(row.get("message") or "")), {}
-    found = nearest(mentions(_row_evidence(row), row.get("message"), set(installed) | set(initial)))
+    evidence = details if details is not None else _row_evidence(row)
+    found = nearest(mentions(evidence, row.get("message"), set(installed) | set(initial)))
     blockers = frozenset(u for u in found if u in installed)
     fixed = not blockers and (any(u in initial for u in found) or row.get("reason") in STATE_INDEPENDENT)
     reason = str(row.get("reason") or "failed")

@@ -23,8 +23,6 @@ __all__ = ["UNIT_PREFIX", "Mention", "mentions", "nearest", "obstacle_name", "un
 #: How the collision world names an installed unit: ``"unit <id>"``.
 UNIT_PREFIX = "unit "
 _UNIT_RE = re.compile(r"\bunit ([A-Za-z0-9._-]+)")
-#: Keys of a record that say where along the cycle it was found.
-_WHERE_KEYS = ("leg", "where")
 
 
 def obstacle_name(unit_id: str) -> str:
@@ -46,7 +44,8 @@ class Mention:
         body: The robot body (or ``payload``) it is measured against, when the record names one.
         distance_m: The exact distance of that record [m] (<= 0: contact), when it has one.
         required_m: The distance the planner required there [m], when the record has one.
-        where: Where along the cycle (the leg, or the record's ``where``), when the record says.
+        where: Where the record was found (its ``where``: ``"at the goal"``), when it says.
+        leg: The cycle's leg it was found in (the nearest enclosing ``leg``), when known.
     """
 
     unit: str
@@ -54,15 +53,17 @@ class Mention:
     distance_m: float | None = None
     required_m: float | None = None
     where: str | None = None
+    leg: str | None = None
 
 
 def _number(value: Any) -> float | None:
     return float(value) if isinstance(value, int | float) and math.isfinite(float(value)) else None
 
 
-def _walk(node: Any, where: str | None, out: list[Mention], units: frozenset[str]) -> None:
+def _walk(node: Any, leg: str | None, out: list[Mention], units: frozenset[str]) -> None:
     if isinstance(node, dict):
-        here = next((str(node[k]) for k in _WHERE_KEYS if isinstance(node.get(k), str)), where)
+        leg = str(node["leg"]) if isinstance(node.get("leg"), str) else leg
+        where = str(node["where"]) if isinstance(node.get("where"), str) else None
         bodies = node.get("bodies")
         if isinstance(bodies, list) and all(isinstance(b, str) for b in bodies):
             for k, name in enumerate(bodies):
@@ -76,34 +77,38 @@ def _walk(node: Any, where: str | None, out: list[Mention], units: frozenset[str
                         others[0] if others else None,
                         _number(node.get("distance_m")),
                         _number(node.get("required_m")),
-                        here,
+                        where,
+                        leg,
                     )
                 )
         for key, value in node.items():
             if key != "bodies":
-                _walk(value, here, out, units)
+                _walk(value, leg, out, units)
     elif isinstance(node, list):
         for value in node:
-            _walk(value, where, out, units)
+            _walk(value, leg, out, units)
     elif isinstance(node, str):
         for unit in _UNIT_RE.findall(node):
             if unit in units:
-                out.append(Mention(unit, where=where))
+                out.append(Mention(unit, leg=leg))
 
 
-def mentions(details: Any, message: str | None, installed: Iterable[str]) -> list[Mention]:
+def mentions(
+    details: Any, message: str | None, installed: Iterable[str], leg: str | None = None
+) -> list[Mention]:
     """Every mention of an installed unit in a refusal's evidence (records first, then message text).
 
     Args:
         details: The refusal's ``details`` (any JSON value).
         message: The refusal's message (units named in its text count too).
         installed: Ids of the units installed when the cycle was planned (only these can block it).
+        leg: The leg the refusal names at its top level, if the details do not carry it.
     """
     units = frozenset(installed)
     out: list[Mention] = []
-    _walk(details, None, out, units)
+    _walk(details, leg, out, units)
     if message:
-        _walk(message, None, out, units)
+        _walk(message, leg, out, units)
     return out
 
 
@@ -111,7 +116,10 @@ def nearest(found: list[Mention]) -> dict[str, Mention]:
     """Per unit, its most telling mention: the smallest distance, else the first with a body or place."""
 
     def rank(m: Mention) -> tuple[float, int]:
-        return (m.distance_m if m.distance_m is not None else math.inf, 0 if m.body or m.where else 1)
+        return (
+            m.distance_m if m.distance_m is not None else math.inf,
+            0 if m.body or m.where or m.leg else 1,
+        )
 
     out: dict[str, Mention] = {}
     for m in found:
