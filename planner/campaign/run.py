@@ -129,8 +129,11 @@ class CampaignRun:
         self.status = {u: UnitStatus(u) for u in campaign.ids}
         self._progress = progress or (lambda s: None)
         self.poll_s = poll_s
+        #: Cycles this run planned, and those it found planned by an earlier run (the journal's rows then).
         self.planned = 0
         self.cached = 0
+        self._known = frozenset(self.journal.rows)
+        self._counted: set[str] = set()
         self._initial = {e.id for e in campaign.installed}
 
     # ----------------------------------------------------------------- jobs
@@ -169,19 +172,20 @@ class CampaignRun:
         recorded.
         """
         pending: deque[Job[CycleJob]] = deque()
-        for k, job in enumerate(jobs):
+        for job in jobs:
             if self.journal.done(job.sha256):
-                self.cached += 1
-                self.status[job.unit].cycles_cached += 1
+                if job.sha256 in self._known and job.sha256 not in self._counted:
+                    self._counted.add(job.sha256)
+                    self.cached += 1
+                    self.status[job.unit].cycles_cached += 1
                 row = self.journal.rows[job.sha256]
                 if stop_at_refusal and row.get("status") != "succeeded":
                     break
                 continue
             self._write_input(job)
             pending.append(Job(job, self._task(job), self._hard_limit_s(job)))
-            del k
         index = {job.sha256: k for k, job in enumerate(jobs)}
-        stop = [len(jobs)]
+        dropped: set[str] = set()
 
         def finished(done: Job[CycleJob], outcome: dict[str, Any], wall_time_s: float) -> None:
             c = done.plan
@@ -214,16 +218,18 @@ class CampaignRun:
             self._mark(c.unit, "planned" if row["status"] == "succeeded" else "refused", row)
             if stop_at_refusal and row["status"] != "succeeded":
                 k = index[c.sha256]
-                stop[0] = min(stop[0], k)
                 for j in [j for j in pending if index[j.plan.sha256] > k]:
                     pending.remove(j)
+                    dropped.add(j.plan.sha256)
 
         def running_changed(n: int) -> None:
             for u in self.status.values():
                 if u.status == "planning":
                     u.status = "waiting"
-            for j in self.executor_jobs(pending, jobs):
-                self.status[j].status = "planning"
+            waiting = {j.plan.sha256 for j in pending} | dropped
+            for j in jobs:
+                if j.sha256 not in waiting and not self.journal.done(j.sha256):
+                    self.status[j.unit].status = "planning"
             self._progress(self.status)
 
         if pending:
@@ -231,11 +237,6 @@ class CampaignRun:
                 raise RuntimeError("campaign: cycles to plan but no executor set")
             drive(pending, self.executor, finished, running_changed=running_changed, poll_s=self.poll_s)
         return [self.journal.rows.get(job.sha256, {}) for job in jobs]
-
-    def executor_jobs(self, pending: deque[Job[CycleJob]], jobs: Sequence[CycleJob]) -> list[str]:
-        """Units whose cycle was submitted and has no row yet (running now)."""
-        waiting = {j.plan.sha256 for j in pending}
-        return [j.unit for j in jobs if j.sha256 not in waiting and not self.journal.done(j.sha256)]
 
     def _mark(self, unit: str, status: str, row: dict[str, Any] | None = None) -> None:
         st = self.status[unit]

@@ -442,8 +442,8 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
     doc_units = []
     for u in units:
         e = [float(v) for v in u.R[:, 2]]
-        lo, hi = _pedestal(u, shell.deck_top_y_m, clearance)
-        centre = (np.array(lo) + np.array(hi)) / 2
+        p_lo, p_hi = _pedestal(u, shell.deck_top_y_m, clearance)
+        centre = (np.array(p_lo) + np.array(p_hi)) / 2
         doc_units.append(
             {
                 "unit": {
@@ -455,7 +455,7 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
                 "dock": {
                     "pose": _pose_doc(_pose(u.R, _dock_pose(u))),
                     "fixture": {
-                        "box": [float(v) for v in np.round(np.array(hi) - np.array(lo), 6)],
+                        "box": [float(v) for v in np.round(np.array(p_hi) - np.array(p_lo), 6)],
                         "pose": _pose_doc(_pose(np.eye(3), centre)),
                     },
                     "approach": {"direction": e, "distance": u.grasp_line_m},
