@@ -302,6 +302,55 @@ def plan(
     )
 
 
+@app.command()
+@handle_errors
+def cycle(
+    cycle_file: Annotated[
+        Path, typer.Argument(metavar="FILE", help="cycle file (.yaml, .yml or .json)", dir_okay=False)
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="cycle profile / refusal JSON")],
+    csv: Annotated[Path | None, typer.Option("--csv", help="also write the profile as CSV")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="also plot the profile (PNG)")] = None,
+) -> None:
+    """Plan an assembly cycle.
+
+    one certified drive profile with its legs and events (exit 0), or a refusal with its reason and the leg
+    that refused (exit 3).
+
+    The JSON written to --output is the cycle profile on success and the refusal document otherwise.
+    """
+    from planner.core.exceptions import PlanRefused
+    from planner.documents.cycle import cycle_document, cycle_png, cycle_refusal_document
+    from planner.documents.output import document_bytes
+    from planner.task.cycle import plan_cycle
+    from planner.task.resolve import load_cycle
+
+    cyc = load_cycle(cycle_file)
+    try:
+        with _Progress(sys.stderr.isatty()) as progress:
+            result = plan_cycle(cyc, progress)
+    except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
+    except InvalidInput:
+        raise
+    except PlannerError as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", 1)
+    _write(output, document_bytes(cycle_document(cyc, result, arrays=True)) + b"\n", "--output")
+    if csv is not None:
+        _write(csv, result.profile.to_csv(), "--csv")
+    if plot is not None:
+        _write(plot, cycle_png(cyc, result), "--plot")
+    springs = ", ".join(f"{e.kind} {1e3 * e.springback_m:.2f} mm" for e in result.events)
+    typer.echo(
+        f"cabinplan: {cyc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, {len(result.profile.t)} "
+        f"samples, {len(result.legs)} legs, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm, "
+        f"spring-back {springs} -> {output}",
+        err=True,
+    )
+
+
 class _SweepProgress(_Bar):
     """Sweep progress on stderr when it is a terminal (rich: done / failed / running, ETA)."""
 
@@ -430,11 +479,12 @@ def check(
 ) -> None:
     """Run the validation gate on a drive profile for a scenario; the report goes to stdout.
 
+    A cycle profile (``kind: cycle``) is checked against its cycle file instead.
+
     Exit 0 when every check passes, 3 when any fails.
     """
     from planner.gate.check_profile import check_profile
 
-    sc = _load(scenario)
     try:
         data = json.loads(profile.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -443,7 +493,13 @@ def check(
         _fail(f"profile: not valid JSON ({exc.msg} at line {exc.lineno})", EXIT_INVALID)
     except UnicodeDecodeError:
         _fail(f"profile: {profile} is not UTF-8 text (expected the JSON written by plan)", EXIT_INVALID)
-    report = check_profile(sc, data)
+    if isinstance(data, dict) and data.get("kind") == "cycle":
+        from planner.task.check import check_cycle
+        from planner.task.resolve import load_cycle
+
+        report = check_cycle(load_cycle(scenario), data)
+    else:
+        report = check_profile(_load(scenario), data)
     _emit(report.to_dict())
     if not report.passed:
         _fail(f"validation_failed: {report.summary()}", EXIT_INFEASIBLE)
@@ -553,6 +609,96 @@ def generate(
         cases.append(case)
     write_manifest(cases, out, seed)
     _emit({"out": str(out), "seed": seed, "scenarios": [f"{c.name}.yaml" for c in cases]})
+
+
+class _CampaignProgress(_Bar):
+    """Campaign progress on stderr when it is a terminal: one row per unit (status, cycles planned)."""
+
+    def __init__(self, enabled: bool, units: list[str]) -> None:
+        self.tasks: dict[str, Any] = {}
+        if enabled:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(
+                TextColumn("{task.description:<12}"),
+                BarColumn(bar_width=20),
+                TextColumn("{task.fields[status]:<11} cycles {task.fields[cycles]}"),
+                TimeElapsedColumn(),
+            )
+            for u in units:
+                self.tasks[u] = self.bar.add_task(u, total=1, status="waiting", cycles=0)
+
+    def __call__(self, status: dict[str, Any]) -> None:
+        if self.bar is None:
+            return
+        for u, st in status.items():
+            done = st.status in ("planned", "refused", "not_planned")
+            self.bar.update(
+                self.tasks[u],
+                completed=1 if done else 0,
+                status=st.status,
+                cycles=st.cycles_planned + st.cycles_cached,
+            )
+
+
+@app.command()
+@handle_errors
+def campaign(
+    spec: Annotated[Path, typer.Argument(help="campaign file (.yaml, .yml or .json)", dir_okay=False)],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="output folder (cycle documents, summary.json)")
+    ],
+    workers: Annotated[
+        int, typer.Option("--workers", min=1, max=256, help="cycles at a time (local processes or Ray CPUs)")
+    ] = max(1, os.cpu_count() or 1),
+    ray: Annotated[bool, typer.Option("--ray", help="run the cycles as Ray tasks")] = False,
+    ray_address: Annotated[
+        str | None,
+        typer.Option("--ray-address", help="Ray cluster address (default RAY_ADDRESS, else a local Ray)"),
+    ] = None,
+) -> None:
+    """Install a campaign's units one cycle at a time: the cycle documents in install order + summary.json.
+
+    Resumable: cycles with a row in OUTPUT's journal (keyed by the cycle's hash) are not planned again.
+    Exit 0 when every unit is installed, 3 when a cycle is refused (given order) or no order is found.
+    """
+    from planner.campaign.run import CYCLE_RUNNER, CampaignRun, campaign_meshes
+    from planner.sweep.run import WARMUP_TIME_LIMIT_S, EmbeddedExecutor, RayExecutor
+    from planner.task.campaign_schema import load_campaign_file
+
+    camp = load_campaign_file(spec)
+    base_dir = spec.parent.resolve()
+    executor: Any = None
+    try:
+        with _CampaignProgress(sys.stderr.isatty(), camp.ids) as progress:
+            run = CampaignRun(camp, output, None, base_dir=base_dir, progress=progress)
+            first = run.job(camp.ids[0], ())
+            warm: dict[str, Any] | None = None
+            if not run.journal.done(first.sha256):  # something to plan: warm the workers on it
+                warm = {"runner": CYCLE_RUNNER, "cycle": first.document, "base_dir": str(base_dir)}
+                warm["cycle"] = {**warm["cycle"], "options": {**warm["cycle"]["options"]}}
+                limit = warm["cycle"]["options"].get("time_limit_s", 30.0)
+                warm["cycle"]["options"]["time_limit_s"] = min(float(limit), WARMUP_TIME_LIMIT_S)
+            if ray:
+                executor = RayExecutor(ray_address, workers, None, campaign_meshes(camp, base_dir), warm)
+            else:
+                executor = EmbeddedExecutor(workers, warm)
+            run.executor = executor
+            result = run.run()
+    except KeyboardInterrupt:
+        _fail(f"campaign {camp.name}: interrupted; the cycles so far are in {output}, rerun to resume", 130)
+    finally:
+        if executor is not None:
+            executor.close()
+    total = sum(e["duration_s"] or 0.0 for e in result.units if e["status"] == "planned")
+    typer.echo(
+        f"cabinplan: campaign {camp.name}: {result.message}; {len(result.order)} units in order "
+        f"{' '.join(result.order) or '-'}, campaign {total:.1f} s; {result.cycles_planned} cycles planned, "
+        f"{result.cycles_cached} already done -> {output}",
+        err=True,
+    )
+    if not result.succeeded:
+        raise typer.Exit(EXIT_INFEASIBLE)
 
 
 def main() -> None:

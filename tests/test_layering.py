@@ -24,9 +24,12 @@ FLOORS = (
     "scenario",
     "gate",
     "plan",
+    "task",
     "documents",
     "tools",
+    "generate",
     "sweep",
+    "campaign",
     "cli",
 )
 #: Engines and edge libraries, and the only rooms that may import them.

@@ -210,7 +210,8 @@ def validate_profile(
             )
         )
     probe = clearance_probe_indices(n)
-    min_c = float(np.min(world.clearance_profile(q[probe]))) if world.cabin is not None else float("inf")
+    has_environment = world.cabin is not None or world.obstacles is not None
+    min_c = float(np.min(world.clearance_profile(q[probe]))) if has_environment else float("inf")
     return GateReport(tuple(checks), n, min_c, peaks)
 
 

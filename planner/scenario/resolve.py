@@ -18,6 +18,8 @@ import numpy as np
 
 from meshes import reference_cabin_path, reference_cabins
 from planner.collision.bodies import PayloadGeometry
+from planner.collision.obstacles import Obstacle
+from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
 from planner.core.types import Array
 from planner.meshio.load import LoadedMesh, MeshLimits, load_mesh
@@ -62,6 +64,10 @@ class ResolvedScenario:
         approach_distance_m: Length of that motion [m]; 0.0 without an approach.
         options: Planning options.
         scenario_sha256: :func:`scenario_hash` of ``spec``.
+        obstacles: The cabin state: fixed bodies added to the cabin (installed units, fixtures), each
+            compared by clearance like the cabin (:mod:`planner.collision.obstacles`); () for a scenario.
+        allowed_pairs: ``(body, obstacle)`` pairs this plan may bring within the clearance (a cycle's
+            grasp and release lines, :mod:`planner.task`); empty for a scenario.
     """
 
     spec: Scenario
@@ -79,6 +85,14 @@ class ResolvedScenario:
     approach_distance_m: float
     options: PlanOptions
     scenario_sha256: str
+    obstacles: tuple[Obstacle, ...] = ()
+    allowed_pairs: frozenset[tuple[str, str]] = frozenset()
+
+    def world(self) -> CollisionWorld:
+        """The collision world of this scenario: robot, payload, cabin and its obstacles."""
+        return CollisionWorld(
+            self.robot, self.cabin, self.payload, obstacles=self.obstacles, allowed=self.allowed_pairs
+        )
 
     def __post_init__(self) -> None:
         for name in (
