@@ -51,7 +51,15 @@ from multiprocessing.process import BaseProcess
 from typing import Any, Protocol
 
 from api.db import Database
-from api.jobstore import MAX_ATTEMPTS, JobStore, expire_leases, purge_expired, recover_jobs, rows_matched
+from api.jobstore import (
+    KEEP_PREFIX,
+    MAX_ATTEMPTS,
+    JobStore,
+    expire_leases,
+    purge_expired,
+    recover_jobs,
+    rows_matched,
+)
 from api.lifeline import SERVER_PID_ENV
 from api.metrics import ServiceMetrics
 from api.settings import Settings
@@ -352,9 +360,11 @@ class ProcessJobRunner:
         row = self.store.claim(self.instance_id, self.settings.job_lease_s)
         if row is None:
             return None
+        kept = self.store.kept(row.id, KEEP_PREFIX)  # an earlier attempt's finished work (campaigns)
         return {
             "id": row.id,
             "kind": row.kind,
+            "kept": kept,
             "scenario": row.scenario,
             "meshes": dict(row.meshes),
             "empty_dir": str(self.empty_dir),
@@ -413,7 +423,8 @@ class ProcessJobRunner:
 
     def _drain(self, r: _Running) -> None:
         """Read the job's messages; write its latest progress once (one database write a pass)."""
-        latest: tuple[str, float] | None = None
+        latest: tuple[str, float, dict[str, Any] | None] | None = None
+        detail: dict[str, Any] | None = None
         while not r.eof:
             try:
                 if not r.conn.poll(0):
@@ -423,11 +434,17 @@ class ProcessJobRunner:
                 r.eof = True
                 break
             if msg[0] == "progress":
-                latest = (str(msg[1]), float(msg[2]))
+                if len(msg) > 3 and msg[3] is not None:
+                    detail = msg[3]
+                latest = (str(msg[1]), float(msg[2]), detail)
+            elif msg[0] == "keep":  # a file the job keeps for a relaunch (a campaign's finished cycle)
+                self.store.keep(r.job_id, self.instance_id, str(msg[1]), bytes(msg[2]))
             elif msg[0] == "done":
                 r.outcome = msg[1]
         if latest is not None and r.outcome is None:  # a finished job's end write supersedes it
             self.store.progress(r.job_id, self.instance_id, *latest)
+        elif detail is not None:  # the last units of a finished job stay in its document
+            self.store.progress(r.job_id, self.instance_id, "finishing", 0.99, detail)
 
     def _finish(self, r: _Running) -> None:
         out = r.outcome

@@ -94,8 +94,16 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
         except OSError:  # the server is gone (its end of the pipe closed): its lease re-queues the job
             os._exit(0)  # quietly, before the parent-death signal: no traceback in the server's log
 
-    def progress(stage: str, fraction: float) -> None:
-        send(("progress", str(stage), float(fraction)))
+    class Progress:
+        """What the job's function reports through: ``(stage, fraction[, detail])``, and files to keep."""
+
+        def __call__(self, stage: str, fraction: float, detail: dict[str, Any] | None = None) -> None:
+            send(("progress", str(stage), float(fraction), detail))
+
+        def keep(self, name: str, data: bytes) -> None:
+            send(("keep", str(name), bytes(data)))
+
+    progress = Progress()
 
     if job.get("nice"):
         os.nice(int(job["nice"]))  # planning yields the CPU to the service's event loop
