@@ -331,7 +331,7 @@ def campaign_plot_png(source: FileSource) -> bytes:
     cycles = [c for c in doc.get("cycles", []) if c.get("status") == "succeeded"]
     names = [leg["name"] for leg in cycles[0]["legs"]] if cycles else []
     colours = {n: plt.get_cmap("tab10")(k % 10) for k, n in enumerate(names)}
-    fig, ax = plt.subplots(figsize=(10, 1.2 + 0.5 * max(1, len(doc.get("units", [])))))
+    fig, ax = plt.subplots(figsize=(10, 1.8 + 0.5 * max(1, len(doc.get("units", [])))))
     offset = 0.0
     labels = []
     for row, u in enumerate(doc.get("units", [])):
@@ -355,12 +355,12 @@ def campaign_plot_png(source: FileSource) -> bytes:
     ax.set_xlabel("campaign time [s]")
     handles = [plt.Rectangle((0, 0), 1, 1, color=colours[n]) for n in names]
     if handles:
-        ax.legend(handles, names, ncol=5, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.35))
+        fig.legend(handles, names, ncol=9, fontsize=7, loc="lower center")
     total = doc.get("campaign_duration_s") or doc.get("planned_duration_s") or 0.0
     ax.set_title(
         f"{doc['campaign']['name']}: {doc['status']}, {total:.1f} s; {doc['message']}"[:160], fontsize=9
     )
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.08, 1.0, 1.0))
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)

@@ -53,6 +53,11 @@ from planner.core.exceptions import InvalidInput, InvalidMesh
 router = APIRouter(tags=["cycles"])
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+#: The list routes' query parameters (module level: the routes are made per kind, their annotations
+#: resolve here).
+StatusQuery = Annotated[JobStatus | None, Query(description="Only jobs in this state.")]
+LimitQuery = Annotated[int, Query(ge=1, le=1000)]
+OffsetQuery = Annotated[int, Query(ge=0, le=10**9)]
 #: The searched legs of a cycle, each with the full ``options.time_limit_s`` (pre-grasp, transit, park).
 SEARCHED_LEGS = 3
 
@@ -282,9 +287,9 @@ def _job_routes(kind: JobKind) -> None:
     def list_jobs(
         ctx: Ctx,
         principal: CurrentPrincipal,
-        status: Annotated[JobStatus | None, Query(description=f"Only {c} in this state.")] = None,
-        limit: Annotated[int, Query(ge=1, le=1000)] = 20,
-        offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
+        status: StatusQuery = None,
+        limit: LimitQuery = 20,
+        offset: OffsetQuery = 0,
     ) -> dict[str, Any]:
         return jobroutes.page(ctx, kind, principal.tenant, status, limit, offset)
 
