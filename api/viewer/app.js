@@ -429,7 +429,7 @@ function figures(job, scene) {
 function provenance(p) {
   const code = p.code || {};
   $('#provenance').innerHTML = [
-    row('scenario', p.scenario_sha256 || '–', 'hash'),
+    row(p.cycle_sha256 ? 'cycle' : 'scenario', p.cycle_sha256 || p.scenario_sha256 || '–', 'hash'),
     row('robot description', p.robot_description_sha256 || '–', 'hash'),
     row('cabin mesh', p.cabin_mesh_sha256 || 'free space', 'hash'),
     row('cabin', p.cabin_source || '–', ''),
@@ -659,7 +659,7 @@ function joinedProfile(kind, job) {
 async function showTask(kind, job, scene) {
   state.mode = kind;
   await buildScene(scene, scene.has_cabin);
-  if (viewer3d) { viewer3d.setTask(scene); viewer3d.frameCamera(); }
+  if (viewer3d) { viewer3d.setTask(scene); viewer3d.frameTask(); }
   $('#legend').innerHTML = [['#8fa3bf', 'robot bodies'], ['#f59e0b', 'unit'], ['#60a5fa', 'installed before'],
     ['#92400e', 'dock fixture'], ['#22c55e', 'bay'], ['#ef4444', 'closest pair'], ['#9ca3af', 'cabin']]
     .map(([c, t]) => `<div><span style="background:${c}"></span>${t}</div>`).join('');

@@ -202,6 +202,27 @@ export class Scene3D {
     this.render();
   }
 
+  // A task's view: the robot, the docks and every bay framed from above the aisle, looking across at the
+  // bays (the cabin wall is see-through), so that the unit is seen on its dock, carried and in its bay.
+  frameTask() {
+    if (!this.task) { this.frameCamera(); return; }
+    const box = new THREE.Box3();
+    for (const b of this.bodies) { b.group.updateMatrixWorld(true); box.expandByObject(b.group); }
+    this.task.group.updateMatrixWorld(true);
+    box.expandByObject(this.task.group);
+    if (box.isEmpty()) return;
+    const centre = box.getCenter(new THREE.Vector3());
+    const size = box.getSize(new THREE.Vector3()).length();
+    const d = Math.max(size * 0.55, 0.25);
+    this.camera.position.set(centre.x - 0.75 * d, centre.y + 0.85 * d, centre.z - 0.35 * d);
+    this.camera.near = d / 200;
+    this.camera.far = d * 50;
+    this.camera.updateProjectionMatrix();
+    this.controls.target.copy(centre);
+    this.controls.update();
+    this.render();
+  }
+
   showFrame(frames, i, closest) {
     const R = frames.R[i];
     const p = frames.p_m[i];
