@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
@@ -125,6 +126,9 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
 
 
 # ---------------------------------------------------------------- files made on request (server side)
+_PLOT_LOCK = threading.Lock()
+
+
 def _resolved(source: FileSource) -> ResolvedScenario:
     spec = scenario_from_dict(source.input, source="plan")
     return resolve_scenario(
@@ -151,6 +155,11 @@ def plot_png(source: FileSource) -> bytes:
     sc = _resolved(source)
     doc = source.document
     profile = DriveProfile.from_dict(doc, sc.robot)
+    with _PLOT_LOCK:  # pyplot's figure registry is global: one plot at a time per server process
+        return _plot(sc, doc, profile)
+
+
+def _plot(sc: ResolvedScenario, doc: dict[str, Any], profile: DriveProfile) -> bytes:
     q = profile.joints
     idx = np.unique(np.concatenate([np.arange(0, len(q), max(1, len(q) // 200)), [len(q) - 1]]))
     clearance = None

@@ -23,6 +23,7 @@ from fastapi import APIRouter, Body, Response
 from api.auth import CurrentPrincipal
 from api.context import AppContext
 from api.examples import aisle_bay_goal, docked
+from api.openapi import BODY_SCHEMA_KEY
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 from api.routes.jobroutes import forget_result, result_text
@@ -93,7 +94,12 @@ def _tenant_sweep(ctx: AppContext, tenant: str, sweep_id: str) -> Sweep:
     return row
 
 
-@router.post("/sweeps", status_code=202, summary="Submit a feasibility sweep")
+@router.post(
+    "/sweeps",
+    status_code=202,
+    summary="Submit a feasibility sweep",
+    openapi_extra={BODY_SCHEMA_KEY: "Sweep"},
+)
 def submit_sweep(
     ctx: Ctx,
     principal: CurrentPrincipal,

@@ -18,9 +18,13 @@ day; a build killed by a signal or a timeout leaves none, and a build that does 
 made again once).
 
 The key is a hash of the kernel source files (and of this module), the numba, llvmlite, numpy and Python
-versions, the platform and the target CPU (the build is compiled for this machine's CPU; its model and
-feature flags are part of the key, so a cache folder shared with another machine never loads code for the
-wrong CPU).
+versions, the platform and the target CPU. By default a build is compiled for this machine's CPU (``host``):
+its model and feature flags are part of the key, so a cache folder shared with another machine never loads
+code for the wrong CPU. ``CABINPLAN_AOT_CPU=generic`` compiles for the architecture's baseline instead
+(x86-64 without AVX, say): a portable build, whose key holds only the architecture, that loads on any
+machine of it -- a container image builds its kernels that way, in a stage with a C compiler, for machines
+it has never seen. :func:`kernels` takes this machine's own build when there is one, else a portable one,
+and builds only when neither is there (for the target ``CABINPLAN_AOT_CPU`` says).
 
 The extension's entries do not check their arguments: an array of another dtype, layout or number of
 dimensions is read as if it had the declared one (wrong numbers or a crash). Each layer therefore reaches
@@ -57,7 +61,10 @@ log = logging.getLogger(__name__)
 
 #: ``CABINPLAN_KERNELS``: ``auto`` (the default: the ahead-of-time build, built on first use) or ``jit``.
 MODES = ("auto", "jit")
-#: Target CPU of the builds: the machine's own (as numba's JIT; its identity is part of the key).
+#: Target CPUs of the builds: ``host``, the machine's own (as numba's JIT; its identity is part of the key),
+#: and ``generic``, the architecture's baseline (portable: only the architecture is in the key).
+CPU_TARGETS = ("host", "generic")
+#: The default target (``CABINPLAN_AOT_CPU`` unset).
 TARGET_CPU = "host"
 #: Longest a build may take [s] before the JIT is used instead.
 BUILD_TIMEOUT_S = 900.0
@@ -106,6 +113,15 @@ def mode() -> str:
     return value
 
 
+def target_cpu() -> str:
+    """The CPU new builds target: ``CABINPLAN_AOT_CPU`` (``host`` unless set to ``generic``)."""
+    value = os.environ.get("CABINPLAN_AOT_CPU", TARGET_CPU).strip().lower() or TARGET_CPU
+    if value not in CPU_TARGETS:
+        log.warning("CABINPLAN_AOT_CPU=%r is neither of %s; using %s", value, CPU_TARGETS, TARGET_CPU)
+        return TARGET_CPU
+    return value
+
+
 def _cpu_identity() -> str:
     """This machine's CPU: model and feature flags (Linux), else what ``platform`` reports."""
     try:
@@ -132,8 +148,13 @@ def _version_file(package: str) -> str:
         return spec.origin
 
 
-def key(ext: Extension) -> str:
-    """The hash of everything the build depends on (24 hex digits)."""
+def key(ext: Extension, cpu: str | None = None) -> str:
+    """The hash of everything the build for ``cpu`` (default :func:`target_cpu`) depends on (24 hex digits).
+
+    A ``host`` build's key holds this machine's CPU model and feature flags; a ``generic`` one's only the
+    architecture (``platform.machine()``), so it is the same on every machine of that architecture.
+    """
+    cpu = target_cpu() if cpu is None else cpu
     h = hashlib.sha256()
     for path in (*ext.sources, Path(__file__)):  # this module's build steps are part of the build
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
@@ -145,8 +166,8 @@ def key(ext: Extension) -> str:
         sys.version,
         sysconfig.get_platform(),
         _suffix(),
-        TARGET_CPU,
-        _cpu_identity(),
+        cpu,
+        _cpu_identity() if cpu == "host" else platform.machine(),
     ):
         h.update(part.encode() + b"\0")
     return h.hexdigest()[:24]
@@ -162,15 +183,15 @@ def folder() -> Path | None:
     return None if root is None else root / "native"
 
 
-def path(ext: Extension) -> Path | None:
-    """Where the build of ``ext`` for the current key lives (None without a cache folder)."""
+def path(ext: Extension, cpu: str | None = None) -> Path | None:
+    """Where the build of ``ext`` for ``cpu`` (default :func:`target_cpu`) lives (None without a cache)."""
     where = folder()
-    return None if where is None else where / f"{ext.name}-{key(ext)}{_suffix()}"
+    return None if where is None else where / f"{ext.name}-{key(ext, cpu)}{_suffix()}"
 
 
-def load(ext: Extension) -> ModuleType | None:
-    """The extension built for the current key, loaded, or None when it is not in the cache."""
-    lib = path(ext)
+def load(ext: Extension, cpu: str | None = None) -> ModuleType | None:
+    """The extension built for ``cpu`` (default :func:`target_cpu`), loaded, or None when it is not there."""
+    lib = path(ext, cpu)
     if lib is None or not lib.is_file():
         return None
     module = _LOADED.get(str(lib))
@@ -205,14 +226,17 @@ def kernels(ext: Extension) -> Any:
     if mode() == "jit" or folder() is None:
         return jit_kernels(ext)
     try:
-        try:
-            module = load(ext)
-        except ImportError as exc:  # a damaged file: set it aside and build again, once
-            lib = path(ext)
-            assert lib is not None
-            log.warning("kernels %s: %s does not load (%s); building it again", ext.name, lib, exc)
-            os.replace(lib, lib.with_name(lib.name + ".bad"))
-            module = None
+        module = None
+        for cpu in dict.fromkeys((target_cpu(), "generic")):  # this machine's own build, else a portable one
+            try:
+                module = load(ext, cpu)
+            except ImportError as exc:  # a damaged file: set it aside and build again, once
+                lib = path(ext, cpu)
+                assert lib is not None
+                log.warning("kernels %s: %s does not load (%s); building it again", ext.name, lib, exc)
+                os.replace(lib, lib.with_name(lib.name + ".bad"))
+            if module is not None:
+                break
         if module is None:
             module = _build_in_subprocess(ext)
         if module is not None:
@@ -351,7 +375,7 @@ def build(ext: Extension) -> Path:
     ):
         cc = CC(ext.name)
         cc.output_dir = tmp
-        cc.target_cpu = TARGET_CPU
+        cc.target_cpu = target_cpu()
         cc.verbose = False
         for entry in ext.entries:
             dispatcher = getattr(kernels_module, entry.name)

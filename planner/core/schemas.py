@@ -18,9 +18,10 @@ def _finite(v: float) -> float:
     return v
 
 
-#: A finite real number, lax (pydantic's float coercion: ``"0.3"`` and ``true`` pass): poses and wrenches of
-#: the CLI and the HTTP API.
-Finite = Annotated[float, AfterValidator(_finite)]
+#: A finite real number: ints and floats only (a numeric string or a boolean is refused, as the published
+#: OpenAPI document's ``number`` says), checked for NaN/inf after any bound: poses and wrenches of the CLI
+#: and the HTTP API.
+Finite = Annotated[float, Strict(), AfterValidator(_finite)]
 
 #: A finite real number, strict: ints and floats only (no numeric strings, no booleans, no NaN/inf),
 #: checked *before* any bound, so ``.nan`` is reported as "not finite" rather than as "not <= 0.2"; bounds
