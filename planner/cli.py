@@ -664,10 +664,12 @@ def campaign(
     """
     from planner.campaign.run import CYCLE_RUNNER, CampaignRun, campaign_meshes
     from planner.sweep.run import WARMUP_TIME_LIMIT_S, EmbeddedExecutor, RayExecutor
+    from planner.task.campaign import check_campaign
     from planner.task.campaign_schema import load_campaign_file
 
     camp = load_campaign_file(spec)
     base_dir = spec.parent.resolve()
+    check_campaign(camp, base_dir)
     executor: Any = None
     try:
         with _CampaignProgress(sys.stderr.isatty(), camp.ids) as progress:

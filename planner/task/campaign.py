@@ -37,6 +37,7 @@ __all__ = [
     "CycleJob",
     "blocking_message",
     "campaign_sha256",
+    "check_campaign",
     "cycle_document",
     "cycle_key",
     "installed_entry",
@@ -244,3 +245,60 @@ def campaign_sha256(campaign: Campaign) -> str:
     """SHA-256 of the campaign's canonical JSON."""
     text = json.dumps(campaign.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+#: Cycle fields a campaign gives for every cycle (their errors are the campaign's, not a unit's).
+_CAMPAIGN_FIELDS = frozenset(
+    {"robot", "rail_length", "cabin", "installed", "park", "dwell", "gripper", "options"}
+)
+
+
+def check_campaign(campaign: Campaign, base_dir: Path | None = None) -> None:
+    """Refuse a campaign no order can install for a reason of its input, naming the fields and the units.
+
+    * two units (the campaign's, or one installed before it) overlapping at their installed poses: one
+      resolution of a cycle with every other unit installed (:func:`planner.task.resolve.resolve_cycle`
+      checks every installed pair and the unit's bay against them);
+    * each unit's own cycle in the cabin as the campaign finds it: its robot, cabin and meshes, its dock
+      clear of its fixture and of the units installed before the campaign, its bay free of them.
+
+    What depends on the order (a dock that an installed unit of the campaign overlaps) is the cycles' to
+    refuse in the states where it holds.
+
+    Raises:
+        InvalidInput: ``units``/``units[k]...`` with the cycle's reason (``details['units']`` names both
+            units of an overlap).
+    """
+    from planner.task.resolve import resolve_cycle
+    from planner.task.schema import cycle_from_dict
+
+    ids = campaign.ids
+    index = {u: k for k, u in enumerate(ids)}
+    if len(ids) > 1:
+        try:
+            resolve_cycle(cycle_from_dict(cycle_document(campaign, ids[0], ids[1:])), base_dir)
+        except InvalidInput as exc:
+            field_name = str(exc.details.get("field", ""))
+            named = [str(n) for n in exc.details.get("units", [])]
+            if field_name in ("installed", "bay.pose") and len(named) == 2:
+                where = [f"units[{index[n[5:]]}]" if n[5:] in index else "installed" for n in named]
+                raise InvalidInput(
+                    f"units: {named[0]} ({where[0]}) and {named[1]} ({where[1]}) overlap at their installed "
+                    "poses: no order installs both",
+                    field="units",
+                    units=named,
+                ) from None
+    for k, unit_id in enumerate(ids):
+        try:
+            resolve_cycle(cycle_from_dict(cycle_document(campaign, unit_id, ())), base_dir)
+        except InvalidInput as exc:
+            field_name = str(exc.details.get("field", "cycle"))
+            prefix = (
+                ""
+                if field_name in ("robot", "cabin", "cabin.mesh", "park", "rail_length")
+                else f"units[{k}]."
+            )
+            raise InvalidInput(
+                f"{prefix}{exc.message} (unit {unit_id})",
+                **{**exc.details, "field": f"{prefix}{field_name}", "unit": unit_id},
+            ) from None
