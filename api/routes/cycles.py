@@ -7,8 +7,8 @@ one of the tenant's uploaded meshes, every other mesh (an installed unit's, the 
 uploaded id; no file of the server is ever named by a request. The document is validated and resolved
 before it is queued, so bad input is a 422 naming the field (overlapping installed units name both, a bay
 already occupied names the unit there, a unit on its dock overlapping its fixture names ``dock.pose``);
-for a campaign every unit's cycle is resolved in the cabin its listed predecessors leave
-(``units[k].bay.pose``: two units of the campaign in one bay).
+for a campaign :func:`planner.task.campaign.check_campaign` refuses what no order can install (two units
+overlapping at their installed poses: ``units``, both named; a unit's own bad cycle: ``units[k].<field>``).
 
 Both are jobs of the one job machinery (:mod:`api.jobkinds` ``CYCLE`` and ``CAMPAIGN``; the helpers of
 :mod:`api.routes.jobroutes`): the same tenants, quota (429), ``Idempotency-Key`` replay, cancellation
@@ -159,10 +159,8 @@ def _campaign_cycles(campaign: Any) -> int:
 
 
 def _campaign_job(ctx: AppContext, tenant: str, body: Any, key: str | None, sha: str) -> Job:
-    from planner.task.campaign import campaign_sha256, cycle_document
+    from planner.task.campaign import campaign_sha256, check_campaign
     from planner.task.campaign_schema import campaign_from_dict
-    from planner.task.resolve import resolve_cycle
-    from planner.task.schema import cycle_from_dict
 
     campaign = campaign_from_dict(body, source="request")
     _ceiling(ctx, float(campaign.options.time_limit_s))
@@ -171,36 +169,11 @@ def _campaign_job(ctx: AppContext, tenant: str, body: Any, key: str | None, sha:
         if isinstance(u, dict):
             fields += _mesh_fields(u, f"units[{k}].", cabin=False)
     meshes = mesh_map(ctx, tenant, fields)
-    resolver = scenario_mesh_resolver(meshes)
-    ids = campaign.ids
-    for k, unit in enumerate(ids):  # each unit in the cabin its listed predecessors leave
-        doc = cycle_document(campaign, unit, ids[:k])
-        try:
-            resolve_cycle(
-                cycle_from_dict(doc, source="campaign"), base_dir=_empty(ctx), mesh_resolver=resolver
-            )
-        except InvalidInput as exc:
-            raise _in_unit(exc, k, unit) from None
+    check_campaign(campaign, base_dir=_empty(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
     limit = SEARCHED_LEGS * float(campaign.options.time_limit_s) * _campaign_cycles(campaign)
     provenance = {"campaign_sha256": campaign_sha256(campaign)}
     doc = campaign.model_dump(mode="json")
     return new_job(CAMPAIGN, tenant, doc, campaign.name, sha, meshes, provenance, limit, key)
-
-
-#: Fields of a composed cycle that are the campaign unit's own (``units[k].<field>``).
-_UNIT_FIELDS = ("unit", "dock", "bay", "retract", "dwell")
-
-
-def _in_unit(exc: InvalidInput, k: int, unit: str) -> InvalidInput:
-    """A composed cycle's refusal with its fields named in the campaign (``units[k].bay.pose``)."""
-    field = str(exc.details.get("field") or "")
-    if field.split(".")[0].split("[")[0] in _UNIT_FIELDS:
-        field = f"units[{k}].{field}"
-    elif field.startswith("installed["):  # a campaign unit installed before k, or one installed before
-        pass
-    message = f"units[{k}] (unit {unit}, installed after {k} of the listed units): {exc.message}"
-    details = {key: v for key, v in exc.details.items() if key not in ("field", "errors")}
-    return InvalidInput(message, field=field, **details)
 
 
 def _submit(
@@ -271,15 +244,25 @@ async def submit_campaign(
 ) -> dict[str, Any]:
     """Queue a campaign job: 202 with the job document (its ``units`` appear as they start) and ``Location``.
 
-    Every unit's cycle is resolved in the cabin its listed predecessors leave before the job is queued:
-    422 naming ``units[k].<field>`` (two units in one bay, a dock in collision with its fixture) or the
-    campaign's own field.
+    What no order can install is refused before the job is queued
+    (:func:`planner.task.campaign.check_campaign`): 422 naming ``units`` and both units when two overlap
+    at their installed poses, ``units[k].<field>`` for a unit's own bad cycle (a dock in collision with
+    its fixture), or the campaign's own field.
     """
     body = parse_body(await request.body(), request.headers.get("content-type"))
     return await run_in_threadpool(_submit, CAMPAIGN, ctx, principal.tenant, response, body, idempotency_key)
 
 
 # ------------------------------------------------------------------------------ the shared job routes
+def _file_route(kind: JobKind, name: str, what: str) -> Any:
+    """The route function of one download of ``kind`` (its name bound here, not a parameter)."""
+
+    def get_file(job_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
+        return jobroutes.file_answer(ctx, kind, principal.tenant, job_id, name, what)
+
+    return get_file
+
+
 def _job_routes(kind: JobKind) -> None:
     """GET list, GET one, files, DELETE of ``kind`` (thin calls into :mod:`api.routes.jobroutes`)."""
     c, noun = kind.collection, kind.noun
@@ -324,11 +307,7 @@ def _job_routes(kind: JobKind) -> None:
     for f in kind.files:
         what = {"profile.csv": "profile", "units.csv": "unit table", "plot.png": "plot"}[f.name]
 
-        def get_file(
-            job_id: str, ctx: Ctx, principal: CurrentPrincipal, _name: str = f.name, _what: str = what
-        ) -> Response:
-            return jobroutes.file_answer(ctx, kind, principal.tenant, job_id, _name, _what)
-
+        get_file = _file_route(kind, f.name, what)
         router.add_api_route(
             f"/{c}/{{job_id}}/{f.name}",
             get_file,

@@ -24,12 +24,15 @@ import json
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from planner.core.exceptions import InvalidInput
 from planner.task.campaign_schema import Campaign, CampaignUnit
 from planner.task.evidence import Mention, mentions, nearest
 from planner.task.order import Verdict
+
+if TYPE_CHECKING:
+    from planner.scenario.resolve import MeshResolver
 
 __all__ = [
     "MONOTONICITY",
@@ -253,7 +256,9 @@ _CAMPAIGN_FIELDS = frozenset(
 )
 
 
-def check_campaign(campaign: Campaign, base_dir: Path | None = None) -> None:
+def check_campaign(
+    campaign: Campaign, base_dir: Path | None = None, mesh_resolver: MeshResolver | None = None
+) -> None:
     """Refuse a campaign no order can install for a reason of its input, naming the fields and the units.
 
     * two units (the campaign's, or one installed before it) overlapping at their installed poses: one
@@ -264,6 +269,8 @@ def check_campaign(campaign: Campaign, base_dir: Path | None = None) -> None:
 
     What depends on the order (a dock that an installed unit of the campaign overlaps) is the cycles' to
     refuse in the states where it holds.
+
+    ``mesh_resolver``: how mesh names resolve (the service's store of uploaded meshes), as for a cycle.
 
     Raises:
         InvalidInput: ``units``/``units[k]...`` with the cycle's reason (``details['units']`` names both
@@ -276,7 +283,7 @@ def check_campaign(campaign: Campaign, base_dir: Path | None = None) -> None:
     index = {u: k for k, u in enumerate(ids)}
     if len(ids) > 1:
         try:
-            resolve_cycle(cycle_from_dict(cycle_document(campaign, ids[0], ids[1:])), base_dir)
+            resolve_cycle(cycle_from_dict(cycle_document(campaign, ids[0], ids[1:])), base_dir, mesh_resolver)
         except InvalidInput as exc:
             field_name = str(exc.details.get("field", ""))
             named = [str(n) for n in exc.details.get("units", [])]
@@ -290,7 +297,7 @@ def check_campaign(campaign: Campaign, base_dir: Path | None = None) -> None:
                 ) from None
     for k, unit_id in enumerate(ids):
         try:
-            resolve_cycle(cycle_from_dict(cycle_document(campaign, unit_id, ())), base_dir)
+            resolve_cycle(cycle_from_dict(cycle_document(campaign, unit_id, ())), base_dir, mesh_resolver)
         except InvalidInput as exc:
             field_name = str(exc.details.get("field", "cycle"))
             prefix = (

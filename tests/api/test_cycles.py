@@ -200,8 +200,15 @@ def test_bad_cycles_and_campaigns_are_422_naming_the_field(svc: Service) -> None
 
     same_bay = aisle_campaign()
     same_bay["units"][1]["bay"] = same_bay["units"][0]["bay"]
-    body = _problem(c.post("/api/v1/campaigns", json=same_bay, headers=h), "units[1].bay.pose")
-    assert "unit A3" in body["detail"] and "units[1]" in body["detail"]
+    body = _problem(c.post("/api/v1/campaigns", json=same_bay, headers=h), "units")
+    assert "unit A3 (units[0])" in body["detail"] and "unit A5 (units[1])" in body["detail"], body["detail"]
+    assert sorted(body["details"]["units"]) == ["unit A3", "unit A5"]
+
+    on_fixture = aisle_campaign()
+    on_fixture["units"][1]["dock"]["pose"]["position"] = on_fixture["units"][1]["dock"]["fixture"]["pose"][
+        "position"
+    ]
+    _problem(c.post("/api/v1/campaigns", json=on_fixture, headers=h), "units[1].dock.pose")
 
     twice = aisle_campaign()
     twice["units"][1]["unit"]["id"] = "A3"
