@@ -90,13 +90,14 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
             lv.record(doc)
             units = {u["id"]: u["status"] for u in doc.get("units") or []}
             if units.get("A3") == "planned":
+                lv.killed_state["progress"] = doc["progress"]
                 break
             assert doc["status"] in ("queued", "running"), doc
             assert time.monotonic() < deadline, doc
             time.sleep(0.1)
         server.kill()
         con = sqlite3.connect(data / "cabinplan.db")  # what the crash left behind
-        lv.killed_state = {
+        lv.killed_state |= {
             "status": con.execute("SELECT status FROM jobs WHERE id = ?", (campaign_id,)).fetchone()[0],
             "kept": [
                 n
@@ -117,6 +118,7 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
 
 def test_campaign_reports_each_unit_and_resumes_after_sigkill(live: Live) -> None:
     assert live.killed_state["status"] == "running"
+    assert live.killed_state["progress"] == 0.5  # one unit of two done
     assert len(live.killed_state["kept"]) == 1 and live.killed_state["kept"][0].startswith("keep/")
     # Per-unit progress as it ran: A3 planning with A5 waiting, then A3 planned; after the restart A5
     # planned from the cabin A3 left.
