@@ -11,7 +11,10 @@ process runs. A dispatcher thread, never the event loop:
   claimed once even with several service instances on one PostgreSQL database), up to ``workers`` at a
   time, and counts the attempt;
 * reads ``progress`` and ``done`` messages from each job's pipe and writes them to the database (the
-  latest progress once a pass, the outcome once);
+  latest progress once a pass, with its detail -- a campaign's units --, the outcome once);
+* stores the files a running job hands over to keep (``keep`` messages: a campaign's finished cycles,
+  :meth:`api.jobstore.JobStore.keep`) and gives them to the job's next attempt (``kept``), so a job whose
+  instance died resumes from them;
 * kills a job whose hard wall-clock limit (``time_limit_s + job_grace_s``) expires and marks it failed
   with reason ``time_limit_exceeded``: the process is gone, so its slot is free for the next job (the
   "worker" is replaced by construction);

@@ -2,12 +2,14 @@
 
 The parent (:mod:`api.jobs`) sends nothing after start: the job description (its kind, the scenario as
 submitted and the tenant's mesh files it names) is the process argument. The child runs its kind's
-function (:mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction)``
-messages while planning and one ``("done", outcome)`` at the end; the parent writes everything to the
-database. The packed result document (:mod:`api.compact`) is made here, never in the server's event
-loop; it is the only thing a job writes: the CSV and the plot are made on request (:func:`profile_csv`,
-:func:`plot_png`, run by the server in its thread pool, the plot kept once made). The process arms its
-parent-death signal first, so it ends with the service (:mod:`api.lifeline`).
+function (:mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction,
+detail)`` messages while planning (``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)``
+for what a relaunch must not redo (a campaign's finished cycles) and one ``("done", outcome)`` at the
+end; the parent writes everything to the database. The packed result document (:mod:`api.compact`) is
+made here, never in the server's event loop; it is the only thing a job writes: the CSV and the plot are
+made on request (:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the plot
+kept once made). The process arms its parent-death signal first, so it ends with the service
+(:mod:`api.lifeline`).
 
 Importing this module imports the planner, so the forkserver can preload it once and every job forks
 warm.
