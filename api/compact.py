@@ -10,9 +10,11 @@ format 1, written by earlier versions, used LZMA: 15% smaller, but 20-30x slower
 second a plan on the worker's critical path -- and still read here).
 
 :func:`pack_value` packs the document as the worker made it (a dict, never written as text);
-:func:`pack_document` packs its JSON text. Both are exact inverses of :func:`unpack_document` and
-:func:`unpack_text`: ``unpack_text(pack_value(doc)) == json.dumps(doc)`` for any document ``json.dumps``
-writes (Python writes the shortest repr of a float64, which the binary round trip reproduces).
+:func:`pack_document` packs its JSON text. :func:`unpack_document` is their exact inverse (every float bit
+for bit, ints stay ints). :func:`unpack_text` writes the document as compact JSON with orjson straight
+from the unpacked arrays (no Python float per sample: 20-30x faster than ``json.dumps`` of the lists, the
+server's largest cost per finished plan): the same JSON value as ``json.dumps(doc)``, each float in its
+shortest round-trip form, non-finite floats as ``null`` (planner documents hold none).
 Only lists whose items are all ``float`` (1-D) or equal-length lists of ``float`` (2-D) are packed;
 ints, bools, strings and ragged lists stay in the JSON skeleton as they are, so their text is unchanged.
 """
@@ -26,6 +28,7 @@ import zlib
 from typing import Any
 
 import numpy as np
+import orjson
 
 #: First bytes of a packed document (format version 2: zlib).
 MAGIC = b"CPD2"
@@ -101,16 +104,22 @@ def unpack_document(blob: bytes) -> Any:
     Raises:
         ValueError: not a packed document of this format.
     """
+    return _unpack(blob, lists=True)
+
+
+def _unpack(blob: bytes, lists: bool) -> Any:
+    """The document of a packed blob, its arrays as lists (``lists``) or as float64 numpy arrays."""
     if blob[:4] not in (MAGIC, MAGIC_V1):
         raise ValueError("not a packed cabinplan document")
     (n_header,) = struct.unpack("<I", blob[4:8])
     body = zlib.decompress(blob[8:]) if blob[:4] == MAGIC else lzma.decompress(blob[8:])
     header = json.loads(body[:n_header])
-    arrays: list[list[Any]] = []
+    arrays: list[Any] = []
     offset = n_header
     for shape in header["arrays"]:
         size = 8 * int(np.prod(shape))
-        arrays.append(_unshuffle(body[offset : offset + size], tuple(shape)).tolist())
+        array = _unshuffle(body[offset : offset + size], tuple(shape))
+        arrays.append(array.tolist() if lists else array)
         offset += size
 
     def walk(value: Any) -> Any:
@@ -126,8 +135,8 @@ def unpack_document(blob: bytes) -> Any:
 
 
 def unpack_text(blob: bytes) -> str:
-    """The document's JSON text, as the worker wrote it (``json.dumps`` defaults)."""
-    return json.dumps(unpack_document(blob))
+    """The document as compact JSON text (orjson; see the module docstring)."""
+    return orjson.dumps(_unpack(blob, lists=False), option=orjson.OPT_SERIALIZE_NUMPY).decode()
 
 
 __all__ = ["MAGIC", "MAGIC_V1", "pack_document", "pack_value", "unpack_document", "unpack_text"]

@@ -169,7 +169,10 @@ def test_the_image_builds_and_plans(tmp_path) -> None:
         pytest.skip("no container engine (docker or podman) runs here: the image is checked by reading it")
     tag = "cabinplan-test:latest"
     subprocess.run([engine, "build", "-t", tag, str(ROOT)], check=True, timeout=3600)
-    script = "from api.prebuilt import missing; assert not missing(), missing(); import api.warmup; print('ok')"
+    script = (
+        "from api.prebuilt import missing; assert not missing(), missing(); "
+        "import api.warmup; print('ok')"  # plans the warm-up scenario in the container
+    )
     out = subprocess.run([engine, "run", "--rm", tag, "python", "-c", script], capture_output=True, text=True)
     assert "no ahead-of-time build" not in out.stderr and "unavailable" not in out.stderr, out.stderr
     assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr

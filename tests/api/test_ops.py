@@ -20,7 +20,7 @@ import pytest
 import yaml
 from sqlalchemy import select
 
-from api.compact import pack_document, unpack_document, unpack_text
+from api.compact import pack_document, pack_value, unpack_document, unpack_text
 from api.db import Database, Job, now_s
 from api.jobs import purge_expired
 from api.settings import Settings
@@ -342,10 +342,13 @@ def test_compact_documents_round_trip_exactly() -> None:
         "empty": [],
     }
     text = json.dumps(doc)
-    blob = pack_document(text)
-    assert unpack_text(blob) == text
-    back = unpack_document(blob)
-    assert back["ints"] == doc["ints"] and type(back["ints"][0]) is int and back["mixed"][-1] == 2
+    for blob in (pack_document(text), pack_value(doc)):
+        back = unpack_document(blob)
+        assert json.dumps(back) == text  # every float bit for bit, ints as ints, NaN as NaN
+        assert back["ints"] == doc["ints"] and type(back["ints"][0]) is int and back["mixed"][-1] == 2
+        served = json.loads(unpack_text(blob))  # compact JSON: the same values, NaN written as null
+        assert served == {**json.loads(text), "nan": [None] * 20}
+        assert all(a == b for a, b in zip(served["t"], doc["t"], strict=True))
 
 
 def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tmp_path: Path) -> None:
