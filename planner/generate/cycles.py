@@ -4,7 +4,7 @@ A generated campaign is a cabin of the scenario generator's kind (:mod:`planner.
 cylindrical shell with the floor deck and end walls, optional ring frames) with 3-8 units to install:
 
 * **Bays**: rack bays in the +x side wall (insertion along +x; the arm cannot point to -x) at distinct
-  stations along the cabin, each in a low or a high row, and with some probability one bay recessed into
+  stations along the cabin (one per station), and with some probability one bay recessed into
   the far end wall (insertion along the rail, +z). Each bay is built around its unit's installed pose
   with the drawn free space per side (12-40 mm), as the scenario generator builds its bays.
 * **Blocking pairs**: a *front* unit mounted in the aisle in front of a side bay, in the corridor its
@@ -42,6 +42,7 @@ import yaml
 
 from meshes.generate import Shell, binary_stl_bytes
 from planner.collision.bodies import PayloadGeometry
+from planner.collision.obstacles import Obstacle
 from planner.collision.world import CollisionWorld
 from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
@@ -86,26 +87,33 @@ __all__ = [
 
 #: The campaigns' random stream, apart from the scenario generator's (``[seed, index]``).
 STREAM = 0xC1C1E
-#: The pedestal a docked unit waits on: footprint (x, z) [m] (its top follows the unit's height).
+#: The fixture a docked unit waits on: footprint (x, z) [m] (its top follows the unit's height) and its
+#: bottom [m]: 50 mm above the carriage's top (y = 0), whose 1.7 m width sweeps the deck beside the rail.
 PEDESTAL_FOOTPRINT_M = (0.26, 0.26)
+FIXTURE_BOTTOM_M = 0.05
 #: Gap between a docked unit and its pedestal beyond the clearance [m].
 DOCK_EXTRA_M = 0.004
 #: Where a dock's unit centre is across the cabin [m]: the arm reaches a unit held along +x from x = 0.5 m
 #: on, one held along +z up to 0.3 m (measured with the generator's IK on its units).
 DOCK_X_SIDE_M = (0.6, 0.95)
 DOCK_X_END_M = (-0.2, 0.3)
-#: The docked unit centre's height [m]: held along +x the arm holds 40-80 kg only high up (y >= 0.9-1.1),
-#: along +z from 0.5 to 0.9 m (the same measurement).
-DOCK_Y_SIDE_M = (1.0, 1.15)
+#: The docked unit centre's height [m] (held along +z the arm reaches no higher than 0.9 m).
+DOCK_Y_SIDE_M = (0.6, 1.1)
 DOCK_Y_END_M = (0.55, 0.85)
+#: Clearance the bay's own panels keep at the drawn installed and pre-insertion poses [m] (the cycle's
+#: requested 10 mm plus the planner's slack: a bay the planner can enter).
+PANEL_CLEARANCE_M = 0.012
 #: The lift-off line: straight up [m].
 LIFT_M = 0.05
 #: Stations along the cabin for side bays: spacing [m] and the first one's place along the rail [m] (the
 #: docks are at 0.8-1.4 m).
-STATION_SPACING_M = 0.85
+STATION_SPACING_M = 0.8
 FIRST_STATION_M = 2.1
-#: Rows of side bays: ranges of the unit centre's height [m].
-ROWS_Y_M = ((0.40, 0.62), (0.95, 1.20))
+#: Heights of the side bays' unit centres [m].
+ROWS_Y_M = ((0.55, 1.2),)
+#: Exact IK solutions drawn before the force filter (a 60 kg unit held along +x at 0.6-0.8 m height: 1 of
+#: 8-10 solutions is holdable, none of the first 3; measured with the generator's IK and force check).
+HELD_SOLUTIONS = 10
 
 
 class _Redraw(Exception):
@@ -129,7 +137,7 @@ class CycleGeneratorOptions:
     units: tuple[int, int] = (3, 8)
     clearance_m: float = 0.01
     time_limit_s: float = 30.0
-    rail_length_m: float = 5.0
+    rail_length_m: float = 6.0
     pair_probability: float = 0.35
     end_bay_probability: float = 0.4
     max_attempts: int = 40
@@ -190,8 +198,14 @@ def _tool(T_base_unit: Array, grasp: Array) -> Array:
     return T
 
 
-def _reachable(robot: Cabin8, u: _Unit, p: Array, count: int = 1, held: bool = True) -> list[Array]:
-    """Exact, admissible IK solutions holding unit ``u`` at ``p`` (holdable within the force limits)."""
+def _reachable(
+    robot: Cabin8, u: _Unit, p: Array, count: int = HELD_SOLUTIONS, held: bool = True
+) -> list[Array]:
+    """Exact, admissible IK solutions holding unit ``u`` at ``p`` (holdable within the force limits).
+
+    ``count`` solutions are drawn before the force filter: the holdable ones of a heavy unit held sideways
+    are rarely among the three of the largest margin.
+    """
     sols = exact_solutions(robot, _tool(_pose(u.R, p), u.grasp), robot.home_drives, count)
     if not held:
         return sols
@@ -210,14 +224,32 @@ def _draw_unit(rng: np.random.Generator, uid: str, kind: str) -> _Unit:
     return _Unit(uid, kind, size, mass, grasp, R, np.zeros(3), 0.0)
 
 
+def _panels_clear(robot: Cabin8, u: _Unit, p: Array, f: tuple[float, ...], recess: float, kind: str) -> bool:
+    """Whether a holdable IK solution at the installed and at the pre-insertion pose clears the bay's panels.
+
+    The panels are boxes, obstacles of a world without a cabin: no grid to build per candidate.
+    """
+    bay = BayLayout(kind, (f[0], f[1], f[2], f[3], f[4]), recess)
+    panels, _, _ = bay_boxes(_pose(u.R, p), u.size, bay)
+    obstacles = tuple(
+        Obstacle.box(f"panel {k}", tuple(float(v) for v in hi - lo), _pose(np.eye(3), (lo + hi) / 2))
+        for k, (lo, hi) in enumerate(panels)
+    )
+    world = CollisionWorld(robot, None, u.payload(), obstacles=obstacles)
+    e = u.R[:, 2]
+    return all(
+        any(world.is_valid(q, PANEL_CLEARANCE_M) for q in _reachable(robot, u, x))
+        for x in (p, p - u.approach_m * e)
+    )
+
+
 def _side_bay(rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z: float, row: int) -> None:
     """Place a side-wall bay at station ``z`` in ``row``: a reachable installed and pre-insertion pose."""
     f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
     u.approach_m = float(np.round(recess + u.size[2] + rng.uniform(0.03, 0.08), 3))
     half = np.abs(u.R) @ (np.array(u.size) / 2 + 0.06)
-    e = u.R[:, 2]
-    for _ in range(12):
+    for _ in range(24):
         y = rng.uniform(*ROWS_Y_M[row])
         axis = shell.axis_y_m
         x_wall = shell.half_width_at(axis + max(abs(y + half[1] - axis), abs(y - half[1] - axis)))
@@ -225,7 +257,7 @@ def _side_bay(rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z
         if x_hi <= 0.55:
             continue
         p = np.array([rng.uniform(0.55, x_hi), y, z])
-        if _reachable(robot, u, p) and _reachable(robot, u, p - u.approach_m * e):
+        if _panels_clear(robot, u, p, f, recess, "bay-side"):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
     raise _Redraw("no reachable side bay at this station")
@@ -253,10 +285,9 @@ def _end_bay(rng: np.random.Generator, robot: Cabin8, u: _Unit, rail_max: float)
     f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
     u.approach_m = float(np.round(recess + u.size[2] + rng.uniform(0.03, 0.08), 3))
-    e = u.R[:, 2]
-    for _ in range(12):
+    for _ in range(24):
         p = np.array([rng.uniform(-0.45, 0.55), rng.uniform(0.35, 1.15), rail_max + rng.uniform(0.55, 1.05)])
-        if _reachable(robot, u, p) and _reachable(robot, u, p - u.approach_m * e):
+        if _panels_clear(robot, u, p, f, recess, "bay-end-far"):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
     raise _Redraw("no reachable end bay")
@@ -292,9 +323,15 @@ def _dock(rng: np.random.Generator, robot: Cabin8, u: _Unit, clearance: float) -
 
 
 def _pedestal(u: _Unit, deck_top: float, clearance: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """The pedestal's box (lo, hi) [m], from the deck up to below the docked unit."""
+    """The fixture's box (lo, hi) [m]: a shelf from above the carriage's lane up to below the docked unit.
+
+    (``deck_top`` is kept for the signature of a floor-standing fixture; the carriage, 1.7 m wide, sweeps
+    the deck beside the rail, so the fixture hangs above it, as the reference example's does.)
+    """
     (x_d, z_d), (fx, fz) = u.dock_xz, PEDESTAL_FOOTPRINT_M
-    return (x_d - fx / 2, deck_top, z_d - fz / 2), (x_d + fx / 2, _pedestal_top(u, clearance), z_d + fz / 2)
+    top = _pedestal_top(u, clearance)
+    bottom = min(FIXTURE_BOTTOM_M, top - 0.05)
+    return (x_d - fx / 2, bottom, z_d - fz / 2), (x_d + fx / 2, top, z_d + fz / 2)
 
 
 def _loaded(parts_layout: CabinLayout) -> LoadedMesh:
@@ -310,8 +347,8 @@ def _place_units(
     units: list[_Unit] = []
     end_wanted = rng.uniform() < opts.end_bay_probability and n >= 2
     stations = list(np.arange(FIRST_STATION_M, rail_max - 0.2, STATION_SPACING_M))
-    # One bay per station (a stage reaching the high row hits a low row's panels below it), row drawn.
-    slots = [(float(z), int(rng.integers(2))) for z in stations]
+    # One bay per station (a stage reaching a high bay hits a low bay's panels below it).
+    slots = [(float(z), 0) for z in stations]
     slots = [slots[int(k)] for k in rng.permutation(len(slots))]
     k = 0
     while len(units) < n:
@@ -397,18 +434,18 @@ def _witnesses(
     e, up = u.R[:, 2], np.array([0.0, 1.0, 0.0])
     payload = u.payload()
     for what, p in (("bay", u.p_bay), ("pre-insertion", u.p_bay - u.approach_m * e)):
-        if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p, 3)):
-            raise _Redraw(f"unit {u.uid}: no clear, holdable {what} configuration")
+        if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p)):
+            raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     dock = _loaded(_with_plates(layout, (_pedestal(u, shell.deck_top_y_m, clearance),)))
     held = CollisionWorld(robot, dock, payload, grid_step_m=GRID_STEP_M)
     p_dock = _dock_pose(u)
     for what, p in (("dock", p_dock), ("lift-off", p_dock + LIFT_M * up)):
-        if not any(held.is_valid(q, clearance) for q in _reachable(robot, u, p, 3)):
-            raise _Redraw(f"unit {u.uid}: no clear, holdable {what} configuration")
+        if not any(held.is_valid(q, clearance) for q in _reachable(robot, u, p)):
+            raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     empty = CollisionWorld(robot, dock, None, grid_step_m=GRID_STEP_M)
     pre = _reachable(robot, u, p_dock - u.grasp_line_m * e, 3, held=False)
     if not any(empty.is_valid(q, clearance) for q in pre):
-        raise _Redraw(f"unit {u.uid}: no clear pre-grasp configuration")
+        raise _Redraw(f"{u.kind} unit: no clear pre-grasp configuration")
 
 
 def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorOptions) -> GeneratedCampaign:
