@@ -15,7 +15,7 @@ cylindrical shell with the floor deck and end walls, optional ring frames) with 
 * **Dock**: every unit waits on its transport fixture at the cabin entrance (a pedestal on the deck beside
   the rail's start, 0.8-1.4 m along it), in the orientation it is installed in, a gap of clearance + 4 mm
   above the pedestal; the tool approaches along the insertion direction and lifts off upwards.
-* **Park**: the tucked posture of the reference cabins at the rail's start.
+* **Park**: the robot's home posture at the rail's start (clear by the clearance + 20 mm).
 
 Every key configuration of every unit alone in the cabin has an exact, admissible inverse-kinematics
 solution that keeps the requested clearance from the cabin (and the pedestal) and holds the unit within
@@ -67,7 +67,6 @@ from planner.tools.generate import (
     _robot,
     _shell,
     _shell_like,
-    _tucked,
     bay_boxes,
     cabin_parts,
     exact_solutions,
@@ -103,6 +102,8 @@ DOCK_Y_END_M = (0.55, 0.85)
 #: Clearance the bay's own panels keep at the drawn installed and pre-insertion poses [m] (the cycle's
 #: requested 10 mm plus the planner's slack: a bay the planner can enter).
 PANEL_CLEARANCE_M = 0.012
+#: Rail travel of the park posture, tried in order [m].
+PARK_D1_M = (0.05, 0.15, 0.3, 0.5)
 #: The lift-off line: straight up [m].
 LIFT_M = 0.05
 #: Stations along the cabin for side bays: spacing [m] and the first one's place along the rail [m] (the
@@ -448,6 +449,16 @@ def _witnesses(
         raise _Redraw(f"{u.kind} unit: no clear pre-grasp configuration")
 
 
+def _park(robot: Cabin8, d1: float) -> Array:
+    """The robot's home posture at rail travel ``d1`` (joints).
+
+    Inside every limit with its margins: a park posture sags under gravity, one on a limit would leave it.
+    """
+    drives = np.array(robot.home_drives, dtype=float)
+    drives[0] = d1
+    return np.asarray(robot.joints_from_drives(drives), dtype=float)
+
+
 def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorOptions) -> GeneratedCampaign:
     lo, hi = opts.units
     n = int(rng.integers(lo, hi + 1))
@@ -461,14 +472,9 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
     for u in units:
         bays_u = CollisionWorld(robot, cabin, u.payload(), grid_step_m=GRID_STEP_M)
         _witnesses(robot, layout, shell, u, clearance, bays_u)
-    # Park: tucked at the rail's start, clear by the clearance + 20 mm without a unit.
+    # Park: home at the rail's start, clear by the clearance + 20 mm without a unit.
     park = next(
-        (
-            _tucked(d1)
-            for d1 in (0.02, 0.06, 0.1, 0.15)
-            if not robot.violations(_tucked(d1)) and bays.is_valid(_tucked(d1), clearance + 0.02)
-        ),
-        None,
+        (q for q in (_park(robot, d1) for d1 in PARK_D1_M) if bays.is_valid(q, clearance + 0.02)), None
     )
     if park is None:
         raise _Redraw("no clear park posture")
