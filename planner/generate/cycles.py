@@ -13,7 +13,7 @@ cylindrical shell with the floor deck and end walls, optional ring frames) with 
   unit's mount free (a 30-50 mm gap to the bay's face plate). So some orders fail and others succeed,
   for a reason the generator knows (``meta["precedence"]``: deep before front).
 * **Dock**: every unit waits on its transport fixture at the cabin entrance (a pedestal on the deck beside
-  the rail's start, 0.8-1.4 m along it), in the orientation it is installed in, a gap of clearance + 4 mm
+  the rail's start, 0.8-1.4 m along it), in the orientation it is installed in, a gap of clearance + 8 mm
   above the pedestal; the tool approaches along the insertion direction and lifts off upwards.
 * **Park**: the robot's home posture at the rail's start (clear by the clearance + 20 mm).
 
@@ -90,8 +90,8 @@ STREAM = 0xC1C1E
 #: bottom [m]: 50 mm above the carriage's top (y = 0), whose 1.7 m width sweeps the deck beside the rail.
 PEDESTAL_FOOTPRINT_M = (0.26, 0.26)
 FIXTURE_BOTTOM_M = 0.05
-#: Gap between a docked unit and its pedestal beyond the clearance [m].
-DOCK_EXTRA_M = 0.004
+#: Gap between a docked unit and its fixture beyond the clearance [m] (more than the witnesses' extra).
+DOCK_EXTRA_M = 0.008
 #: Where a dock's unit centre is across the cabin [m]: the arm reaches a unit held along +x from x = 0.5 m
 #: on, one held along +z up to 0.3 m (measured with the generator's IK on its units).
 DOCK_X_SIDE_M = (0.6, 0.95)
@@ -99,9 +99,12 @@ DOCK_X_END_M = (-0.2, 0.3)
 #: The docked unit centre's height [m] (held along +z the arm reaches no higher than 0.9 m).
 DOCK_Y_SIDE_M = (0.6, 1.1)
 DOCK_Y_END_M = (0.55, 0.85)
-#: Clearance the bay's own panels keep at the drawn installed and pre-insertion poses [m] (the cycle's
-#: requested 10 mm plus the planner's slack: a bay the planner can enter).
-PANEL_CLEARANCE_M = 0.012
+#: Largest force ratio (of the drive limits) of a generated dock's grasp: below the planner's 95% by a
+#: margin for the robot's own deflection and the grasp line's other end.
+DOCK_FORCE_FRACTION = 0.85
+#: Extra clearance the generator's witnesses keep beyond the requested one [m] (the planner adds its own
+#: 1.5 mm slack to the requested clearance where it plans).
+WITNESS_EXTRA_M = 0.005
 #: Rail travel of the park posture, tried in order [m].
 PARK_D1_M = (0.05, 0.15, 0.3, 0.5)
 #: The lift-off line: straight up [m].
@@ -225,7 +228,9 @@ def _draw_unit(rng: np.random.Generator, uid: str, kind: str) -> _Unit:
     return _Unit(uid, kind, size, mass, grasp, R, np.zeros(3), 0.0)
 
 
-def _panels_clear(robot: Cabin8, u: _Unit, p: Array, f: tuple[float, ...], recess: float, kind: str) -> bool:
+def _panels_clear(
+    robot: Cabin8, u: _Unit, p: Array, f: tuple[float, ...], recess: float, kind: str, clearance: float
+) -> bool:
     """Whether a holdable IK solution at the installed and at the pre-insertion pose clears the bay's panels.
 
     The panels are boxes, obstacles of a world without a cabin: no grid to build per candidate.
@@ -239,12 +244,13 @@ def _panels_clear(robot: Cabin8, u: _Unit, p: Array, f: tuple[float, ...], reces
     world = CollisionWorld(robot, None, u.payload(), obstacles=obstacles)
     e = u.R[:, 2]
     return all(
-        any(world.is_valid(q, PANEL_CLEARANCE_M) for q in _reachable(robot, u, x))
-        for x in (p, p - u.approach_m * e)
+        any(world.is_valid(q, clearance) for q in _reachable(robot, u, x)) for x in (p, p - u.approach_m * e)
     )
 
 
-def _side_bay(rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z: float, row: int) -> None:
+def _side_bay(
+    rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z: float, row: int, clearance: float
+) -> None:
     """Place a side-wall bay at station ``z`` in ``row``: a reachable installed and pre-insertion pose."""
     f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
@@ -258,7 +264,7 @@ def _side_bay(rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z
         if x_hi <= 0.55:
             continue
         p = np.array([rng.uniform(0.55, x_hi), y, z])
-        if _panels_clear(robot, u, p, f, recess, "bay-side"):
+        if _panels_clear(robot, u, p, f, recess, "bay-side", clearance):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
     raise _Redraw("no reachable side bay at this station")
@@ -281,14 +287,14 @@ def _front_of(rng: np.random.Generator, robot: Cabin8, deep: _Unit, u: _Unit) ->
     u.p_bay, u.deep_of = p, deep.uid
 
 
-def _end_bay(rng: np.random.Generator, robot: Cabin8, u: _Unit, rail_max: float) -> None:
+def _end_bay(rng: np.random.Generator, robot: Cabin8, u: _Unit, rail_max: float, clearance: float) -> None:
     """A bay recessed into the far end wall, insertion along +z, as far as the arm reaches."""
     f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
     u.approach_m = float(np.round(recess + u.size[2] + rng.uniform(0.03, 0.08), 3))
     for _ in range(24):
         p = np.array([rng.uniform(-0.45, 0.55), rng.uniform(0.35, 1.15), rail_max + rng.uniform(0.55, 1.05)])
-        if _panels_clear(robot, u, p, f, recess, "bay-end-far"):
+        if _panels_clear(robot, u, p, f, recess, "bay-end-far", clearance):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
     raise _Redraw("no reachable end bay")
@@ -300,7 +306,7 @@ def _dock_pose(u: _Unit) -> Array:
 
 
 def _pedestal_top(u: _Unit, clearance: float) -> float:
-    """The pedestal's top [m]: clearance + 4 mm below the docked unit's lowest face."""
+    """The fixture's top [m]: clearance + 8 mm below the docked unit's lowest face."""
     half_y = float((np.abs(u.R) @ (np.array(u.size) / 2))[1])
     return float(np.round(u.dock_y - half_y - clearance - DOCK_EXTRA_M, 6))
 
@@ -315,12 +321,26 @@ def _dock(rng: np.random.Generator, robot: Cabin8, u: _Unit, clearance: float) -
         u.dock_y = float(np.round(rng.uniform(*y_range), 3))
         p = _dock_pose(u)
         if (
-            _reachable(robot, u, p)
-            and _reachable(robot, u, p + LIFT_M * up)
+            _robustly_held(robot, u, p)
+            and _robustly_held(robot, u, p + LIFT_M * up)
             and _reachable(robot, u, p - u.grasp_line_m * e, held=False)
         ):
             return
     raise _Redraw("no reachable dock")
+
+
+def _robustly_held(robot: Cabin8, u: _Unit, p: Array) -> bool:
+    """Whether half or more of the exact IK solutions at ``p`` (two at least) hold the unit with margin.
+
+    Held within :data:`DOCK_FORCE_FRACTION` of the drive limits. A cycle's planner chooses its grasp line
+    among the dock's solutions by its own criteria (clearance, the lines' redundancy), not by force: a
+    dock held by one solution in ten is one it refuses (``unit_not_holdable``, measured on the first
+    generated campaigns), so a generated dock is one most solutions hold.
+    """
+    sols = _reachable(robot, u, p, held=False)
+    forces = StaticForceCheck(Cabin8Dynamics.of(robot), u.payload().rigid_payload())
+    held = [q for q in sols if float(forces.ratios(q)[0]) <= DOCK_FORCE_FRACTION]
+    return len(held) >= max(2, (len(sols) + 1) // 2)
 
 
 def _pedestal(u: _Unit, deck_top: float, clearance: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -358,7 +378,7 @@ def _place_units(
             end_wanted = False
             u = _draw_unit(rng, uid, "end")
             try:
-                _end_bay(rng, robot, u, rail_max)
+                _end_bay(rng, robot, u, rail_max, clearance)
                 _dock(rng, robot, u, clearance)
                 units.append(u)
             except _Redraw:
@@ -370,7 +390,7 @@ def _place_units(
         k += 1
         u = _draw_unit(rng, uid, "side")
         try:
-            _side_bay(rng, robot, shell, u, z + rng.uniform(-0.05, 0.05), row)
+            _side_bay(rng, robot, shell, u, z + rng.uniform(-0.05, 0.05), row, clearance)
             _dock(rng, robot, u, clearance)
         except _Redraw:
             continue
@@ -434,18 +454,20 @@ def _witnesses(
     """Every key configuration of unit ``u`` alone in the cabin: exact IK, clear, holdable (or redraw)."""
     e, up = u.R[:, 2], np.array([0.0, 1.0, 0.0])
     payload = u.payload()
+    # In its bay the unit has the drawn free space (12-40 mm) to the panels: the requested clearance there.
     for what, p in (("bay", u.p_bay), ("pre-insertion", u.p_bay - u.approach_m * e)):
         if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p)):
             raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
+    need = clearance + WITNESS_EXTRA_M
     dock = _loaded(_with_plates(layout, (_pedestal(u, shell.deck_top_y_m, clearance),)))
     held = CollisionWorld(robot, dock, payload, grid_step_m=GRID_STEP_M)
     p_dock = _dock_pose(u)
     for what, p in (("dock", p_dock), ("lift-off", p_dock + LIFT_M * up)):
-        if not any(held.is_valid(q, clearance) for q in _reachable(robot, u, p)):
+        if not any(held.is_valid(q, need) for q in _reachable(robot, u, p)):
             raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     empty = CollisionWorld(robot, dock, None, grid_step_m=GRID_STEP_M)
     pre = _reachable(robot, u, p_dock - u.grasp_line_m * e, 3, held=False)
-    if not any(empty.is_valid(q, clearance) for q in pre):
+    if not any(empty.is_valid(q, need) for q in pre):
         raise _Redraw(f"{u.kind} unit: no clear pre-grasp configuration")
 
 
