@@ -228,6 +228,10 @@ def _draw_unit(rng: np.random.Generator, uid: str, kind: str) -> _Unit:
     return _Unit(uid, kind, size, mass, grasp, R, np.zeros(3), 0.0)
 
 
+def _size3(v: Array) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
 def _panels_clear(
     robot: Cabin8, u: _Unit, p: Array, f: tuple[float, ...], recess: float, kind: str, clearance: float
 ) -> bool:
@@ -238,7 +242,7 @@ def _panels_clear(
     bay = BayLayout(kind, (f[0], f[1], f[2], f[3], f[4]), recess)
     panels, _, _ = bay_boxes(_pose(u.R, p), u.size, bay)
     obstacles = tuple(
-        Obstacle.box(f"panel {k}", tuple(float(v) for v in hi - lo), _pose(np.eye(3), (lo + hi) / 2))
+        Obstacle.box(f"panel {k}", _size3(hi - lo), _pose(np.eye(3), (lo + hi) / 2))
         for k, (lo, hi) in enumerate(panels)
     )
     world = CollisionWorld(robot, None, u.payload(), obstacles=obstacles)
