@@ -25,7 +25,9 @@ re-derives and checks:
                   between them keep the clearance in the event's world (:func:`jump_check`);
 ``allowed_pair``  (informational) the closest the explicitly allowed pair comes on the legs that allow it.
 
-``min_clearance_m``: the smallest exact distance over each leg's probe samples in that leg's world.
+``min_clearance_m``: the smallest exact distance at the probe samples (every ``n // 40``-th of the cycle, and
+each leg's last), each measured in its leg's world (the certified ``collision`` check, not this figure,
+guarantees the clearance between them).
 """
 
 from __future__ import annotations
@@ -174,10 +176,14 @@ def validate_cycle(
         )
     checks.extend(_allowed_checks(q, req))
     min_c = float("inf")
+    probe = clearance_probe_indices(n)
     for leg in req.legs:
-        rows = q[leg.rows()]
-        probe = clearance_probe_indices(len(rows))
-        min_c = min(min_c, float(np.min(leg.world.clearance_profile(rows[probe]))))
+        s, e = leg.sample_start, leg.sample_end
+        if e == s:
+            continue
+        mine = probe[(probe >= s) & (probe < e)]
+        rows = q[np.unique(np.concatenate([mine, [e - 1]]))]  # the probes in the leg, and its last sample
+        min_c = min(min_c, float(np.min(leg.world.clearance_profile(rows))))
     return GateReport(tuple(checks), n, min_c, peaks)
 
 

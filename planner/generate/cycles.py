@@ -4,7 +4,7 @@ A generated campaign is a cabin of the scenario generator's kind (:mod:`planner.
 cylindrical shell with the floor deck and end walls, optional ring frames) with 3-8 units to install:
 
 * **Bays**: rack bays in the +x side wall (insertion along +x; the arm cannot point to -x) at distinct
-  stations along the cabin, each in a low or a high row, and with some probability one bay recessed into
+  stations along the cabin (one per station), and with some probability one bay recessed into
   the far end wall (insertion along the rail, +z). Each bay is built around its unit's installed pose
   with the drawn free space per side (12-40 mm), as the scenario generator builds its bays.
 * **Blocking pairs**: a *front* unit mounted in the aisle in front of a side bay, in the corridor its
@@ -13,9 +13,9 @@ cylindrical shell with the floor deck and end walls, optional ring frames) with 
   unit's mount free (a 30-50 mm gap to the bay's face plate). So some orders fail and others succeed,
   for a reason the generator knows (``meta["precedence"]``: deep before front).
 * **Dock**: every unit waits on its transport fixture at the cabin entrance (a pedestal on the deck beside
-  the rail's start, 0.8-1.4 m along it), in the orientation it is installed in, a gap of clearance + 4 mm
+  the rail's start, 0.8-1.4 m along it), in the orientation it is installed in, a gap of clearance + 8 mm
   above the pedestal; the tool approaches along the insertion direction and lifts off upwards.
-* **Park**: the tucked posture of the reference cabins at the rail's start.
+* **Park**: the robot's home posture at the rail's start (clear by the clearance + 20 mm).
 
 Every key configuration of every unit alone in the cabin has an exact, admissible inverse-kinematics
 solution that keeps the requested clearance from the cabin (and the pedestal) and holds the unit within
@@ -42,6 +42,7 @@ import yaml
 
 from meshes.generate import Shell, binary_stl_bytes
 from planner.collision.bodies import PayloadGeometry
+from planner.collision.obstacles import Obstacle
 from planner.collision.world import CollisionWorld
 from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
@@ -66,7 +67,6 @@ from planner.tools.generate import (
     _robot,
     _shell,
     _shell_like,
-    _tucked,
     bay_boxes,
     cabin_parts,
     exact_solutions,
@@ -86,26 +86,38 @@ __all__ = [
 
 #: The campaigns' random stream, apart from the scenario generator's (``[seed, index]``).
 STREAM = 0xC1C1E
-#: The pedestal a docked unit waits on: footprint (x, z) [m] (its top follows the unit's height).
+#: The fixture a docked unit waits on: footprint (x, z) [m] (its top follows the unit's height) and its
+#: bottom [m]: 50 mm above the carriage's top (y = 0), whose 1.7 m width sweeps the deck beside the rail.
 PEDESTAL_FOOTPRINT_M = (0.26, 0.26)
-#: Gap between a docked unit and its pedestal beyond the clearance [m].
-DOCK_EXTRA_M = 0.004
+FIXTURE_BOTTOM_M = 0.05
+#: Gap between a docked unit and its fixture beyond the clearance [m] (more than the witnesses' extra).
+DOCK_EXTRA_M = 0.008
 #: Where a dock's unit centre is across the cabin [m]: the arm reaches a unit held along +x from x = 0.5 m
 #: on, one held along +z up to 0.3 m (measured with the generator's IK on its units).
 DOCK_X_SIDE_M = (0.6, 0.95)
 DOCK_X_END_M = (-0.2, 0.3)
-#: The docked unit centre's height [m]: held along +x the arm holds 40-80 kg only high up (y >= 0.9-1.1),
-#: along +z from 0.5 to 0.9 m (the same measurement).
-DOCK_Y_SIDE_M = (1.0, 1.15)
+#: The docked unit centre's height [m] (held along +z the arm reaches no higher than 0.9 m).
+DOCK_Y_SIDE_M = (0.6, 1.1)
 DOCK_Y_END_M = (0.55, 0.85)
+#: Largest force ratio (of the drive limits) of a generated dock's grasp: below the planner's 95% by a
+#: margin for the robot's own deflection and the grasp line's other end.
+DOCK_FORCE_FRACTION = 0.85
+#: Extra clearance the generator's witnesses keep beyond the requested one [m] (the planner adds its own
+#: 1.5 mm slack to the requested clearance where it plans).
+WITNESS_EXTRA_M = 0.005
+#: Rail travel of the park posture, tried in order [m].
+PARK_D1_M = (0.05, 0.15, 0.3, 0.5)
 #: The lift-off line: straight up [m].
 LIFT_M = 0.05
 #: Stations along the cabin for side bays: spacing [m] and the first one's place along the rail [m] (the
 #: docks are at 0.8-1.4 m).
-STATION_SPACING_M = 0.85
+STATION_SPACING_M = 0.8
 FIRST_STATION_M = 2.1
-#: Rows of side bays: ranges of the unit centre's height [m].
-ROWS_Y_M = ((0.40, 0.62), (0.95, 1.20))
+#: Heights of the side bays' unit centres [m].
+ROWS_Y_M = ((0.55, 1.2),)
+#: Exact IK solutions drawn before the force filter (a 60 kg unit held along +x at 0.6-0.8 m height: 1 of
+#: 8-10 solutions is holdable, none of the first 3; measured with the generator's IK and force check).
+HELD_SOLUTIONS = 10
 
 
 class _Redraw(Exception):
@@ -129,7 +141,7 @@ class CycleGeneratorOptions:
     units: tuple[int, int] = (3, 8)
     clearance_m: float = 0.01
     time_limit_s: float = 30.0
-    rail_length_m: float = 5.0
+    rail_length_m: float = 6.0
     pair_probability: float = 0.35
     end_bay_probability: float = 0.4
     max_attempts: int = 40
@@ -190,8 +202,14 @@ def _tool(T_base_unit: Array, grasp: Array) -> Array:
     return T
 
 
-def _reachable(robot: Cabin8, u: _Unit, p: Array, count: int = 1, held: bool = True) -> list[Array]:
-    """Exact, admissible IK solutions holding unit ``u`` at ``p`` (holdable within the force limits)."""
+def _reachable(
+    robot: Cabin8, u: _Unit, p: Array, count: int = HELD_SOLUTIONS, held: bool = True
+) -> list[Array]:
+    """Exact, admissible IK solutions holding unit ``u`` at ``p`` (holdable within the force limits).
+
+    ``count`` solutions are drawn before the force filter: the holdable ones of a heavy unit held sideways
+    are rarely among the three of the largest margin.
+    """
     sols = exact_solutions(robot, _tool(_pose(u.R, p), u.grasp), robot.home_drives, count)
     if not held:
         return sols
@@ -210,14 +228,39 @@ def _draw_unit(rng: np.random.Generator, uid: str, kind: str) -> _Unit:
     return _Unit(uid, kind, size, mass, grasp, R, np.zeros(3), 0.0)
 
 
-def _side_bay(rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z: float, row: int) -> None:
+def _size3(v: Array) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _panels_clear(
+    robot: Cabin8, u: _Unit, p: Array, f: tuple[float, ...], recess: float, kind: str, clearance: float
+) -> bool:
+    """Whether a holdable IK solution at the installed and at the pre-insertion pose clears the bay's panels.
+
+    The panels are boxes, obstacles of a world without a cabin: no grid to build per candidate.
+    """
+    bay = BayLayout(kind, (f[0], f[1], f[2], f[3], f[4]), recess)
+    panels, _, _ = bay_boxes(_pose(u.R, p), u.size, bay)
+    obstacles = tuple(
+        Obstacle.box(f"panel {k}", _size3(hi - lo), _pose(np.eye(3), (lo + hi) / 2))
+        for k, (lo, hi) in enumerate(panels)
+    )
+    world = CollisionWorld(robot, None, u.payload(), obstacles=obstacles)
+    e = u.R[:, 2]
+    return all(
+        any(world.is_valid(q, clearance) for q in _reachable(robot, u, x)) for x in (p, p - u.approach_m * e)
+    )
+
+
+def _side_bay(
+    rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z: float, row: int, clearance: float
+) -> None:
     """Place a side-wall bay at station ``z`` in ``row``: a reachable installed and pre-insertion pose."""
     f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
     u.approach_m = float(np.round(recess + u.size[2] + rng.uniform(0.03, 0.08), 3))
     half = np.abs(u.R) @ (np.array(u.size) / 2 + 0.06)
-    e = u.R[:, 2]
-    for _ in range(12):
+    for _ in range(24):
         y = rng.uniform(*ROWS_Y_M[row])
         axis = shell.axis_y_m
         x_wall = shell.half_width_at(axis + max(abs(y + half[1] - axis), abs(y - half[1] - axis)))
@@ -225,7 +268,7 @@ def _side_bay(rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z
         if x_hi <= 0.55:
             continue
         p = np.array([rng.uniform(0.55, x_hi), y, z])
-        if _reachable(robot, u, p) and _reachable(robot, u, p - u.approach_m * e):
+        if _panels_clear(robot, u, p, f, recess, "bay-side", clearance):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
     raise _Redraw("no reachable side bay at this station")
@@ -248,15 +291,14 @@ def _front_of(rng: np.random.Generator, robot: Cabin8, deep: _Unit, u: _Unit) ->
     u.p_bay, u.deep_of = p, deep.uid
 
 
-def _end_bay(rng: np.random.Generator, robot: Cabin8, u: _Unit, rail_max: float) -> None:
+def _end_bay(rng: np.random.Generator, robot: Cabin8, u: _Unit, rail_max: float, clearance: float) -> None:
     """A bay recessed into the far end wall, insertion along +z, as far as the arm reaches."""
     f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
     u.approach_m = float(np.round(recess + u.size[2] + rng.uniform(0.03, 0.08), 3))
-    e = u.R[:, 2]
-    for _ in range(12):
+    for _ in range(24):
         p = np.array([rng.uniform(-0.45, 0.55), rng.uniform(0.35, 1.15), rail_max + rng.uniform(0.55, 1.05)])
-        if _reachable(robot, u, p) and _reachable(robot, u, p - u.approach_m * e):
+        if _panels_clear(robot, u, p, f, recess, "bay-end-far", clearance):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
     raise _Redraw("no reachable end bay")
@@ -268,7 +310,7 @@ def _dock_pose(u: _Unit) -> Array:
 
 
 def _pedestal_top(u: _Unit, clearance: float) -> float:
-    """The pedestal's top [m]: clearance + 4 mm below the docked unit's lowest face."""
+    """The fixture's top [m]: clearance + 8 mm below the docked unit's lowest face."""
     half_y = float((np.abs(u.R) @ (np.array(u.size) / 2))[1])
     return float(np.round(u.dock_y - half_y - clearance - DOCK_EXTRA_M, 6))
 
@@ -283,18 +325,38 @@ def _dock(rng: np.random.Generator, robot: Cabin8, u: _Unit, clearance: float) -
         u.dock_y = float(np.round(rng.uniform(*y_range), 3))
         p = _dock_pose(u)
         if (
-            _reachable(robot, u, p)
-            and _reachable(robot, u, p + LIFT_M * up)
+            _robustly_held(robot, u, p)
+            and _robustly_held(robot, u, p + LIFT_M * up)
             and _reachable(robot, u, p - u.grasp_line_m * e, held=False)
         ):
             return
     raise _Redraw("no reachable dock")
 
 
+def _robustly_held(robot: Cabin8, u: _Unit, p: Array) -> bool:
+    """Whether half or more of the exact IK solutions at ``p`` (two at least) hold the unit with margin.
+
+    Held within :data:`DOCK_FORCE_FRACTION` of the drive limits. A cycle's planner chooses its grasp line
+    among the dock's solutions by its own criteria (clearance, the lines' redundancy), not by force: a
+    dock held by one solution in ten is one it refuses (``unit_not_holdable``, measured on the first
+    generated campaigns), so a generated dock is one most solutions hold.
+    """
+    sols = _reachable(robot, u, p, held=False)
+    forces = StaticForceCheck(Cabin8Dynamics.of(robot), u.payload().rigid_payload())
+    held = [q for q in sols if float(forces.ratios(q)[0]) <= DOCK_FORCE_FRACTION]
+    return len(held) >= max(2, (len(sols) + 1) // 2)
+
+
 def _pedestal(u: _Unit, deck_top: float, clearance: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """The pedestal's box (lo, hi) [m], from the deck up to below the docked unit."""
+    """The fixture's box (lo, hi) [m]: a shelf from above the carriage's lane up to below the docked unit.
+
+    (``deck_top`` is kept for the signature of a floor-standing fixture; the carriage, 1.7 m wide, sweeps
+    the deck beside the rail, so the fixture hangs above it, as the reference example's does.)
+    """
     (x_d, z_d), (fx, fz) = u.dock_xz, PEDESTAL_FOOTPRINT_M
-    return (x_d - fx / 2, deck_top, z_d - fz / 2), (x_d + fx / 2, _pedestal_top(u, clearance), z_d + fz / 2)
+    top = _pedestal_top(u, clearance)
+    bottom = min(FIXTURE_BOTTOM_M, top - 0.05)
+    return (x_d - fx / 2, bottom, z_d - fz / 2), (x_d + fx / 2, top, z_d + fz / 2)
 
 
 def _loaded(parts_layout: CabinLayout) -> LoadedMesh:
@@ -310,8 +372,8 @@ def _place_units(
     units: list[_Unit] = []
     end_wanted = rng.uniform() < opts.end_bay_probability and n >= 2
     stations = list(np.arange(FIRST_STATION_M, rail_max - 0.2, STATION_SPACING_M))
-    # One bay per station (a stage reaching the high row hits a low row's panels below it), row drawn.
-    slots = [(float(z), int(rng.integers(2))) for z in stations]
+    # One bay per station (a stage reaching a high bay hits a low bay's panels below it).
+    slots = [(float(z), 0) for z in stations]
     slots = [slots[int(k)] for k in rng.permutation(len(slots))]
     k = 0
     while len(units) < n:
@@ -320,7 +382,7 @@ def _place_units(
             end_wanted = False
             u = _draw_unit(rng, uid, "end")
             try:
-                _end_bay(rng, robot, u, rail_max)
+                _end_bay(rng, robot, u, rail_max, clearance)
                 _dock(rng, robot, u, clearance)
                 units.append(u)
             except _Redraw:
@@ -332,7 +394,7 @@ def _place_units(
         k += 1
         u = _draw_unit(rng, uid, "side")
         try:
-            _side_bay(rng, robot, shell, u, z + rng.uniform(-0.05, 0.05), row)
+            _side_bay(rng, robot, shell, u, z + rng.uniform(-0.05, 0.05), row, clearance)
             _dock(rng, robot, u, clearance)
         except _Redraw:
             continue
@@ -396,19 +458,31 @@ def _witnesses(
     """Every key configuration of unit ``u`` alone in the cabin: exact IK, clear, holdable (or redraw)."""
     e, up = u.R[:, 2], np.array([0.0, 1.0, 0.0])
     payload = u.payload()
+    # In its bay the unit has the drawn free space (12-40 mm) to the panels: the requested clearance there.
     for what, p in (("bay", u.p_bay), ("pre-insertion", u.p_bay - u.approach_m * e)):
-        if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p, 3)):
-            raise _Redraw(f"unit {u.uid}: no clear, holdable {what} configuration")
+        if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p)):
+            raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
+    need = clearance + WITNESS_EXTRA_M
     dock = _loaded(_with_plates(layout, (_pedestal(u, shell.deck_top_y_m, clearance),)))
     held = CollisionWorld(robot, dock, payload, grid_step_m=GRID_STEP_M)
     p_dock = _dock_pose(u)
     for what, p in (("dock", p_dock), ("lift-off", p_dock + LIFT_M * up)):
-        if not any(held.is_valid(q, clearance) for q in _reachable(robot, u, p, 3)):
-            raise _Redraw(f"unit {u.uid}: no clear, holdable {what} configuration")
+        if not any(held.is_valid(q, need) for q in _reachable(robot, u, p)):
+            raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     empty = CollisionWorld(robot, dock, None, grid_step_m=GRID_STEP_M)
     pre = _reachable(robot, u, p_dock - u.grasp_line_m * e, 3, held=False)
-    if not any(empty.is_valid(q, clearance) for q in pre):
-        raise _Redraw(f"unit {u.uid}: no clear pre-grasp configuration")
+    if not any(empty.is_valid(q, need) for q in pre):
+        raise _Redraw(f"{u.kind} unit: no clear pre-grasp configuration")
+
+
+def _park(robot: Cabin8, d1: float) -> Array:
+    """The robot's home posture at rail travel ``d1`` (joints).
+
+    Inside every limit with its margins: a park posture sags under gravity, one on a limit would leave it.
+    """
+    drives = np.array(robot.home_drives, dtype=float)
+    drives[0] = d1
+    return np.asarray(robot.joints_from_drives(drives), dtype=float)
 
 
 def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorOptions) -> GeneratedCampaign:
@@ -424,14 +498,9 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
     for u in units:
         bays_u = CollisionWorld(robot, cabin, u.payload(), grid_step_m=GRID_STEP_M)
         _witnesses(robot, layout, shell, u, clearance, bays_u)
-    # Park: tucked at the rail's start, clear by the clearance + 20 mm without a unit.
+    # Park: home at the rail's start, clear by the clearance + 20 mm without a unit.
     park = next(
-        (
-            _tucked(d1)
-            for d1 in (0.02, 0.06, 0.1, 0.15)
-            if not robot.violations(_tucked(d1)) and bays.is_valid(_tucked(d1), clearance + 0.02)
-        ),
-        None,
+        (q for q in (_park(robot, d1) for d1 in PARK_D1_M) if bays.is_valid(q, clearance + 0.02)), None
     )
     if park is None:
         raise _Redraw("no clear park posture")

@@ -47,8 +47,10 @@ def test_legs_cover_the_timeline_in_order(planned: CycleResult, cycle: ResolvedC
 
 
 def test_forces_follow_each_legs_payload_state(planned: CycleResult, cycle: ResolvedCycle) -> None:
-    """Inverse dynamics of every sample with its leg's load gives the reported forces; without the unit on
-    the loaded legs (or with it on the empty ones) it does not."""
+    """Inverse dynamics of every sample with its leg's load gives the reported forces.
+
+    Without the unit on the loaded legs (or with it on the empty ones) it does not.
+    """
     p = planned.profile
     dyn = Cabin8Dynamics.of(cycle.robot)
     qd, qdd = dyn.joint_rates_batch(p.joints, p.velocity, p.acceleration)
@@ -100,7 +102,9 @@ def test_every_sample_within_the_drive_limits(planned: CycleResult, cycle: Resol
     assert p.effort is not None and np.all(np.abs(p.effort) <= tol * lim.effort_max)
     assert lim.j_max is not None and np.all(np.abs(p.jerk) <= tol * lim.j_max)
     assert np.all(p.velocity[[0, -1]] == 0.0)
-    assert np.allclose(p.position[0], cycle.park_u, atol=1e-9) and np.allclose(p.position[-1], cycle.park_u, atol=1e-9)
+    assert np.allclose(p.position[0], cycle.park_u, atol=1e-9) and np.allclose(
+        p.position[-1], cycle.park_u, atol=1e-9
+    )
 
 
 def test_the_robot_rests_on_every_dwell(planned: CycleResult) -> None:
@@ -130,7 +134,9 @@ def test_straight_legs_follow_their_lines(planned: CycleResult, cycle: ResolvedC
     assert np.allclose(end, cycle.T_base_unit_dock, atol=1e-6)
 
 
-def _fcl_distance(obstacle: Obstacle, shape_kind: str, size: tuple[float, ...], R: np.ndarray, p: np.ndarray) -> float:
+def _fcl_distance(
+    obstacle: Obstacle, shape_kind: str, size: tuple[float, ...], R: np.ndarray, p: np.ndarray
+) -> float:
     """Exact distance from one posed body to a box obstacle, by FCL alone (the obstacle as a mesh)."""
     box = trimesh.creation.box(extents=obstacle.size)
     mesh = fcl.BVHModel()
@@ -144,9 +150,13 @@ def _fcl_distance(obstacle: Obstacle, shape_kind: str, size: tuple[float, ...], 
     return float(fcl.distance(a, b, fcl.DistanceRequest(), fcl.DistanceResult()))
 
 
-def _distances_to(cycle: ResolvedCycle, result: CycleResult, name: str, obstacle: Obstacle, held: bool) -> dict[str, float]:
-    """Smallest exact distance of each robot body (and the tool's body) to ``obstacle`` over every sample of
-    a leg, from the robot model's numpy body poses and FCL (not the collision world)."""
+def _distances_to(
+    cycle: ResolvedCycle, result: CycleResult, name: str, obstacle: Obstacle, held: bool
+) -> dict[str, float]:
+    """Smallest exact distance of each robot body (and the tool's body) to ``obstacle`` on a leg.
+
+    Every sample, from the robot model's numpy body poses and FCL (not the collision world).
+    """
     model = cycle.robot.collision_model()
     geom = cycle.held if held else cycle.gripper
     assert geom is not None
@@ -173,8 +183,10 @@ def _distances_to(cycle: ResolvedCycle, result: CycleResult, name: str, obstacle
 def test_no_sample_after_the_release_within_the_clearance_of_the_installed_unit(
     planned: CycleResult, cycle: ResolvedCycle
 ) -> None:
-    """Exact FCL distances at every sample: on the retract only the gripper may be closer (the allowed pair);
-    on the way back to park nothing is."""
+    """Exact FCL distances at every sample: on the retract only the gripper may be closer.
+
+    The gripper and the unit are the retract's allowed pair; on the way back to park nothing is closer.
+    """
     clearance = cycle.spec.options.clearance_m
     retract = _distances_to(cycle, planned, "retract", cycle.bay_unit, held=False)
     park = _distances_to(cycle, planned, "park", cycle.bay_unit, held=False)
@@ -240,3 +252,31 @@ def test_the_document_round_trips_through_the_independent_check(
     doc["position"][k][0] += 1e-3
     bad = check_cycle(cycle, doc)
     assert {c.name for c in bad.failures} >= {"dwell"}
+
+
+def test_a_release_whose_springback_ends_within_the_clearance_is_refused(
+    planned: CycleResult, cycle: ResolvedCycle
+) -> None:
+    """An obstacle 5 mm from the arm at the release (within the 10 mm clearance): refused, bodies and mm."""
+    import dataclasses
+
+    from planner.core.exceptions import ReleaseInCollision
+    from planner.plan.context import PlanContext
+    from planner.task.cycle import _check_release
+    from planner.task.legs import leg_scenario
+
+    q = planned.profile.joints[_rows(planned, "release").stop - 1]
+    sc = leg_scenario(cycle, leg("retract"), q, goal_q=q)
+    world = leg_world(cycle, leg("retract"))
+    _, P, _ = world.poses(q)
+    arm = world.names.index("arm")
+    T = np.eye(4)
+    T[:3, 3] = P[0, arm] + np.array([0.0, 0.07 + 0.005 + 0.005, 0.0])  # 5 mm above the arm capsule
+    probe = Obstacle.box("probe", (0.01, 0.01, 0.01), T)
+    ctx = PlanContext.build(dataclasses.replace(sc, obstacles=(*sc.obstacles, probe)))
+    with pytest.raises(ReleaseInCollision) as exc:
+        _check_release(cycle, ctx, q)
+    assert "probe" in exc.value.message and " mm from probe" in exc.value.message
+    assert exc.value.details["springback_m"] == pytest.approx(
+        next(e for e in planned.events if e.kind == "detach").springback_m, abs=1e-9
+    )

@@ -26,9 +26,7 @@ def _resolve(data: dict[str, Any]) -> ResolvedCycle:
 
 def test_overlapping_installed_units_name_both() -> None:
     data = example_dict()
-    data["installed"].append(
-        {"id": "B7", "box": [0.2, 0.2, 0.2], "pose": {"position": [0.9, 0.7, 2.15]}}
-    )
+    data["installed"].append({"id": "B7", "box": [0.2, 0.2, 0.2], "pose": {"position": [0.9, 0.7, 2.15]}})
     with pytest.raises(InvalidInput) as exc:
         _resolve(data)
     assert exc.value.details["field"] == "installed"
