@@ -22,7 +22,7 @@ from api.examples import aisle_campaign, aisle_cycle
 from planner.task.cycle import CycleResult, plan_cycle
 from planner.task.legs import LEG_NAMES
 from planner.task.resolve import ResolvedCycle, load_cycle
-from tests.api.conftest import Service, make_settings, start_idle_service, start_service
+from tests.api.conftest import Service, box_stl, make_settings, start_idle_service, start_service
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "tests" / "cycles" / "aisle-install-A3.yaml"
@@ -281,3 +281,24 @@ def test_openapi_publishes_the_cycle_and_campaign_schemas(svc: Service) -> None:
         assert body["application/yaml"]["schema"] == {"$ref": f"#/components/schemas/{name}"}
     for path in ("/api/v1/cycles/{job_id}/profile.csv", "/api/v1/campaigns/{job_id}/units.csv"):
         assert "get" in doc["paths"][path]
+
+
+def test_meshes_of_a_cycle_resolve_through_the_tenants_store(tmp_path: Path) -> None:
+    """An installed unit given as an uploaded mesh: accepted by its id, refused by another tenant or unit."""
+    for svc in start_idle_service(make_settings(tmp_path)):
+        c, h = svc.client, svc.h()
+        files = {"file": ("A9.stl", box_stl((0.24, 0.35, 0.45)), "model/stl")}
+        up = c.post("/api/v1/cabins", files=files, data={"units": "m", "name": "A9"}, headers=h)
+        assert up.status_code == 201, up.text
+        mesh_id = up.json()["id"]
+        body = aisle_cycle()
+        a4 = body["installed"][1]
+        body["installed"][1] = {"id": "A9", "mesh": mesh_id, "units": "m", "pose": a4["pose"]}
+        ok = c.post("/api/v1/cycles", json=body, headers=h)
+        assert ok.status_code == 202, ok.text
+        job = c.app.state.ctx.jobs.get("alpha", ok.json()["id"])  # type: ignore[attr-defined]
+        assert list(job.meshes) == [mesh_id]
+        # Not this tenant's mesh: the field named, nothing read from the server's disk.
+        _problem(c.post("/api/v1/cycles", json=body, headers=svc.h("beta")), "installed[1].mesh")
+        body["installed"][1]["units"] = "mm"
+        _problem(c.post("/api/v1/cycles", json=body, headers=h), "installed[1].units")
