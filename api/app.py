@@ -36,6 +36,7 @@ from api.openapi import install_openapi
 from api.ratelimit import TenantRateLimiter
 from api.routes import (
     cabins,
+    cycles,
     exports,
     health,
     keys,
@@ -280,7 +281,8 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         body_timeout_s=settings.body_timeout_s,
     )
     templates: dict[int, str] = {}  # route object -> full path template, for the access log
-    for module in (health, robots, cabins, plans, exports, sweeps, scene, kinematics, pprs6, stiffness, keys):
+    routers = [health, robots, cabins, plans, exports, cycles, sweeps, scene, kinematics, pprs6, stiffness, keys]
+    for module in routers:
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
         templates.update({id(r): API_PREFIX + r.path for r in router.routes})

@@ -114,6 +114,8 @@ class Job(Base):
     status: Mapped[str] = mapped_column(String(16))
     stage: Mapped[str | None] = mapped_column(String(32), nullable=True)
     progress: Mapped[float] = mapped_column(Float, default=0.0)
+    #: What the job reports beyond its stage and fraction (a campaign: ``{"units": [...]}``), JSON.
+    progress_detail: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     scenario: Mapped[dict[str, Any]] = mapped_column(JSON)
     scenario_name: Mapped[str] = mapped_column(String(100))
     request_sha256: Mapped[str] = mapped_column(String(64))

@@ -1,4 +1,4 @@
-"""Job kinds: what the service can run as a job, one entry each (plans today; cycles and campaigns next).
+"""Job kinds: what the service can run as a job, one entry each (plans, assembly cycles, campaigns).
 
 Every kind shares the job machinery of :mod:`api.jobstore` (queue, tenants and their quota, idempotency,
 leases, cancellation, retention, progress) and the HTTP helpers of :mod:`api.routes.jobroutes`. A kind
@@ -8,7 +8,7 @@ only says what differs:
 * ``collection``: its URL collection under ``/api/v1`` (``plans`` -> ``/api/v1/plans/{id}``) and
   ``noun``, the word its messages use ("no plan 'x'");
 * ``input_key``: the key of the job document naming what was submitted (``scenario``: its name and
-  SHA-256);
+  SHA-256, read from the job's provenance as ``<input_key>_sha256``);
 * ``runner``: ``"module:function"`` run in the job's worker process, ``function(job, progress) ->
   outcome`` (see :func:`api.worker.plan_job`); imported there by name, so this registry imports nothing
   heavy;
@@ -145,4 +145,51 @@ PLAN = register(
 )
 
 
-__all__ = ["DEFAULT_KIND", "PLAN", "FileSource", "JobKind", "ResultFile", "kind_of", "kinds", "register"]
+#: Assembly cycles: a cycle document in, one cycle profile document (legs, events) or a refusal out.
+CYCLE = register(
+    JobKind(
+        name="cycle",
+        collection="cycles",
+        noun="cycle",
+        runner="api.cycles:cycle_job",
+        input_key="cycle",
+        files=(
+            ResultFile(
+                "profile.csv", "profile_csv", "text/csv; charset=utf-8", "api.cycles:cycle_profile_csv"
+            ),
+            ResultFile("plot.png", "plot_png", "image/png", "api.cycles:cycle_plot_png", stored=True),
+        ),
+    )
+)
+
+#: Campaigns: units installed one cycle each in a cabin that fills up; the summary and the cycle documents.
+CAMPAIGN = register(
+    JobKind(
+        name="campaign",
+        collection="campaigns",
+        noun="campaign",
+        runner="api.cycles:campaign_job",
+        input_key="campaign",
+        files=(
+            ResultFile(
+                "profile.csv", "profile_csv", "text/csv; charset=utf-8", "api.cycles:campaign_profile_csv"
+            ),
+            ResultFile("units.csv", "units_csv", "text/csv; charset=utf-8", "api.cycles:campaign_units_csv"),
+            ResultFile("plot.png", "plot_png", "image/png", "api.cycles:campaign_plot_png", stored=True),
+        ),
+    )
+)
+
+
+__all__ = [
+    "CAMPAIGN",
+    "CYCLE",
+    "DEFAULT_KIND",
+    "PLAN",
+    "FileSource",
+    "JobKind",
+    "ResultFile",
+    "kind_of",
+    "kinds",
+    "register",
+]

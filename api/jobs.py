@@ -11,7 +11,10 @@ process runs. A dispatcher thread, never the event loop:
   claimed once even with several service instances on one PostgreSQL database), up to ``workers`` at a
   time, and counts the attempt;
 * reads ``progress`` and ``done`` messages from each job's pipe and writes them to the database (the
-  latest progress once a pass, the outcome once);
+  latest progress once a pass, with its detail -- a campaign's units --, the outcome once);
+* stores the files a running job hands over to keep (``keep`` messages: a campaign's finished cycles,
+  :meth:`api.jobstore.JobStore.keep`) and gives them to the job's next attempt (``kept``), so a job whose
+  instance died resumes from them;
 * kills a job whose hard wall-clock limit (``time_limit_s + job_grace_s``) expires and marks it failed
   with reason ``time_limit_exceeded``: the process is gone, so its slot is free for the next job (the
   "worker" is replaced by construction);
@@ -51,7 +54,15 @@ from multiprocessing.process import BaseProcess
 from typing import Any, Protocol
 
 from api.db import Database
-from api.jobstore import MAX_ATTEMPTS, JobStore, expire_leases, purge_expired, recover_jobs, rows_matched
+from api.jobstore import (
+    KEEP_PREFIX,
+    MAX_ATTEMPTS,
+    JobStore,
+    expire_leases,
+    purge_expired,
+    recover_jobs,
+    rows_matched,
+)
 from api.lifeline import SERVER_PID_ENV
 from api.metrics import ServiceMetrics
 from api.settings import Settings
@@ -352,9 +363,11 @@ class ProcessJobRunner:
         row = self.store.claim(self.instance_id, self.settings.job_lease_s)
         if row is None:
             return None
+        kept = self.store.kept(row.id, KEEP_PREFIX)  # an earlier attempt's finished work (campaigns)
         return {
             "id": row.id,
             "kind": row.kind,
+            "kept": kept,
             "scenario": row.scenario,
             "meshes": dict(row.meshes),
             "empty_dir": str(self.empty_dir),
@@ -413,7 +426,8 @@ class ProcessJobRunner:
 
     def _drain(self, r: _Running) -> None:
         """Read the job's messages; write its latest progress once (one database write a pass)."""
-        latest: tuple[str, float] | None = None
+        latest: tuple[str, float, dict[str, Any] | None] | None = None
+        detail: dict[str, Any] | None = None
         while not r.eof:
             try:
                 if not r.conn.poll(0):
@@ -423,11 +437,17 @@ class ProcessJobRunner:
                 r.eof = True
                 break
             if msg[0] == "progress":
-                latest = (str(msg[1]), float(msg[2]))
+                if len(msg) > 3 and msg[3] is not None:
+                    detail = msg[3]
+                latest = (str(msg[1]), float(msg[2]), detail)
+            elif msg[0] == "keep":  # a file the job keeps for a relaunch (a campaign's finished cycle)
+                self.store.keep(r.job_id, self.instance_id, str(msg[1]), bytes(msg[2]))
             elif msg[0] == "done":
                 r.outcome = msg[1]
         if latest is not None and r.outcome is None:  # a finished job's end write supersedes it
             self.store.progress(r.job_id, self.instance_id, *latest)
+        elif detail is not None:  # the last units of a finished job stay in its document
+            self.store.progress(r.job_id, self.instance_id, "finishing", 0.99, detail)
 
     def _finish(self, r: _Running) -> None:
         out = r.outcome

@@ -42,6 +42,9 @@ from api.jobkinds import DEFAULT_KIND, JobKind
 
 _LOG = logging.getLogger(__name__)
 
+#: Name prefix of the files a running job keeps for a relaunch (:meth:`JobStore.keep`).
+KEEP_PREFIX: Final = "keep/"
+
 #: A job that ran this many times and was interrupted again is failed with reason ``interrupted``.
 MAX_ATTEMPTS = 2
 
@@ -417,14 +420,46 @@ class JobStore:
                     return s.get(Job, job_id)
         return None
 
-    def progress(self, job_id: str, owner: str, stage: str, fraction: float) -> None:
-        """The owner's progress of a running job (stage name cut to its column's 32 characters)."""
+    def progress(
+        self, job_id: str, owner: str, stage: str, fraction: float, detail: dict[str, Any] | None = None
+    ) -> None:
+        """The owner's progress of a running job (stage name cut to its column's 32 characters).
+
+        ``detail``: what the job reports beyond the fraction (a campaign's units), kept when ``None``.
+        """
+        values: dict[str, Any] = {"stage": stage[:32], "progress": fraction}
+        if detail is not None:
+            values["progress_detail"] = detail
         with self.db.session() as s:
             s.execute(
                 update(Job)
                 .where(Job.id == job_id, Job.status == "running", Job.owner == owner)
-                .values(stage=stage[:32], progress=fraction)
+                .values(**values)
             )
+
+    def keep(self, job_id: str, owner: str, name: str, data: bytes) -> bool:
+        """Keep a file a running job made (a campaign's finished cycle), only while ``owner`` runs it.
+
+        Kept files outlive the job's process (a relaunch reads them: :meth:`kept`) and go with the job.
+        """
+        with self.db.session() as s:
+            mine = s.scalar(
+                select(Job.id).where(Job.id == job_id, Job.status == "running", Job.owner == owner)
+            )
+            if mine is None:
+                return False
+            s.merge(JobFile(job_id=job_id, name=name, data=data))
+        return True
+
+    def kept(self, job_id: str, prefix: str) -> dict[str, bytes]:
+        """``{name: data}`` of the job's files whose names start with ``prefix``."""
+        with self.db.session() as s:
+            rows = s.execute(
+                select(JobFile.name, JobFile.data).where(
+                    JobFile.job_id == job_id, JobFile.name.startswith(prefix)
+                )
+            ).all()
+        return {str(n): bytes(d) for n, d in rows}
 
     def heartbeat(
         self, owner: str, job_ids: Iterable[str], lease_s: float
@@ -567,6 +602,7 @@ def purge_expired(db: Database, retention_s: float, now: float | None = None) ->
 
 __all__ = [
     "END_EVENT",
+    "KEEP_PREFIX",
     "MAX_ATTEMPTS",
     "TRANSITIONS",
     "Cancelled",

@@ -5,6 +5,9 @@ FastAPI's generated document is completed once, when first asked for:
 * ``components.schemas.Scenario`` (and its parts, prefixed ``scenario.``) is the pydantic model of
   :class:`planner.scenario.Scenario`, the body of ``POST /plans`` in ``application/json`` and
   ``application/yaml``;
+* ``components.schemas.Cycle`` and ``components.schemas.Campaign`` (parts prefixed ``cycle.`` and
+  ``campaign.``): the bodies of ``POST /cycles`` and ``POST /campaigns``
+  (:class:`planner.task.schema.Cycle`, :class:`planner.task.campaign_schema.Campaign`);
 * ``components.schemas.Problem`` is the RFC 9457 body of every error; each operation lists the statuses
   it can answer with, all as ``application/problem+json``: 422 always (replacing FastAPI's
   ``application/json`` validation error), 401 and 429 (rate limit) when it takes an API key, 404 when
@@ -35,6 +38,23 @@ def scenario_schemas() -> dict[str, Any]:
     out = {f"{SCENARIO_PREFIX}{name}": value for name, value in defs.items()}
     out["Scenario"] = schema
     return out
+
+
+def model_schemas(model: Any, name: str, prefix: str) -> dict[str, Any]:
+    """``{name: schema}`` of a pydantic model and its nested models (``prefix`` + their names)."""
+    schema = model.model_json_schema(ref_template=f"#/components/schemas/{prefix}{{model}}")
+    defs = schema.pop("$defs", {})
+    out = {f"{prefix}{key}": value for key, value in defs.items()}
+    out[name] = schema
+    return out
+
+
+def task_schemas() -> dict[str, Any]:
+    """The cycle and campaign documents' schemas (``Cycle``, ``Campaign`` and their parts)."""
+    from planner.task.campaign_schema import Campaign
+    from planner.task.schema import Cycle
+
+    return {**model_schemas(Cycle, "Cycle", "cycle."), **model_schemas(Campaign, "Campaign", "campaign.")}
 
 
 #: Component-name prefix of the sweep description's nested models.
@@ -155,6 +175,7 @@ def install_openapi(app: FastAPI) -> None:
         )
         schemas = doc.setdefault("components", {}).setdefault("schemas", {})
         schemas.update(scenario_schemas())
+        schemas.update(task_schemas())
         schemas.update(sweep_schemas())
         schemas["Problem"] = PROBLEM_SCHEMA
         for name in ("HTTPValidationError", "ValidationError"):
@@ -175,7 +196,9 @@ __all__ = [
     "drive_map_schema",
     "exact_variants",
     "install_openapi",
+    "model_schemas",
     "scenario_request_body",
     "scenario_schemas",
     "sweep_schemas",
+    "task_schemas",
 ]

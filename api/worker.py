@@ -2,12 +2,14 @@
 
 The parent (:mod:`api.jobs`) sends nothing after start: the job description (its kind, the scenario as
 submitted and the tenant's mesh files it names) is the process argument. The child runs its kind's
-function (:mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction)``
-messages while planning and one ``("done", outcome)`` at the end; the parent writes everything to the
-database. The packed result document (:mod:`api.compact`) is made here, never in the server's event
-loop; it is the only thing a job writes: the CSV and the plot are made on request (:func:`profile_csv`,
-:func:`plot_png`, run by the server in its thread pool, the plot kept once made). The process arms its
-parent-death signal first, so it ends with the service (:mod:`api.lifeline`).
+function (:mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction,
+detail)`` messages while planning (``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)``
+for what a relaunch must not redo (a campaign's finished cycles) and one ``("done", outcome)`` at the
+end; the parent writes everything to the database. The packed result document (:mod:`api.compact`) is
+made here, never in the server's event loop; it is the only thing a job writes: the CSV and the plot are
+made on request (:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the plot
+kept once made). The process arms its parent-death signal first, so it ends with the service
+(:mod:`api.lifeline`).
 
 Importing this module imports the planner, so the forkserver can preload it once and every job forks
 warm.
@@ -95,8 +97,16 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
         except OSError:  # the server is gone (its end of the pipe closed): its lease re-queues the job
             os._exit(0)  # quietly, before the parent-death signal: no traceback in the server's log
 
-    def progress(stage: str, fraction: float) -> None:
-        send(("progress", str(stage), float(fraction)))
+    class Progress:
+        """What the job's function reports through: ``(stage, fraction[, detail])``, and files to keep."""
+
+        def __call__(self, stage: str, fraction: float, detail: dict[str, Any] | None = None) -> None:
+            send(("progress", str(stage), float(fraction), detail))
+
+        def keep(self, name: str, data: bytes) -> None:
+            send(("keep", str(name), bytes(data)))
+
+    progress = Progress()
 
     if job.get("nice"):
         os.nice(int(job["nice"]))  # planning yields the CPU to the service's event loop

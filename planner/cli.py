@@ -669,6 +669,98 @@ def generate(
     _emit({"out": str(out), "seed": seed, "scenarios": [f"{c.name}.yaml" for c in cases]})
 
 
+class _CampaignProgress(_Bar):
+    """Campaign progress on stderr when it is a terminal: one row per unit (status, cycles planned)."""
+
+    def __init__(self, enabled: bool, units: list[str]) -> None:
+        self.tasks: dict[str, Any] = {}
+        if enabled:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(
+                TextColumn("{task.description:<12}"),
+                BarColumn(bar_width=20),
+                TextColumn("{task.fields[status]:<11} cycles {task.fields[cycles]}"),
+                TimeElapsedColumn(),
+            )
+            for u in units:
+                self.tasks[u] = self.bar.add_task(u, total=1, status="waiting", cycles=0)
+
+    def __call__(self, status: dict[str, Any]) -> None:
+        if self.bar is None:
+            return
+        for u, st in status.items():
+            done = st.status in ("planned", "refused", "not_planned")
+            self.bar.update(
+                self.tasks[u],
+                completed=1 if done else 0,
+                status=st.status,
+                cycles=st.cycles_planned + st.cycles_cached,
+            )
+
+
+@app.command()
+@handle_errors
+def campaign(
+    spec: Annotated[Path, typer.Argument(help="campaign file (.yaml, .yml or .json)", dir_okay=False)],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="output folder (cycle documents, summary.json)")
+    ],
+    workers: Annotated[
+        int, typer.Option("--workers", min=1, max=256, help="cycles at a time (local processes or Ray CPUs)")
+    ] = max(1, os.cpu_count() or 1),
+    ray: Annotated[bool, typer.Option("--ray", help="run the cycles as Ray tasks")] = False,
+    ray_address: Annotated[
+        str | None,
+        typer.Option("--ray-address", help="Ray cluster address (default RAY_ADDRESS, else a local Ray)"),
+    ] = None,
+) -> None:
+    """Install a campaign's units one cycle at a time: the cycle documents in install order + summary.json.
+
+    Resumable: cycles with a row in OUTPUT's journal (keyed by the cycle's hash) are not planned again.
+    Exit 0 when every unit is installed, 3 when a cycle is refused (given order) or no order is found.
+    """
+    from planner.campaign.run import CYCLE_RUNNER, CampaignRun, campaign_meshes
+    from planner.sweep.run import WARMUP_TIME_LIMIT_S, EmbeddedExecutor, RayExecutor
+    from planner.task.campaign import check_campaign
+    from planner.task.campaign_schema import load_campaign_file
+
+    camp = load_campaign_file(spec)
+    base_dir = spec.parent.resolve()
+    check_campaign(camp, base_dir)
+    executor: Any = None
+    try:
+        with _CampaignProgress(sys.stderr.isatty(), camp.ids) as progress:
+            run = CampaignRun(camp, output, None, base_dir=base_dir, progress=progress)
+            first = run.job(camp.ids[0], ())
+            warm: dict[str, Any] | None = None
+            if not run.journal.done(first.sha256):  # something to plan: warm the workers on it
+                warm = {"runner": CYCLE_RUNNER, "cycle": first.document, "base_dir": str(base_dir)}
+                warm["cycle"] = {**warm["cycle"], "options": {**warm["cycle"]["options"]}}
+                limit = warm["cycle"]["options"].get("time_limit_s", 30.0)
+                warm["cycle"]["options"]["time_limit_s"] = min(float(limit), WARMUP_TIME_LIMIT_S)
+            if ray:
+                executor = RayExecutor(ray_address, workers, None, campaign_meshes(camp, base_dir), warm)
+            else:
+                executor = EmbeddedExecutor(workers, warm)
+            run.executor = executor
+            result = run.run()
+    except KeyboardInterrupt:
+        _fail(f"campaign {camp.name}: interrupted; the cycles so far are in {output}, rerun to resume", 130)
+    finally:
+        if executor is not None:
+            executor.close()
+    total = sum(e["duration_s"] or 0.0 for e in result.units if e["status"] == "planned")
+    typer.echo(
+        f"cabinplan: campaign {camp.name}: {result.message}; {len(result.order)} units in order "
+        f"{' '.join(result.order) or '-'}, campaign {total:.1f} s; {result.cycles_planned} cycles planned, "
+        f"{result.cycles_cached} already done -> {output}",
+        err=True,
+    )
+    if not result.succeeded:
+        raise typer.Exit(EXIT_INFEASIBLE)
+
+
 def main() -> None:
     """Console-script entry point.
 

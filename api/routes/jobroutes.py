@@ -61,7 +61,7 @@ def job_document(kind: JobKind, row: Job, warming: str | None = None) -> dict[st
         "status": row.status,
         "stage": stage,
         "progress": row.progress,
-        kind.input_key: {"name": row.scenario_name, "sha256": row.provenance.get("scenario_sha256")},
+        kind.input_key: {"name": row.scenario_name, "sha256": row.provenance.get(f"{kind.input_key}_sha256")},
         "time_limit_s": row.time_limit_s,
         "attempts": row.attempts,
         "created_at": row.created_at,
@@ -72,6 +72,8 @@ def job_document(kind: JobKind, row: Job, warming: str | None = None) -> dict[st
         "provenance": row.provenance,
         "links": {"self": base},
     }
+    for key, value in (row.progress_detail or {}).items():  # a campaign's units, as they stand
+        doc.setdefault(key, value)
     if row.status == "succeeded":
         doc["links"].update({f.link: f"{base}/{f.name}" for f in kind.files})
     return doc

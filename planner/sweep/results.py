@@ -23,7 +23,7 @@ import logging
 import os
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from planner.sweep.expand import SweepPlan
 
@@ -68,6 +68,18 @@ COLUMN_NAMES = tuple(name for name, _ in COLUMNS)
 
 #: Columns that depend on the machine (times, files), not on the plan: left out when comparing runs.
 MACHINE_COLUMNS = frozenset({"planning_time_s", "wall_time_s", "attempts", "scenario_file", "profile_file"})
+
+
+class TaskKey(Protocol):
+    """What the journal and the executors need of a plan: a name (files, logs) and its content hash."""
+
+    @property
+    def name(self) -> str:
+        """A readable name of the plan (its profile file's name)."""
+
+    @property
+    def sha256(self) -> str:
+        """The plan's content hash (one row, one running job per hash)."""
 
 
 def plan_columns(plan: SweepPlan) -> dict[str, Any]:
@@ -203,7 +215,7 @@ class Journal:
         """A row of this scenario hash is recorded."""
         return sha256 in self.rows
 
-    def profile_path(self, plan: SweepPlan) -> Path:
+    def profile_path(self, plan: TaskKey) -> Path:
         """Where the plan's profile (or refusal document) goes: ``profiles/NAME.json``."""
         return self.out_dir / "profiles" / f"{plan.name}.json"
 
@@ -214,7 +226,7 @@ class Journal:
             json.dumps(plan.scenario.model_dump(mode="json"), indent=1) + "\n",
         )
 
-    def record(self, plan: SweepPlan, row: dict[str, Any], document: str | None) -> bool:
+    def record(self, plan: TaskKey, row: dict[str, Any], document: str | None) -> bool:
         """Write the profile (or refusal) file, then append the row; False if the plan has a row already.
 
         ``document`` is ``None`` when there is none or the plan's process wrote it to
@@ -288,6 +300,7 @@ __all__ = [
     "MAX_EVIDENCE_CHARS",
     "PARQUET_FILE",
     "Journal",
+    "TaskKey",
     "atomic_write",
     "csv_text",
     "evidence_text",

@@ -33,6 +33,8 @@ SEMANTIC_422: dict[tuple[str, str], str] = {
     ("POST", "/api/v1/plans"): "a scenario's start, goal and cabin must be admissible (limits, collisions)",
     ("POST", "/api/v1/plans:validate"): "the scenario and the profile must belong together",
     ("POST", "/api/v1/sweeps"): "the base scenario and the expanded plans must be admissible",
+    ("POST", "/api/v1/cycles"): "a cycle's units, dock, bay and meshes must be admissible (overlaps)",
+    ("POST", "/api/v1/campaigns"): "a campaign's units must be installable (overlaps, docks, stored meshes)",
     ("POST", "/api/v1/robots/pprs6/profiles"): "the pose path must stay in pprs6's workspace",
     ("POST", "/api/v1/robots/pprs6/scene"): "the pose path must stay in pprs6's workspace",
     ("POST", "/api/v1/kinematics/fk"): "the mechanism must assemble",
@@ -63,6 +65,8 @@ HEAVY_TAG = "pprs6"
 LARGE_BODIES = (
     ("POST", "/api/v1/plans"),
     ("POST", "/api/v1/sweeps"),
+    ("POST", "/api/v1/cycles"),
+    ("POST", "/api/v1/campaigns"),
     ("POST", "/api/v1/stiffness"),
     ("POST", "/api/v1/kinematics/fk"),
     ("POST", "/api/v1/kinematics/ik"),

@@ -123,6 +123,30 @@ def test_an_owner_writes_only_over_its_own_running_job(store: JobStore) -> None:
         assert row is not None and (row.status, row.owner, row.stage) == ("running", "other", None)
 
 
+def test_kept_files_and_progress_detail_only_from_the_owner_and_gone_with_the_job(store: JobStore) -> None:
+    """A campaign's finished cycles: kept by its owner while running, read by a relaunch, deleted with it."""
+    tenant = uuid.uuid4().hex[:16]
+    mine = _add(store, tenant, "running", "me")
+    assert store.keep(mine, "me", "keep/a", b"cycle a")
+    assert not store.keep(mine, "other", "keep/b", b"not mine")  # an instance that lost the lease
+    assert store.keep(mine, "me", "keep/a", b"cycle a, again")  # the same name: replaced, no error
+    store.store_file(mine, "plot.png", b"png")
+    assert store.kept(mine, "keep/") == {"keep/a": b"cycle a, again"}
+    store.progress(mine, "me", "unit A3", 0.5, {"units": [{"id": "A3", "status": "planning"}]})
+    store.progress(mine, "me", "unit A3", 0.6)  # no detail: the last one stays
+    store.progress(mine, "other", "x", 0.9, {"units": []})
+    with store.db.session() as s:
+        row = s.get(Job, mine)
+        assert row is not None and row.progress_detail == {"units": [{"id": "A3", "status": "planning"}]}
+        assert row.progress == 0.6
+    store.expire_leases()  # its instance died: re-queued, the kept cycle stays for the next attempt
+    assert store.kept(mine, "keep/") == {"keep/a": b"cycle a, again"}
+    assert not store.keep(mine, "me", "keep/c", b"queued: nobody's")
+    store.cancel([mine], "test")
+    store.delete_finished([mine])
+    assert store.kept(mine, "keep/") == {} and store.stored_file(mine, "plot.png") is None
+
+
 def test_expired_leases_requeue_then_fail_and_a_requested_cancel_wins(store: JobStore) -> None:
     tenant = uuid.uuid4().hex[:16]
     first = _add(store, tenant, "running", "dead", attempts=1)
@@ -154,25 +178,31 @@ def test_kinds_are_one_entry_each_and_a_new_kind_gets_the_shared_job_document(mo
     import api.jobkinds as jobkinds
 
     monkeypatch.setattr(jobkinds, "_KINDS", dict(jobkinds._KINDS))
-    cycle = register(
+    inspection = register(
         JobKind(
-            "cycle",
-            "cycles",
-            "cycle",
+            "inspection",
+            "inspections",
+            "inspection",
             "api.worker:plan_job",
-            input_key="cycle",
+            input_key="inspection",
             files=(ResultFile("profile.csv", "profile_csv", "text/csv", "api.worker:profile_csv"),),
         )
     )
-    row = new_job(cycle, "t", {}, "dock-to-bay", "0" * 64, {}, {"scenario_sha256": "ab"}, 5.0)
+    row = new_job(inspection, "t", {}, "dock-to-bay", "0" * 64, {}, {"inspection_sha256": "ab"}, 5.0)
     row.status = "succeeded"
-    doc = job_document(cycle, row)
-    assert row.kind == "cycle" and kind_of(row.kind) is cycle
-    assert doc["cycle"] == {"name": "dock-to-bay", "sha256": "ab"} and "scenario" not in doc
+    doc = job_document(inspection, row)
+    assert row.kind == "inspection" and kind_of(row.kind) is inspection
+    assert doc["inspection"] == {"name": "dock-to-bay", "sha256": "ab"} and "scenario" not in doc
     assert doc["links"] == {
-        "self": f"/api/v1/cycles/{row.id}",
-        "profile_csv": f"/api/v1/cycles/{row.id}/profile.csv",
+        "self": f"/api/v1/inspections/{row.id}",
+        "profile_csv": f"/api/v1/inspections/{row.id}/profile.csv",
     }
+    # The cycle and campaign kinds are entries of the same registry.
+    assert kind_of("cycle").collection == "cycles" and kind_of("campaign").collection == "campaigns"
+    assert (
+        kind_of("cycle").run().__name__ == "cycle_job"
+        and kind_of("campaign").run().__name__ == "campaign_job"
+    )
 
 
 def test_a_kind_lists_only_its_own_jobs_and_rows_without_a_kind_are_plans(
@@ -181,7 +211,7 @@ def test_a_kind_lists_only_its_own_jobs_and_rows_without_a_kind_are_plans(
     import api.jobkinds as jobkinds
 
     monkeypatch.setattr(jobkinds, "_KINDS", dict(jobkinds._KINDS))
-    other = register(JobKind("campaign", "campaigns", "campaign", "api.worker:plan_job"))
+    other = register(JobKind("inspection", "inspections", "inspection", "api.worker:plan_job"))
     tenant = uuid.uuid4().hex[:16]
     legacy = _add(store, tenant, "queued", None)
     with store.db.session() as s:
@@ -192,7 +222,7 @@ def test_a_kind_lists_only_its_own_jobs_and_rows_without_a_kind_are_plans(
     plans, n_plans = store.page(tenant, PLAN, None, 10, 0)
     campaigns, n_campaigns = store.page(tenant, other, None, 10, 0)
     assert [r.id for r in plans] == [legacy] and n_plans == 1
-    assert n_campaigns == 1 and campaigns[0].kind == "campaign"
+    assert n_campaigns == 1 and campaigns[0].kind == "inspection"
     assert store.get(tenant, legacy, other) is None and store.get(tenant, legacy, PLAN) is not None
 
 
