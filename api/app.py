@@ -281,7 +281,20 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         body_timeout_s=settings.body_timeout_s,
     )
     templates: dict[int, str] = {}  # route object -> full path template, for the access log
-    routers = [health, robots, cabins, plans, exports, cycles, sweeps, scene, kinematics, pprs6, stiffness, keys]
+    routers = [
+        health,
+        robots,
+        cabins,
+        plans,
+        exports,
+        cycles,
+        sweeps,
+        scene,
+        kinematics,
+        pprs6,
+        stiffness,
+        keys,
+    ]
     for module in routers:
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
