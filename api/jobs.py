@@ -3,9 +3,14 @@
 Jobs live in the database (:class:`api.db.Job`); every change of their state is one move of the state
 machine in :mod:`api.jobstore`, which the runner calls (it writes no SQL itself). The runner only claims
 and executes jobs, so nothing submitted is lost when the service stops. :class:`ProcessJobRunner` (the
-default) runs each job in a fresh process forked from a forkserver that has imported the planner once
-(warm start, no shared state between jobs); the job's kind (:mod:`api.jobkinds`) names the function the
-process runs. A dispatcher thread, never the event loop:
+default) runs jobs in warm, reused worker processes (:class:`planner.core.procpool.WarmPool`, the sweep
+executor's pool): forked from a forkserver that has imported and warmed up the planner once, each worker
+runs one job at a time and keeps what the planner caches by content (compiled kernels, parsed meshes, a
+cabin's collision geometry) for its next jobs, so a job costs its planning time plus a small overhead
+instead of a process start and a cold cabin. A worker is replaced by a fresh one after
+``worker_max_jobs`` jobs or once its resident memory exceeds ``worker_max_rss_bytes`` after a job, so
+memory never grows without bound; ``worker_max_jobs = 1`` gives a fresh process per job. The job's kind
+(:mod:`api.jobkinds`) names the function the worker runs. A dispatcher thread, never the event loop:
 
 * claims queued jobs oldest first (a conditional ``UPDATE ... WHERE status='queued'``, so a job is
   claimed once even with several service instances on one PostgreSQL database), up to ``workers`` at a
@@ -15,11 +20,11 @@ process runs. A dispatcher thread, never the event loop:
 * stores the files a running job hands over to keep (``keep`` messages: a campaign's finished cycles,
   :meth:`api.jobstore.JobStore.keep`) and gives them to the job's next attempt (``kept``), so a job whose
   instance died resumes from them;
-* kills a job whose hard wall-clock limit (``time_limit_s + job_grace_s``) expires and marks it failed
-  with reason ``time_limit_exceeded``: the process is gone, so its slot is free for the next job (the
-  "worker" is replaced by construction);
-* kills a running job on cancellation (status ``cancelled``); a process that dies without an outcome
-  makes its job fail with reason ``worker_crashed``.
+* kills a job whose hard wall-clock limit (``time_limit_s + job_grace_s``) expires (SIGKILL of its
+  worker) and marks it failed with reason ``time_limit_exceeded``; the pool forks a fresh worker in its
+  place (one spare is kept forked ahead, so the next job starts at once);
+* kills a running job's worker on cancellation (status ``cancelled``), replaced the same way; a worker
+  that dies without an outcome makes its job (only its job) fail with reason ``worker_crashed``.
 
 Several instances may share one database (PostgreSQL). Each runner has an instance id; a claimed job
 carries its ``owner`` and a lease (``lease_expires_at``) that the owner renews every ``job_lease_s / 3``
@@ -31,9 +36,10 @@ kills its own copy at the next heartbeat. A cancellation sets ``cancel_requested
 at its next heartbeat, whichever instance received the request. On a clean shutdown running jobs are
 killed and re-queued without counting the attempt.
 
-Job processes die with the service: they arm a parent-death signal and the forkserver watches the
-server (:mod:`api.lifeline`), so a SIGKILLed server leaves no process behind. Before it claims the
-first job the runner starts the forkserver and waits for its warm-up (imports, the collision kernels
+Job workers die with the service: each arms a parent-death signal when it starts, busy or idle, and the
+forkserver watches the server (:mod:`api.lifeline`), so a SIGKILLed server leaves no process behind.
+Before it claims the first job the runner starts the forkserver and its workers and waits for the warm-up
+(imports, the collision kernels
 loaded from their ahead-of-time build, or built first on a fresh install -- numba's JIT without a C
 compiler --, one reference plan): ``/ready`` answers 503 with stage ``compiling kernels``
 until then, and no job's time limit is spent on it.
@@ -47,6 +53,7 @@ import os
 import threading
 import time
 import uuid
+from collections import OrderedDict
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from multiprocessing.context import ForkServerContext
@@ -67,15 +74,15 @@ from api.lifeline import SERVER_PID_ENV
 from api.metrics import ServiceMetrics
 from api.settings import Settings
 from api.store import local_mesh_file
+from planner.core.procpool import SINGLE_THREAD_ENV, WarmPool, Worker
 
 _LOG = logging.getLogger(__name__)
 
 #: Stage reported (``/ready``, queued jobs) while the forkserver warms up.
 WARMUP_STAGE = "compiling kernels"
 
-#: Longest wait for the forkserver's warm-up [s] (a fresh machine builds the kernels: 15-30 s, up to
-#: ~2 min for numba's JIT on a loaded machine without a C compiler).
-WARMUP_TIMEOUT_S = 900.0
+#: Jobs remembered in :attr:`ProcessJobRunner.ran_on`.
+RAN_ON_KEPT = 256
 
 #: Period of the retention purge [s].
 PURGE_PERIOD_S = 60.0
@@ -112,25 +119,24 @@ class JobRunner(Protocol):
 @dataclass
 class _Running:
     job_id: str
-    process: BaseProcess
-    conn: Connection
+    worker: Worker
     deadline: float
     started: float
     outcome: dict[str, Any] | None = None
     eof: bool = False
+    #: Its worker was killed (and reaped) by the runner.
+    killed: bool = False
+
+    @property
+    def conn(self) -> Connection:
+        return self.worker.conn
+
+    @property
+    def process(self) -> BaseProcess:
+        return self.worker.process
 
 
 _context_lock = threading.Lock()
-
-
-#: Thread pools of numerical libraries in each job process: one thread (a job is one core's work, and a
-#: forked child must not inherit a thread pool the forkserver started).
-SINGLE_THREAD_ENV = {
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "NUMBA_NUM_THREADS": "1",
-}
 
 
 def _mp_context(preload: bool) -> ForkServerContext:
@@ -149,16 +155,12 @@ def _mp_context(preload: bool) -> ForkServerContext:
         return ctx
 
 
-def _noop() -> None:
-    """Target of the warm-up probe process."""
-
-
 #: Tries of a job's terminal-state write (a busy SQLite file, a dropped PostgreSQL connection).
 END_WRITE_ATTEMPTS = 5
 
 
 class ProcessJobRunner:
-    """Runs each job in its own process with a hard wall-clock limit (see the module docstring).
+    """Runs jobs in warm, reused worker processes with a hard wall-clock limit (see the module docstring).
 
     Args:
         db: The job database.
@@ -188,6 +190,28 @@ class ProcessJobRunner:
         self._last_sync = 0.0
         self._last_purge = 0.0
         self._ctx = _mp_context(settings.forkserver_preload)
+        self._pool = self._new_pool()
+        #: Job id -> (worker pid, which job of that worker it was: 1 for a fresh worker) of the latest
+        #: :data:`RAN_ON_KEPT` jobs started here (logs, tests).
+        self.ran_on: OrderedDict[str, tuple[int, int]] = OrderedDict()
+
+    def _new_pool(self) -> WarmPool:
+        return WarmPool(  # the workers' functions by name: imported in the workers (forkserver preload)
+            self._ctx,
+            "api.worker:run_job",
+            slots=self.settings.workers,
+            tasks_per_process=self.settings.worker_max_jobs,
+            max_rss_bytes=self.settings.worker_max_rss_bytes,
+            setup="api.worker:worker_setup",
+            setup_args=(os.getpid(), self.settings.worker_nice),
+            name="cabinplan-job-worker",
+        )
+
+    def worker_pids(self) -> list[int]:
+        """Process ids of the idle workers (most recently used first) and of the busy ones."""
+        with self._lock:
+            busy = [r.worker.pid for r in self._running.values()]
+        return [p for p in [*(w.pid for w in self._pool.idle()), *busy] if p is not None]
 
     # ----------------------------------------------------------------------- protocol
     def start(self) -> None:
@@ -209,6 +233,9 @@ class ProcessJobRunner:
         for r in running:
             self._kill(r)
             self.store.requeue(r.job_id, self.instance_id)
+        self._pool.close()
+        self._pool = self._new_pool()  # a later start() forks fresh workers
+        self._warm.clear()
 
     def wake(self) -> None:
         """Look for queued work now."""
@@ -235,17 +262,12 @@ class ProcessJobRunner:
 
     # ----------------------------------------------------------------------- dispatcher
     def _warm_up(self) -> None:
-        """Start the forkserver and wait until it has imported and warmed up the planner."""
+        """Start the forkserver (it imports and warms up the planner) and fork the idle workers from it."""
         t0 = time.perf_counter()
         try:
-            probe = self._ctx.Process(target=_noop, name="cabinplan-warmup", daemon=True)
-            probe.start()
-            probe.join(timeout=WARMUP_TIMEOUT_S)
-            if probe.is_alive():
-                probe.kill()
-                probe.join(timeout=5.0)
-        except Exception:  # jobs then start cold: slower, never wrong
-            _LOG.exception("forkserver warm-up failed")
+            self._pool.start()
+        except Exception:  # workers are then forked per job as they are needed: slower, never wrong
+            _LOG.exception("job worker warm-up failed")
         took = time.perf_counter() - t0
         self.metrics.warmup_seconds.set(took)
         _LOG.info("job forkserver warm (%.1f s)", took)
@@ -283,21 +305,27 @@ class ProcessJobRunner:
             self._wake.clear()
         for r in running:
             self._drain(r)
-            if r.eof and not r.process.is_alive():
+            if r.outcome is not None:
                 self._finish(r)
+            elif r.eof or not r.process.is_alive():
+                self._drain(r)  # what it sent before it died
+                if r.outcome is not None:
+                    self._finish(r)
+                else:
+                    self._crashed(r)
             elif time.monotonic() > r.deadline:
-                self._kill(r)
                 self._drain(r)
                 if r.outcome is not None:  # it finished in the last instant
                     self._finish(r)
-                else:
-                    limit = self._hard_limit_s(r.job_id)
-                    self._end(
-                        r,
-                        "failed",
-                        reason="time_limit_exceeded",
-                        message=f"the job ran past its hard wall-clock limit of {limit:.3g} s and was killed",
-                    )
+                    continue
+                self._kill(r)
+                limit = self._hard_limit_s(r.job_id)
+                self._end(
+                    r,
+                    "failed",
+                    reason="time_limit_exceeded",
+                    message=f"the job ran past its hard wall-clock limit of {limit:.3g} s and was killed",
+                )
 
     def _sync(self) -> None:
         """Heartbeat: renew the leases of this instance's jobs; act on remote cancels and lost leases."""
@@ -322,15 +350,10 @@ class ProcessJobRunner:
             self._drop(mine[job_id])
 
     def _drop(self, r: _Running) -> None:
-        """Kill a job's process without writing anything (the job is no longer this instance's)."""
+        """Kill a job's worker without writing anything (the job is no longer this instance's)."""
         with self._lock:
             self._running.pop(r.job_id, None)
         self._kill(r)
-        r.conn.close()
-        try:
-            r.process.close()
-        except ValueError:
-            pass
 
     def _hard_limit_s(self, job_id: str) -> float:
         return self.store.time_limit_s(job_id) + self.settings.job_grace_s
@@ -372,14 +395,10 @@ class ProcessJobRunner:
             "meshes": dict(row.meshes),
             "empty_dir": str(self.empty_dir),
             "time_limit_s": row.time_limit_s,
-            "nice": self.settings.worker_nice,
-            "server_pid": os.getpid(),
         }
 
     def _launch(self, job: dict[str, Any]) -> bool:
-        """Start the job's process; False when it went back to the queue (try again on a later pass)."""
-        from api.worker import run_job  # the child's entry point (preloaded by the forkserver)
-
+        """Hand the job to a warm worker; False when it went back to the queue (try again on a later pass)."""
         try:  # the tenant's mesh files on this instance's disk (another instance may have taken them)
             root = self.settings.mesh_dir
             meshes = {k: str(local_mesh_file(self.db, root, v)) for k, v in job["meshes"].items()}
@@ -391,25 +410,21 @@ class ProcessJobRunner:
             self._requeue_unlaunched(job["id"])
             return False
         job = {**job, "meshes": meshes}
-        parent, child = self._ctx.Pipe(duplex=False)
-        proc = self._ctx.Process(
-            target=run_job, args=(job, child), name=f"cabinplan-job-{job['id']}", daemon=True
-        )
         try:
-            proc.start()
-        except Exception as exc:  # no process: fail the job now rather than at its deadline
-            _LOG.exception("job %s: the worker process did not start", job["id"])
-            parent.close()
-            child.close()
+            worker = self._pool.send(job)
+        except Exception as exc:  # no worker: fail the job now rather than at its deadline
+            _LOG.exception("job %s: no worker process took it", job["id"])
             why = f"the worker process did not start: {type(exc).__name__}: {exc}"
             self._fail_unlaunched(job["id"], "worker_start_failed", why)
             return True
-        child.close()
         started = time.monotonic()
         deadline = started + float(job["time_limit_s"]) + self.settings.job_grace_s
         with self._lock:
-            self._running[job["id"]] = _Running(job["id"], proc, parent, deadline, started)
-        _LOG.info("job %s started (pid %s)", job["id"], proc.pid)
+            self._running[job["id"]] = _Running(job["id"], worker, deadline, started)
+            self.ran_on[job["id"]] = (worker.pid or 0, worker.served)
+            while len(self.ran_on) > RAN_ON_KEPT:
+                self.ran_on.popitem(last=False)
+        _LOG.info("job %s started (worker pid %s, its job %d)", job["id"], worker.pid, worker.served)
         return True
 
     def _fail_unlaunched(self, job_id: str, reason: str, message: str) -> None:
@@ -449,17 +464,28 @@ class ProcessJobRunner:
         elif detail is not None:  # the last units of a finished job stay in its document
             self.store.progress(r.job_id, self.instance_id, "finishing", 0.99, detail)
 
-    def _finish(self, r: _Running) -> None:
-        out = r.outcome
-        if out is None:
+    def _crashed(self, r: _Running) -> None:
+        """The job's worker died without an outcome: reap it (a fresh one takes its place), fail the job."""
+        try:
+            r.process.join(timeout=1.0)
             code = r.process.exitcode
-            self._end(
-                r,
-                "failed",
-                reason="worker_crashed",
-                message=f"the worker process ended without a result (exit code {code})",
-            )
-            return
+        except ValueError:
+            code = None
+        r.killed = True
+        self._pool.discard(r.worker, died=True)
+        self._end(
+            r,
+            "failed",
+            reason="worker_crashed",
+            message=f"the worker process ended without a result (exit code {code})",
+        )
+
+    def _finish(self, r: _Running) -> None:
+        """The job's outcome arrived: its worker returns to the pool (or retires); the outcome is written."""
+        out = r.outcome
+        assert out is not None
+        if not r.killed:
+            self._pool.release(r.worker)
         values: dict[str, Any] = {}
         if out.get("provenance"):  # what really made the plan (the submit-time hashes are a forecast)
             values["provenance"] = out["provenance"]
@@ -473,12 +499,10 @@ class ProcessJobRunner:
         )
 
     def _kill(self, r: _Running) -> None:
-        try:
-            if r.process.is_alive():
-                r.process.kill()
-            r.process.join(timeout=5.0)
-        except ValueError:  # already closed
-            pass
+        """SIGKILL the job's worker (the pool forks a fresh one in its place); at most once."""
+        if not r.killed:
+            r.killed = True
+            self._pool.discard(r.worker)
 
     def _end(self, r: _Running, status: str, **values: Any) -> None:
         """Write the terminal state (only over this instance's ``running``: never over a cancellation).
@@ -499,12 +523,8 @@ class ProcessJobRunner:
                     else:
                         time.sleep(0.5 * (attempt + 1))
         finally:
-            r.process.join(timeout=5.0)
-            r.conn.close()
-            try:
-                r.process.close()
-            except ValueError:
-                pass
+            if not r.killed and r.outcome is None:  # never left running without its job
+                self._kill(r)
         if written:
             reason = values.get("reason")
             self.metrics.job_outcomes.labels(status=status, reason=str(reason or "")).inc()

@@ -36,6 +36,19 @@ class Settings(BaseSettings):
     worker_nice: int = Field(
         5, ge=0, le=19, description="Niceness added to job processes, so the API stays responsive under load."
     )
+    worker_max_jobs: int = Field(
+        100,
+        ge=1,
+        le=100_000,
+        description="Jobs one worker process runs before a fresh one replaces it (1: a fresh process per "
+        "job).",
+    )
+    worker_max_rss_bytes: int = Field(
+        2 << 30,
+        ge=64 << 20,
+        description="A worker process whose resident memory exceeds this after a job is replaced by a fresh "
+        "one.",
+    )
     job_grace_s: float = Field(
         15.0,
         ge=0.0,

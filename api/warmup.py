@@ -8,6 +8,7 @@ Importing this module has that side effect on purpose; nothing else imports it.
 
 from __future__ import annotations
 
+import gc
 import logging
 import time
 
@@ -73,3 +74,7 @@ def preload_tasks() -> None:
 
 warm_up()
 preload_tasks()
+# The workers share the forkserver's heap copy-on-write and live for many jobs; a garbage collection in a
+# worker would touch (and so copy) every object. Frozen objects are left out of collections.
+gc.collect()
+gc.freeze()

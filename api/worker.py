@@ -1,17 +1,23 @@
-"""The child side of a job: runs in its own process, talks to the parent through a pipe; and plan files.
+"""The child side of a job: runs in a warm worker process, talks to the parent through a pipe; and plan files.
 
-The parent (:mod:`api.jobs`) sends nothing after start: the job description (its kind, the scenario as
-submitted and the tenant's mesh files it names) is the process argument. The child runs its kind's
-function (:mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction,
-detail)`` messages while planning (``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)``
-for what a relaunch must not redo (a campaign's finished cycles) and one ``("done", outcome)`` at the
-end; the parent writes everything to the database. The packed result document (:mod:`api.compact`) is
-made here, never in the server's event loop; it is the only thing a job writes: the CSV and the plot are
-made on request (:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the plot
-kept once made). The process arms its parent-death signal first, so it ends with the service
-(:mod:`api.lifeline`).
+A job worker is a reused process (:class:`planner.core.procpool.WarmPool`, see :mod:`api.jobs`): it
+arms its parent-death signal and lowers its priority once (:func:`worker_setup`), so it ends with the
+service (:mod:`api.lifeline`) and yields the CPU to the event loop; then it runs one job after another
+(:func:`run_job`). The parent sends the job description (its kind, the scenario as submitted and the
+tenant's mesh files it names) on the pipe. The worker runs its kind's function (:mod:`api.jobkinds`;
+:func:`plan_job` for plans), sends ``("progress", stage, fraction, detail)`` messages while planning
+(``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)`` for what a relaunch must not
+redo (a campaign's finished cycles) and one ``("done", outcome)`` at the end of each job; the parent
+writes everything to the database. The packed result document (:mod:`api.compact`) is made here, never
+in the server's event loop; it is the only thing a job writes: the CSV and the plot are made on request
+(:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the plot kept once made).
 
-Importing this module imports the planner, so the forkserver can preload it once and every job forks
+What a worker keeps from one job to the next is what the planner caches by content: imports, compiled
+kernels, parsed meshes and a cabin's collision geometry (keyed by the mesh's content hash). Every job
+resolves its scenario afresh and seeds its own random generators, so a reused worker plans exactly what
+a fresh process plans (tests/api/test_warm_workers.py).
+
+Importing this module imports the planner, so the forkserver can preload it once and every worker forks
 warm.
 """
 
@@ -51,8 +57,7 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
     and the plot are made on request from the stored document: :func:`profile_csv`, :func:`plot_png`).
 
     Args:
-        job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}`` (and ``nice``,
-            the niceness :func:`run_job` adds to the process).
+        job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}``.
         send: Called with ``(stage, fraction)`` as the planner's stages start.
     """
     sc: ResolvedScenario | None = None
@@ -83,13 +88,26 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
     }
 
 
-def run_job(job: dict[str, Any], conn: Connection) -> None:
-    """Process entry point: run ``job`` (its kind's function) and send progress and the outcome.
+def worker_setup(server_pid: int | None, nice: int) -> None:
+    """Once in each job worker, before its first job: die with the service, and lower the priority.
 
-    The outcome carries the result document packed (``packed``, :func:`api.compact.pack_value`), not
-    its text.
+    Args:
+        server_pid: The service's pid (:func:`api.lifeline.die_with_parent`).
+        nice: Niceness added to the process (once: :func:`os.nice` adds up), so planning yields the CPU
+            to the service's event loop.
     """
-    die_with_parent(job.get("server_pid"))
+    die_with_parent(server_pid)
+    if nice:
+        os.nice(int(nice))
+
+
+def run_job(job: dict[str, Any], conn: Connection) -> None:
+    """Run one ``job`` in this worker (its kind's function) and send its progress and its outcome.
+
+    The outcome (always sent, last) carries the result document packed (``packed``,
+    :func:`api.compact.pack_value`), not its text; a bug in the job's function is a failed job with
+    reason ``internal_error``, and the worker takes the next job.
+    """
 
     def send(message: tuple[Any, ...]) -> None:
         try:
@@ -108,9 +126,6 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
 
     progress = Progress()
 
-    if job.get("nice"):
-        os.nice(int(job["nice"]))  # planning yields the CPU to the service's event loop
-
     try:
         outcome = kind_of(job.get("kind")).run()(job, progress)
     except Exception as exc:  # a bug in the planner: report it as a failed job, never hang
@@ -124,7 +139,6 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
     document = outcome.pop("document", None)
     outcome["packed"] = pack_value(document) if document is not None else None
     send(("done", outcome))
-    conn.close()
 
 
 # ---------------------------------------------------------------- files made on request (server side)
@@ -184,4 +198,4 @@ def _plot(sc: ResolvedScenario, doc: dict[str, Any], profile: DriveProfile) -> b
     )
 
 
-__all__ = ["plan_job", "plot_png", "profile_csv", "run_job"]
+__all__ = ["plan_job", "plot_png", "profile_csv", "run_job", "worker_setup"]

@@ -28,17 +28,16 @@ import multiprocessing
 import os
 import sys
 import tempfile
-import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
-from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
 
 from planner.core.exceptions import InvalidInput
+from planner.core.procpool import SINGLE_THREAD_ENV, WarmPool, Worker
 from planner.sweep.expand import SweepPlan
 from planner.sweep.results import Journal, TaskKey, make_row, write_tables
 from planner.sweep.spec import Limits
@@ -48,14 +47,6 @@ _LOG = logging.getLogger(__name__)
 
 #: Times a plan is submitted when its process dies without an outcome.
 MAX_ATTEMPTS = 2
-
-#: Thread pools of numerical libraries in each plan process: one thread (a plan is one core's work).
-SINGLE_THREAD_ENV = {
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "NUMBA_NUM_THREADS": "1",
-}
 
 #: Longest time limit of the warm-up plan [s] (it only has to touch every kernel once).
 WARMUP_TIME_LIMIT_S = 5.0
@@ -120,27 +111,9 @@ class Executor(Protocol):
         """Stop every process this executor started."""
 
 
-def _serve_plans(conn: Connection, plans: int) -> None:
-    """Body of one embedded worker process: plan tasks from the pipe, ``plans`` of them (0: no limit)."""
-    done = 0
-    while plans <= 0 or done < plans:
-        try:
-            task = conn.recv()
-        except (EOFError, OSError):  # the sweep ended (or the driver died): nothing more to plan
-            return
-        if task is None:
-            return
-        conn.send(run_task(task))
-        done += 1
-    conn.close()
-
-
-@dataclass
-class _Proc:
-    process: BaseProcess
-    conn: Connection
-    #: Plans this process may still take (``None``: no limit).
-    remaining: int | None
+def _plan_and_send(task: dict[str, Any], conn: Connection) -> None:
+    """An embedded worker's task: plan it, send the outcome (:class:`~planner.core.procpool.WarmPool`)."""
+    conn.send(run_task(task))
 
 
 #: Plans a reused embedded worker runs before it is replaced by a fresh one (bounds slow leaks).
@@ -155,7 +128,8 @@ class EmbeddedExecutor:
     one task at a time and writes the plan's profile file itself (see :func:`plan_outcome`), then takes
     the next task: it is reused for up to ``plans_per_process`` plans, then replaced. Reuse keeps what a
     plan builds from content (parsed meshes, collision geometry: caches keyed by content hash) and never
-    changes a result: each plan seeds its own random generators.
+    changes a result: each plan seeds its own random generators. The processes are a
+    :class:`~planner.core.procpool.WarmPool`, as the HTTP service's job workers.
 
     Isolation is the service's: a worker whose plan runs past its hard limit is killed (SIGKILL) and its
     plan recorded ``time_limit_exceeded``; a worker that dies without an outcome has its plan submitted
@@ -192,125 +166,62 @@ class EmbeddedExecutor:
                 json.dump(warm_task, fh)
             # Read by planner.sweep._preload when the forkserver starts (the first plan process).
             os.environ["CABINPLAN_SWEEP_WARMUP"] = self._warm_file
-        self._ctx = multiprocessing.get_context("forkserver")
-        self._ctx.set_forkserver_preload(["planner.sweep._preload"])
-        self._idle: deque[_Proc] = deque()
-        self._running: dict[int, _Proc] = {}
-        self._lock = threading.Lock()
-        self._want = threading.Event()
-        self._stopping = threading.Event()
-        for _ in range(self._target()):  # blocks until the forkserver has warmed up
-            self._idle.append(self._fork())
-        self._filler = threading.Thread(target=self._fill, name="cabinplan-sweep-fork", daemon=True)
-        self._filler.start()
-
-    def _target(self) -> int:
-        """Processes to keep idle.
-
-        Without reuse a fresh one per slot; with reuse one per slot in all (running ones included) plus
-        one spare, so that a killed worker is replaced at once.
-        """
-        if self.plans_per_process == 1:
-            return self.workers
-        return max(1, self.workers + 1 - len(self._running))
-
-    def _fork(self) -> _Proc:
-        parent, child = self._ctx.Pipe(duplex=True)
-        proc = self._ctx.Process(
-            target=_serve_plans,
-            args=(child, self.plans_per_process),
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["planner.sweep._preload"])
+        self._pool = WarmPool(
+            ctx,
+            _plan_and_send,
+            slots=self.workers,
+            tasks_per_process=self.plans_per_process,
             name="cabinplan-sweep-plan",
-            daemon=True,
         )
-        proc.start()
-        child.close()
-        return _Proc(proc, parent, self.plans_per_process or None)
+        self._running: dict[int, Worker] = {}
+        self._pool.start()  # blocks until the forkserver has warmed up
 
-    def _fill(self) -> None:
-        """Background thread: keep :meth:`_target` processes forked and waiting."""
-        while not self._stopping.is_set():
-            self._want.wait(0.5)
-            self._want.clear()
-            while not self._stopping.is_set():
-                with self._lock:
-                    if len(self._idle) >= self._target():
-                        break
-                proc = self._fork()
-                with self._lock:
-                    if self._stopping.is_set():
-                        proc.process.kill()
-                    self._idle.append(proc)
-
-    def _take(self) -> _Proc:
-        with self._lock:
-            proc = self._idle.popleft() if self._idle else None
-        self._want.set()
-        return proc if proc is not None else self._fork()
+    @property
+    def _idle(self) -> list[Worker]:
+        """The idle workers (tests read their pids)."""
+        return self._pool.idle()
 
     def submit(self, job: Job[Any]) -> None:
         """Hand the plan to an idle worker (forked now if none waits)."""
-        proc = self._take()
-        try:
-            proc.conn.send(job.task)
-        except (BrokenPipeError, OSError):  # the worker died while idle: use a fresh one
-            self._reap(proc, kill=True)
-            proc = self._fork()
-            proc.conn.send(job.task)
-        if proc.remaining is not None:
-            proc.remaining -= 1
+        worker = self._pool.send(job.task)
         job.started_at = time.monotonic()
-        job.handle = id(proc)
-        job.pid = proc.process.pid
-        with self._lock:
-            self._running[id(proc)] = proc
+        job.handle = id(worker)
+        job.pid = worker.pid
+        self._running[id(worker)] = worker
         if job.pid is not None:
             self.started[job.plan.sha256] = job.pid
 
-    def _reap(self, proc: _Proc, kill: bool = False) -> None:
-        if kill and proc.process.is_alive():
-            proc.process.kill()
-        proc.process.join(timeout=5.0)
-        proc.conn.close()
-
-    def _release(self, job: Job[Any]) -> _Proc | None:
+    def _release(self, job: Job[Any]) -> Worker:
         self.started.pop(job.plan.sha256, None)
-        with self._lock:
-            proc = self._running.pop(job.handle, None)
-        self._want.set()
-        return proc
+        return self._running.pop(job.handle)
 
     def poll(self, jobs: Sequence[Job[Any]], timeout_s: float) -> list[tuple[Job[Any], dict[str, Any]]]:
         """Outcomes received within ``timeout_s``; workers dead without one; plans past their limit."""
         by_handle = {j.handle: j for j in jobs}
-        procs = [self._running[h] for h in by_handle]
+        workers = [self._running[h] for h in by_handle]
         now = time.monotonic()
         deadlines = [j.started_at + j.hard_limit_s - now for j in jobs if j.started_at is not None]
-        handles: list[Any] = [p.conn for p in procs] + [p.process.sentinel for p in procs]
+        handles: list[Any] = [w.conn for w in workers] + [w.process.sentinel for w in workers]
         wait(handles, timeout=max(0.0, min([timeout_s, *deadlines])))
         out = []
-        for proc in procs:
-            job = by_handle[id(proc)]
+        for worker in workers:
+            job = by_handle[id(worker)]
             outcome: dict[str, Any] | None = None
             try:
-                if proc.conn.poll(0):
-                    outcome = proc.conn.recv()
+                if worker.conn.poll(0):
+                    outcome = worker.conn.recv()
             except (EOFError, OSError):
                 pass
             if outcome is not None:
-                self._release(job)
-                if proc.remaining is None or proc.remaining > 0:
-                    with self._lock:
-                        self._idle.appendleft(proc)  # warm: reused first
-                else:
-                    self._reap(proc)
-            elif not proc.process.is_alive():
-                self._release(job)
-                self._reap(proc)
-                code = proc.process.exitcode
+                self._pool.release(self._release(job))
+            elif not worker.process.is_alive():
+                code = worker.process.exitcode
+                self._pool.discard(self._release(job), died=True)
                 outcome = _failed(CRASHED, f"the plan process died without an outcome (exit code {code})")
             elif time.monotonic() > (job.started_at or now) + job.hard_limit_s:
-                self._release(job)
-                self._reap(proc, kill=True)
+                self._pool.discard(self._release(job))
                 outcome = killed_outcome(job)
             if outcome is not None:
                 out.append((job, outcome))
@@ -318,19 +229,8 @@ class EmbeddedExecutor:
 
     def close(self) -> None:
         """Kill every worker process."""
-        self._stopping.set()
-        self._want.set()
-        self._filler.join(timeout=10.0)
-        with self._lock:
-            procs = [*self._running.values(), *self._idle]
-            self._running.clear()
-            self._idle.clear()
-        for proc in procs:
-            if proc.process.is_alive():
-                proc.process.kill()
-        for proc in procs:
-            proc.process.join(timeout=5.0)
-            proc.conn.close()
+        self._running.clear()
+        self._pool.close()
         if self._warm_file is not None:
             Path(self._warm_file).unlink(missing_ok=True)
             if os.environ.get("CABINPLAN_SWEEP_WARMUP") == self._warm_file:

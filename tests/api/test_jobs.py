@@ -163,12 +163,14 @@ def test_a_failed_terminal_write_is_retried_and_the_process_reaped(tmp_path, mon
 
     from api.db import Job
     from api.jobs import _Running
+    from planner.core.procpool import Worker
 
     db, runner = _runner_with_job(tmp_path, status="running", owned=True, meshes={})
     process = mp.get_context("fork").Process(target=int)
     process.start()
     parent, _child = mp.Pipe()
-    job = _Running("j1", process, parent, deadline=time.monotonic() + 10, started=time.monotonic())
+    worker = Worker(process, parent, None)
+    job = _Running("j1", worker, deadline=time.monotonic() + 10, started=time.monotonic())
     real, fails = db.session, [2]
 
     @contextmanager
