@@ -11,8 +11,10 @@ validation gate: the gate report stored with each plan, and an independent re-ru
 In the same run, before the server starts, ``--workers`` in-process planners (one process each, warmed
 up on every scenario first, at the niceness of the service's job processes) plan the same list of plans
 the clients submit: plans a minute in process,
-next to the service's, and their ratio (the service's overhead: a job's process, its documents, the
-database and the polling). The load average is printed at the start and the end (a shared machine).
+next to the service's, and their ratio (the service's overhead: handing a job to a worker, its documents,
+the database and the polling), and the median job overhead (a job's run time minus its own
+``planning_time_s``). The load average is printed at the start and the end (a shared machine), and the
+resident memory of the service's processes after the run.
 
     python -m bench.load [--clients 20] [--workers 2]
 """
@@ -132,6 +134,30 @@ def in_process_rate(
     return 60.0 * n / wall, times
 
 
+def _group_rss(pgid: int) -> list[tuple[str, int]]:
+    """(role, resident set size [bytes]) of every process in the process group ``pgid`` (Linux).
+
+    Roles: ``server`` (the group leader), ``forkserver`` and ``helper`` (its children: the forkserver,
+    multiprocessing's resource tracker), ``worker`` (the forkserver's children).
+    """
+    procs = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            if int(fields[2]) != pgid:  # after the name: state, ppid, pgrp
+                continue
+            pages = int((stat.parent / "statm").read_text().split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        procs[int(stat.parent.name)] = (int(fields[1]), pages * os.sysconf("SC_PAGE_SIZE"))
+    roles = {pgid: "server"}
+    for p, (pp, _) in procs.items():
+        if pp == pgid:
+            cmd = Path(f"/proc/{p}/cmdline").read_bytes() if Path(f"/proc/{p}/cmdline").exists() else b""
+            roles[p] = "forkserver" if b"forkserver" in cmd else "helper"
+    return sorted((roles.get(p, "worker"), rss) for p, (_, rss) in procs.items())
+
+
 def _pct(values: list[float]) -> str:
     a = 1e3 * np.asarray(values)
     p50, p95 = np.percentile(a, 50), np.percentile(a, 95)
@@ -239,9 +265,13 @@ def main() -> None:
                 )
                 regate += bool(rep.status_code == 200 and rep.json()["passed"])
         by_name: dict[str, list[float]] = {}
+        overhead: list[float] = []
         for r in ok:
             d = r["doc"]
-            by_name.setdefault(d["scenario"]["name"], []).append(d["finished_at"] - d["started_at"])
+            run_s = d["finished_at"] - d["started_at"]
+            by_name.setdefault(d["scenario"]["name"], []).append(run_s)
+            overhead.append(run_s - float(d["result"]["report"]["planning_time_s"]))
+        members = _group_rss(proc.pid)
         rate = 60 * len(results) / wall
         load_end = os.getloadavg()
         print(f"clients {args.clients}, workers {args.workers}, scenarios {len(scenarios)} (round robin)")
@@ -257,6 +287,15 @@ def main() -> None:
                 f"  {name:<22} job run time median {np.median(ts):5.2f} s (n={len(ts)}); "
                 f"in process {np.median(ip):5.2f} s (n={len(ip)})"
             )
+        print(
+            f"  job overhead (run time, claim to stored outcome, minus the job's own planning_time_s): "
+            f"median {1e3 * np.median(overhead):.0f} ms, p95 {1e3 * np.percentile(overhead, 95):.0f} ms "
+            f"(n={len(overhead)})"
+        )
+        print(
+            "  service processes after the run (server, forkserver, job workers): "
+            + ", ".join(f"{name} {rss / 1e6:.0f} MB" for name, rss in members)
+        )
         failed = [
             (r["doc"]["scenario"]["name"], r["doc"]["reason"])
             for r in results
