@@ -205,6 +205,7 @@ class ProcessJobRunner:
             setup="api.worker:worker_setup",
             setup_args=(os.getpid(), self.settings.worker_nice),
             name="cabinplan-job-worker",
+            on_retire=lambda cause: self.metrics.workers_replaced.labels(cause=cause).inc(),
         )
 
     def worker_pids(self) -> list[int]:

@@ -45,9 +45,16 @@ class ServiceMetrics:
         )
         self.job_duration = Histogram(
             "cabinplan_job_duration_seconds",
-            "Wall-clock time of a planning job's process on this instance.",
+            "Wall-clock time of a planning job on this instance (its start to its outcome).",
             ["status"],
             buckets=JOB_DURATION_BUCKETS,
+            registry=r,
+        )
+        self.workers_replaced = Counter(
+            "cabinplan_job_workers_replaced",
+            "Job worker processes replaced by fresh ones, by cause: tasks (its job budget spent), rss (its "
+            "memory bound), killed (its job past the hard limit, cancelled or no longer ours), died.",
+            ["cause"],
             registry=r,
         )
         self.warmup_seconds = Gauge(

@@ -44,7 +44,7 @@ class Settings(BaseSettings):
         "job).",
     )
     worker_max_rss_bytes: int = Field(
-        2 << 30,
+        1 << 30,
         ge=64 << 20,
         description="A worker process whose resident memory exceeds this after a job is replaced by a fresh "
         "one.",

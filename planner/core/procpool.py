@@ -138,6 +138,8 @@ class WarmPool:
             module-level function or its name, as ``handle``.
         setup_args: Its arguments (picklable).
         name: Process name of the workers.
+        on_retire: Called with the cause each time a worker is retired (``tasks``, ``rss``, ``killed``,
+            ``died``; a metrics counter).
     """
 
     def __init__(
@@ -151,6 +153,7 @@ class WarmPool:
         setup: Callable[..., None] | str | None = None,
         setup_args: tuple[Any, ...] = (),
         name: str = "cabinplan-worker",
+        on_retire: Callable[[str], None] | None = None,
     ) -> None:
         self.ctx = ctx
         self.handle = handle
@@ -160,6 +163,7 @@ class WarmPool:
         self.setup = setup
         self.setup_args = setup_args
         self.name = name
+        self.on_retire = on_retire
         #: Workers retired so far, by cause: ``tasks`` (used up), ``rss`` (memory), ``killed``, ``died``.
         self.retired: dict[str, int] = {"tasks": 0, "rss": 0, "killed": 0, "died": 0}
         self._idle: deque[Worker] = deque()
@@ -328,6 +332,8 @@ class WarmPool:
     def _retire(self, worker: Worker, why: str) -> None:
         self.retired[why] = self.retired.get(why, 0) + 1
         self._reap(worker)
+        if self.on_retire is not None:
+            self.on_retire(why)
 
     @staticmethod
     def _reap(worker: Worker) -> None:

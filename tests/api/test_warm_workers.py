@@ -82,6 +82,8 @@ def test_a_worker_is_reused_plans_what_a_fresh_one_plans_and_is_recycled_after_i
     assert fourth[0] != pid and fourth[1] == 1  # recycled: a fresh worker took the fourth job
     assert _gone(pid)
     assert _runner(one)._pool.retired["tasks"] >= 1
+    metrics = one.client.get("/metrics").text
+    assert 'cabinplan_job_workers_replaced_total{cause="tasks"} 1.0' in metrics
 
 
 def _started(svc: Service, runner: ProcessJobRunner, body: dict[str, Any]) -> tuple[str, int]:
