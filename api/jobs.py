@@ -208,12 +208,6 @@ class ProcessJobRunner:
             on_retire=lambda cause: self.metrics.workers_replaced.labels(cause=cause).inc(),
         )
 
-    def worker_pids(self) -> list[int]:
-        """Process ids of the idle workers (most recently used first) and of the busy ones."""
-        with self._lock:
-            busy = [r.worker.pid for r in self._running.values()]
-        return [p for p in [*(w.pid for w in self._pool.idle()), *busy] if p is not None]
-
     # ----------------------------------------------------------------------- protocol
     def start(self) -> None:
         """Start the dispatcher thread (it warms the forkserver up first)."""
