@@ -27,17 +27,19 @@ re-derives and checks:
 ``approach``        (with an approach) the payload frame stays within 1 mm of the insertion line, with
                     the goal orientation (0.1 deg), from the pre-insertion pose to the goal;
 ``collision``       the polyline through the samples is certified to keep the requested clearance from the
-                    cabin (and the self-clearance between bodies): between consecutive samples, not only
-                    at them (:meth:`CollisionWorld.along`, :meth:`CollisionWorld.check_path` for the sag).
+                    cabin and the world's obstacles (and the self-clearance between bodies): between
+                    consecutive samples, not only at them (:meth:`CollisionWorld.along`,
+                    :meth:`CollisionWorld.check_path` for the sag).
 
 After the drive checks (:mod:`planner.gate.drive_checks`), the checks are :data:`CABIN8_CHECKS`, an ordered
 list of functions of (profile, context) -> Check. A failed check never stops the others: the report lists
 every failure with its worst value and where.
 
 The report's ``min_clearance_m`` is the smallest exact FCL distance of any body (payload included) to the
-cabin, or between two checked bodies, over *every* sample of the rigid robot (found by branch and bound on
-certified bounds, to within :data:`~planner.collision.along.CLEARANCE_TOL_M`; the value itself is the exact
-distance at ``min_clearance_at``), and ``min_clearance_bound_m`` a certified lower bound of it along the
+cabin or an obstacle (installed units, fixtures; allowed pairs apart), or between two checked bodies, over
+*every* sample of the rigid robot (found by branch and bound on certified bounds and swept hulls, to within
+:data:`~planner.collision.along.CLEARANCE_TOL_M`; the value itself is the exact distance at
+``min_clearance_at``), and ``min_clearance_bound_m`` a certified lower bound of it along the
 whole joint-space polyline, between samples included (:mod:`planner.collision.along`).
 """
 
@@ -48,8 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planner.collision.along import AlongReport, ClearanceAlong
-from planner.collision.reports import PathReport
+from planner.collision.along import ClearanceAlong
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
@@ -205,9 +206,10 @@ def approach_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
 def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
     """``collision``: the polyline through the samples keeps the clearance, rigid and sagging.
 
-    The rigid robot's polyline is certified in one batched pass (:meth:`CollisionWorld.along`; pieces the
-    bounds cannot cover are walked by the certified motion check), which also gives the report's
-    smallest distance (exact over every sample, certified between them); with a payload and stiffness
+    The rigid robot's polyline is certified in one batched pass (:meth:`CollisionWorld.along`: the cabin,
+    the robot's pairs and the world's obstacles; pieces the bounds cannot cover are walked by the certified
+    motion check), which also gives the report's smallest distance (exact over every sample, certified
+    between them, obstacles included); with a payload and stiffness
     data, the robot sagging under its predicted static deflection by :meth:`CollisionWorld.check_path`.
     """
     if ctx.q is None:
@@ -215,23 +217,12 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
     req, world, robot = ctx.req, ctx.world, ctx.robot
     along = world.along(ctx.q)
     rep = along.certify(req.clearance_m, world.self_clearance, req.motion_margin_m)
-    if world.cabin is not None:
+    if world.cabin is not None or world.obstacles is not None:
         ctx.clearance = along.clearance()
-    failed: AlongReport | PathReport = rep
-    if rep.valid and world.obstacles is not None:
-        # The batched bounds cover the cabin and the robot's pairs only: the obstacles (installed units,
-        # fixtures) are certified by the motion walk over every piece of the polyline.
-        failed = world.check_path(
-            ctx.q, req.clearance_m, req.motion_margin_m, max_run=GATE_MAX_RUN, max_extra_m=GATE_MAX_EXTRA_M
-        )
-    if not failed.valid:
-        what = "; ".join(c.detail for c in failed.contacts) or "not certified"
+    if not rep.valid:
+        what = "; ".join(c.detail for c in rep.contacts) or "not certified"
         return Check(
-            "collision",
-            False,
-            f"between samples {failed.first_bad} and later: {what}",
-            None,
-            failed.first_bad,
+            "collision", False, f"between samples {rep.first_bad} and later: {what}", None, rep.first_bad
         )
     done = (
         f"certified clearance >= {req.clearance_m} m along the whole polyline ({rep.exact_queries} exact "
