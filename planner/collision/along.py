@@ -489,6 +489,7 @@ class AlongPath:
             if len(opn) == 0:
                 continue
             i, j = i + int(opn[0]), i + int(opn[-1])
+            opn = opn - opn[0]  # relative to the trimmed run
             n_run = j - i + 1
             if n_run >= MIN_SWEPT_RUN:
                 if (t, i, j) not in tried and budget > 0:
