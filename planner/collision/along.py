@@ -74,6 +74,8 @@ MAX_EXACT_QUERIES = 300
 #: Runs of open samples at least this long are bounded by one swept hull (:mod:`.sweep`) before they are
 #: halved; shorter runs sample by sample (a probe costs ~10 us, a hull ~250 us).
 MIN_SWEPT_RUN = 8
+#: Samples whose fine obstacle bounds the certificate evaluates at once where it needs one.
+FINE_BLOCK = 64
 #: Collision probes the figure may spend (~10 us each).
 MAX_PROBES = 20_000
 #: The figure's bounds are evaluated at every this-many-th sample up front (the rest on demand).
@@ -219,12 +221,16 @@ class AlongPath:
         self._reach_k = np.ascontiguousarray(self.reach[:, :nk])
         self._cum_k = np.ascontiguousarray(self.cum[:, :nk])
         if obstacles is not None and self.obstacle_tasks:
-            # Every sample's obstacle bounds at once (a few boxes: cheaper than bounds on demand).
-            lb = obstacles.lower_bounds_batch(poses, allowed_too=bool(allowed))
+            # Every sample's coarse obstacle bounds at once (bounding spheres against bounding boxes); the
+            # fine sphere covers on demand (state SPREAD until then, as the kernel tasks' bounds).
+            lb = obstacles.coarse_bounds_batch(poses, allowed_too=bool(allowed))
             b_idx = np.array([b for b, _ in self.obstacle_tasks])
             o_idx = np.array([o for _, o in self.obstacle_tasks])
             self.lower[:, nk:] = lb[:, b_idx, o_idx]
-            self.state[:, nk:] = BOUND
+            #: Each body's obstacle task columns and their obstacles: (columns, obstacle indices) by body.
+            self._body_tasks = {
+                b: (nk + np.flatnonzero(b_idx == b), o_idx[b_idx == b]) for b in np.unique(b_idx).tolist()
+            }
 
     # ---------------------------------------------------------------- bounds
     def _propagate(self, cols: IntArray) -> None:
@@ -243,6 +249,17 @@ class AlongPath:
         fresh = state == SPREAD
         self.lower[rows, :nk] = np.where(fresh, np.maximum(lower, values), lower)
         self.state[rows, :nk] = np.where(fresh, BOUND, state)
+
+    def _obstacle_bounds(self, rows: IntArray, t: int) -> None:
+        """Evaluate the fine obstacle bounds of task t's body at samples ``rows`` (all its obstacle tasks)."""
+        assert self.obstacles is not None
+        b = self.obstacle_tasks[t - self.n_kernel][0]
+        cols, obs = self._body_tasks[b]
+        fine = self.obstacles.fine_bounds_batch(self.poses[rows, b], b)[:, obs]  # (n, tasks of b)
+        lower, state = self.lower[np.ix_(rows, cols)], self.state[np.ix_(rows, cols)]
+        fresh = state == SPREAD
+        self.lower[np.ix_(rows, cols)] = np.where(fresh, np.maximum(lower, fine), lower)
+        self.state[np.ix_(rows, cols)] = np.where(fresh, BOUND, state)
 
     def task_name(self, t: int) -> tuple[str, str]:
         """(body, "cabin"), (body a, body b) or (body, obstacle) of task t."""
@@ -405,6 +422,10 @@ class AlongPath:
             if not bad.any():
                 return
             k += int(np.argmax(bad))
+            if st[k] == SPREAD or st[k + 1] == SPREAD:  # fine bounds for a block of samples at once
+                block = np.arange(k, min(k + FINE_BLOCK, self.n))
+                self._obstacle_bounds(block[st[block] == SPREAD].astype(np.int64), t)
+                continue
             s = -1
             for level in (PROBED, EXACT):
                 if st[k] < level:
@@ -462,10 +483,11 @@ class AlongPath:
         exact = (state == EXACT) & sel[None, :]
         if not exact.any():
             masked = np.where(sel[None, :], lower, np.inf)
-            k, t = np.unravel_index(int(np.argmin(masked)), lower.shape)
-            self.exact_at(int(k), int(t))
+            k0, t0 = np.unravel_index(int(np.argmin(masked)), lower.shape)
+            self.exact_at(int(k0), int(t0))
             exact = (state == EXACT) & sel[None, :]
-        best_k, best_t = np.unravel_index(int(np.argmin(np.where(exact, lower, np.inf))), lower.shape)
+        flat_best = int(np.argmin(np.where(exact, lower, np.inf)))
+        best_k, best_t = flat_best // lower.shape[1], flat_best % lower.shape[1]
         best = float(lower[best_k, best_t])
         budget, probes = max_exact, MAX_PROBES
         futile = np.zeros(lower.shape[1], dtype=bool)
@@ -514,12 +536,14 @@ class AlongPath:
                 for a, b in ((i, m), (m + 1, j)):
                     heapq.heappush(heap, (float(np.min(lower[a : b + 1, t])), t, a, b))
                 continue
-            if t < self.n_kernel:
-                rows = i + opn[state[i + opn, t] == SPREAD]
-                if len(rows):  # the samples' own bounds first (one call for every kernel task)
+            rows = i + opn[state[i + opn, t] == SPREAD]
+            if len(rows):  # the samples' own bounds first (one call for every kernel task / the body)
+                if t < self.n_kernel:
                     self._bounds(rows.astype(np.int64))
-                    heapq.heappush(heap, (float(np.min(lower[i : j + 1, t])), t, i, j))
-                    continue
+                else:
+                    self._obstacle_bounds(rows.astype(np.int64), t)
+                heapq.heappush(heap, (float(np.min(lower[i : j + 1, t])), t, i, j))
+                continue
             # A short run: sample by sample, smallest bound first.
             ks = i + opn[np.argsort(lower[i + opn, t], kind="stable")]
             for k in ks.tolist():
@@ -544,9 +568,9 @@ class AlongPath:
                 self._spread(k, t, d, floor_now())
         remaining = np.where((state != EXACT) & sel[None, :], lower, np.inf)
         reached = max(tolerance_m, best - float(np.min(remaining)))
-        a, b = lower[:-1][:, cols], lower[1:][:, cols]
+        lo_a, lo_b = lower[:-1][:, cols], lower[1:][:, cols]
         reach = self.reach[:, cols]
-        between = np.maximum(0.5 * (a + b - reach), np.maximum(a, b) - reach)
+        between = np.maximum(0.5 * (lo_a + lo_b - reach), np.maximum(lo_a, lo_b) - reach)
         kb = int(np.argmin(np.min(between, axis=1)))
         bound = min(float(np.min(between)), best)
         return ClearanceAlong(

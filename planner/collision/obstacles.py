@@ -223,6 +223,7 @@ class ObstacleSet:
         self._R_bound = np.array([T[:3, :3] for T, _ in bounds]).reshape(n_o, 3, 3)
         self._p_bound = np.array([T[:3, 3] for T, _ in bounds]).reshape(n_o, 3)
         self._half = np.array([h for _, h in bounds]).reshape(n_o, 3)
+        self._origin_local = np.einsum("oi,oij->oj", self._p_bound, self._R_bound)  # p_o R_o (O, 3)
         self._objects = [o.collision_object() for o in obstacles]
         self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
         # The bodies' fine sphere covers: box bodies by local centre, capsules by a fraction of the length.
@@ -255,10 +256,10 @@ class ObstacleSet:
     # ---------------------------------------------------------------- bounds
     def _box_distance(self, points: Array) -> Array:
         """Distances (P, O) of points (P, 3) to every obstacle's bounding box (0 inside)."""
-        rel = points[:, None, :] - self._p_bound[None, :, :]  # (P, O, 3)
-        local = np.einsum("poi,oij->poj", rel, self._R_bound)  # in the box axes
-        outside = np.maximum(np.abs(local) - self._half[None, :, :], 0.0)
-        return np.sqrt(np.sum(outside * outside, axis=2))
+        # In each box's axes: (x - p_o) R_o = x R_o - p_o R_o, one batched product for all boxes.
+        local = np.matmul(points[None, :, :], self._R_bound) - self._origin_local[:, None, :]  # (O, P, 3)
+        outside = np.maximum(np.abs(local) - self._half[:, None, :], 0.0)
+        return np.sqrt(np.sum(outside * outside, axis=2)).T
 
     def lower_bounds(self, flat: Array, threshold: float | Array = np.inf) -> Array:
         """Certified lower bounds (B, O) of each body's distance to each obstacle at one state.
@@ -293,37 +294,37 @@ class ObstacleSet:
         refined = np.maximum(out, fine)  # both bound the distance from below: keep the larger
         return np.where(self.active, refined, np.inf)
 
-    def lower_bounds_batch(self, poses: Array, threshold: float = 0.1, allowed_too: bool = False) -> Array:
-        """Certified lower bounds (N, B, O) of each body's distance to each obstacle at N states.
+    def coarse_bounds_batch(self, poses: Array, allowed_too: bool = False) -> Array:
+        """Certified lower bounds (N, B, O) of each body's distance to each obstacle at N states, coarse.
 
-        :meth:`lower_bounds` over a sampled path in one vectorised pass: ``poses`` (N, B, 13); the bounding
-        spheres everywhere, each body's fine sphere cover at the samples where one of its pairs is not above
-        ``threshold`` [m]. Allowed pairs are +inf unless ``allowed_too`` (their bounds, for reports).
+        ``poses`` (N, B, 13): each body's bounding sphere (centre, half-diagonal or half-length + radius)
+        against each obstacle's bounding box, in one vectorised pass. Allowed pairs are +inf unless
+        ``allowed_too`` (their bounds, for reports). :meth:`fine_bounds_batch` refines them.
         """
         n, n_b = poses.shape[0], poses.shape[1]
         n_o = len(self.obstacles)
-        p = poses[:, :, 9:12]
         length = poses[:, :, 12]
         capsule_r = self._capsule_r[None, :] + 0.5 * length
         radius = np.where(self._capsule[None, :], capsule_r, self._box_r[None, :])
-        out = self._box_distance(p.reshape(-1, 3)).reshape(n, n_b, n_o) - radius[:, :, None]
+        out = self._box_distance(poses[:, :, 9:12].reshape(-1, 3)).reshape(n, n_b, n_o) - radius[:, :, None]
         active = np.ones_like(self.active) if allowed_too else self.active
-        out = np.where(active[None], out, np.inf)
-        for b in range(n_b):
-            rows = np.flatnonzero(np.any(out[:, b, :] <= threshold, axis=1))
-            if len(rows) == 0:
-                continue
-            sel = np.flatnonzero(self._sphere_body == b)
-            R = poses[rows, b, :9].reshape(-1, 3, 3).transpose(0, 2, 1)  # (n', 3, 3)
-            centres = (
-                p[rows, b][:, None, :]
-                + np.einsum("nij,sj->nsi", R, self._local[sel])
-                + R[:, None, :, 2] * (self._frac[sel][None, :] * length[rows, b][:, None])[..., None]
-            )  # (n', S_b, 3)
-            d = self._box_distance(centres.reshape(-1, 3)).reshape(len(rows), len(sel), n_o)
-            fine = np.min(d - self._radii[sel][None, :, None], axis=1)  # (n', O)
-            out[rows, b] = np.where(active[b][None], np.maximum(out[rows, b], fine), np.inf)
-        return out
+        return np.where(active[None], out, np.inf)
+
+    def fine_bounds_batch(self, poses_b: Array, b: int) -> Array:
+        """Certified lower bounds (n, O) of body b's distance to each obstacle, from its fine sphere cover.
+
+        ``poses_b`` (n, 13) are body b's poses: the smallest of its spheres' distances to the obstacle's
+        bounding box minus their radii (every pair, allowed ones too).
+        """
+        sel = np.flatnonzero(self._sphere_body == b)
+        Rt = poses_b[:, :9].reshape(-1, 3, 3)  # R^T (column-major storage), (n, 3, 3)
+        centres = (
+            poses_b[:, None, 9:12]
+            + np.matmul(self._local[sel][None, :, :], Rt)  # (R local)^T = local^T R^T
+            + Rt[:, None, 2, :] * (self._frac[sel][None, :] * poses_b[:, 12][:, None])[..., None]
+        )  # (n, S_b, 3)
+        d = self._box_distance(centres.reshape(-1, 3)).reshape(len(poses_b), len(sel), len(self.obstacles))
+        return np.min(d - self._radii[sel][None, :, None], axis=1)
 
     def mesh_object(self, o: int) -> fcl.CollisionObject:
         """Obstacle o as a posed FCL triangle mesh (the target of exact distances and swept hulls)."""

@@ -203,7 +203,7 @@ def approach_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     return _approach_check(ctx.T_pay, req, ctx.T_line_goal)
 
 
-def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
+def collision_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     """``collision``: the polyline through the samples keeps the clearance, rigid and sagging.
 
     The rigid robot's polyline is certified in one batched pass (:meth:`CollisionWorld.along`: the cabin,
@@ -211,7 +211,11 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
     motion check), which also gives the report's smallest distance (exact over every sample, certified
     between them, obstacles included); with a payload and stiffness
     data, the robot sagging under its predicted static deflection by :meth:`CollisionWorld.check_path`.
+    Not applicable (None) where the requirements defer it (``req.collision``: a cycle's legs, which the
+    cycle gate certifies in the same worlds).
     """
+    if not ctx.req.collision:  # a cycle's leg: the cycle gate certifies these samples in this world
+        return None
     if ctx.q is None:
         return Check("collision", False, NOT_ASSEMBLED)
     req, world, robot = ctx.req, ctx.world, ctx.robot
@@ -291,8 +295,9 @@ def validate_profile(
         if result is not None:
             checks.append(result)
     c = ctx.clearance
-    if c is None:
-        return GateReport(tuple(checks), n, float("inf") if ctx.q is not None else float("nan"), peaks)
+    if c is None:  # no cabin nor obstacle (inf), or no figure measured here (nan)
+        measured = ctx.q is not None and req.collision
+        return GateReport(tuple(checks), n, float("inf") if measured else float("nan"), peaks)
     where = {
         "t_s": float(profile.t[c.sample]),
         "sample": c.sample,

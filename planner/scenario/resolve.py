@@ -68,6 +68,10 @@ class ResolvedScenario:
             compared by clearance like the cabin (:mod:`planner.collision.obstacles`); () for a scenario.
         allowed_pairs: ``(body, obstacle)`` pairs this plan may bring within the clearance (a cycle's
             grasp and release lines, :mod:`planner.task`); empty for a scenario.
+        gate_collision: Whether the plan's own gate certifies the clearance (its ``collision`` check and
+            figure). False only for a cycle's legs inside :func:`planner.task.cycle.plan_cycle`, whose
+            cycle gate certifies the same samples in the same world, with the same clearance and margin
+            (:func:`planner.gate.cycle.validate_cycle`); True for every scenario a user gives.
     """
 
     spec: Scenario
@@ -87,6 +91,7 @@ class ResolvedScenario:
     scenario_sha256: str
     obstacles: tuple[Obstacle, ...] = ()
     allowed_pairs: frozenset[tuple[str, str]] = frozenset()
+    gate_collision: bool = True
 
     def world(self) -> CollisionWorld:
         """The collision world of this scenario: robot, payload, cabin and its obstacles."""

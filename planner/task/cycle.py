@@ -27,6 +27,7 @@ period), and :func:`planner.gate.cycle.validate_cycle` certifies the whole of it
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -212,13 +213,13 @@ def plan_cycle(
     report_progress("pre_grasp", 0.1)
     with _in_leg("pre_grasp"):
         res = plan_scenario(
-            leg_scenario(cyc, leg("pre_grasp"), cyc.park_q, goal_q=q_pre), None, timing, preset
+            _leg_of_cycle(cyc, leg("pre_grasp"), cyc.park_q, goal_q=q_pre), None, timing, preset
         )
     pieces.append(_Piece(leg("pre_grasp"), q_pre, res.profile, report=_leg_report(res)))
 
     with _in_leg("grasp_line"):
         line_ctx = PlanContext.build(
-            leg_scenario(cyc, leg("grasp_line"), q_pre, goal_q=q_grasp), None, timing, preset
+            _leg_of_cycle(cyc, leg("grasp_line"), q_pre, goal_q=q_grasp), None, timing, preset
         )
         line_ctx.report["grasp"] = grasp_ctx.report.get("grasp", {})
         pieces.append(_line_leg(line_ctx, leg("grasp_line"), q_pre, q_grasp))
@@ -227,13 +228,13 @@ def plan_cycle(
     report_progress("lift_off", 0.3)
     with _in_leg("lift_off"):
         lift_ctx = PlanContext.build(
-            leg_scenario(cyc, leg("lift_off"), q_grasp, goal_q=q_lift), None, timing, preset
+            _leg_of_cycle(cyc, leg("lift_off"), q_grasp, goal_q=q_lift), None, timing, preset
         )
         pieces.append(_line_leg(lift_ctx, leg("lift_off"), q_grasp, q_lift))
 
     report_progress("transit", 0.4)
     with _in_leg("transit"):
-        sc = leg_scenario(
+        sc = _leg_of_cycle(
             cyc, leg("transit"), q_lift, T_base_unit_goal=cyc.T_base_unit_bay, approach=cyc.insertion_line
         )
         res = plan_scenario(sc, None, timing, preset)
@@ -249,7 +250,7 @@ def plan_cycle(
     q_retract = line_joints(q_release, cyc.retract_line.offset)
     with _in_leg("retract"):
         retract_ctx = PlanContext.build(
-            leg_scenario(cyc, leg("retract"), q_release, goal_q=q_retract), None, timing, preset
+            _leg_of_cycle(cyc, leg("retract"), q_release, goal_q=q_retract), None, timing, preset
         )
         _check_release(cyc, retract_ctx, q_release)
         _check_line_end(cyc, leg("park"), q_retract, "retract", "retract.distance")
@@ -258,7 +259,7 @@ def plan_cycle(
     report_progress("park", 0.8)
     with _in_leg("park"):
         res = plan_scenario(
-            leg_scenario(cyc, leg("park"), q_retract, goal_q=cyc.park_q), None, timing, preset
+            _leg_of_cycle(cyc, leg("park"), q_retract, goal_q=cyc.park_q), None, timing, preset
         )
     pieces.append(_Piece(leg("park"), cyc.park_q, res.profile, report=_leg_report(res)))
 
@@ -281,6 +282,17 @@ def plan_cycle(
 
 
 # ------------------------------------------------------------------------------------------------ legs
+def _leg_of_cycle(cyc: ResolvedCycle, state: LegState, start_q: Array, **goal: Any) -> ResolvedScenario:
+    """:func:`leg_scenario` for planning inside this cycle: its gate leaves the clearance to the cycle gate.
+
+    The cycle gate (:func:`~planner.gate.cycle.validate_cycle`) certifies every leg's samples -- the very
+    samples of the leg's plan, joined unchanged -- in the same world (:func:`leg_world`: the leg's payload,
+    obstacles and allowed pair), with the same clearance and margin, rigid and sagging; the leg's own gate
+    would certify them twice. A leg that fails there fails the cycle (never a weaker certificate).
+    """
+    return dataclasses.replace(leg_scenario(cyc, state, start_q, **goal), gate_collision=False)
+
+
 def _leg_report(res: PlanResult) -> dict[str, Any]:
     keep = ("planning_time_s", "legs", "leg_durations_s", "approach", "compensation", "duration")
     return {k: v for k, v in res.report.items() if k in keep}
