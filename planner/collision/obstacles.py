@@ -270,29 +270,12 @@ class ObstacleSet:
         (B, 1)) is refined with the body's fine sphere cover (the smallest of its spheres' bounds).
         Allowed pairs are +inf.
         """
-        R = flat[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1)  # (B, 3, 3)
-        p = flat[:, 9:12]
-        length = flat[:, 12]
-        radius = np.where(self._capsule, self._capsule_r + 0.5 * length, self._box_r)
-        out = self._box_distance(p) - radius[:, None]
-        out = np.where(self.active, out, np.inf)
+        out = self.coarse_bounds_batch(flat[None])[0]
         near = np.flatnonzero(np.any(out <= threshold, axis=1))
-        if len(near) == 0:
-            return out
-        sel = np.flatnonzero(np.isin(self._sphere_body, near))
-        b = self._sphere_body[sel]
-        Rb = R[b]
-        centres = (
-            p[b]
-            + np.einsum("sij,sj->si", Rb, self._local[sel])
-            + Rb[:, :, 2] * (self._frac[sel] * length[b])[:, None]
-        )
-        d = self._box_distance(centres) - self._radii[sel, None]  # (S', O)
-        fine = np.full(self.active.shape, -np.inf)
-        fine[near] = np.inf
-        np.minimum.at(fine, b, d)
-        refined = np.maximum(out, fine)  # both bound the distance from below: keep the larger
-        return np.where(self.active, refined, np.inf)
+        for b in near.tolist():  # both bound the distance from below: keep the larger
+            fine = self.fine_bounds_batch(flat[b][None], b)[0]
+            out[b] = np.where(self.active[b], np.maximum(out[b], fine), np.inf)
+        return out
 
     def coarse_bounds_batch(self, poses: Array, allowed_too: bool = False) -> Array:
         """Certified lower bounds (N, B, O) of each body's distance to each obstacle at N states, coarse.

@@ -409,7 +409,9 @@ def deflected_joints(
 
     n = len(q)
     idx = deflection_sample_indices(n)
-    x = stiffness_model(robot).deflection_along(q[idx], payload, T_tool_payload)
+    # Each distinct configuration once (a dwell repeats one): the same inputs give the same deflection.
+    distinct, back = np.unique(q[idx], axis=0, return_inverse=True)
+    x = stiffness_model(robot).deflection_along(distinct, payload, T_tool_payload)[back.ravel()]
     T_pay = robot.fk_batch(q[idx]) @ T_tool_payload
     T_payload_tool = np.linalg.inv(T_tool_payload)
     T_def = T_pay.copy()  # the payload frames displaced by their small twists (as deflected_pose, batched)
