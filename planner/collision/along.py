@@ -530,9 +530,9 @@ class AlongPath:
                         if d < best:
                             best, best_k, best_t = d, k, t
                         self._spread(k, t, d, floor_now())
-                    heapq.heappush(heap, (float(np.min(lower[i : j + 1, t])), t, i, j))
-                    continue
-                m = (i + j) // 2
+                    if not np.any((seg < floor_now()) & (state[i : j + 1, t] != EXACT)):
+                        continue
+                m = (i + j) // 2  # what is still open, in halves (each trimmed to its open samples)
                 for a, b in ((i, m), (m + 1, j)):
                     heapq.heappush(heap, (float(np.min(lower[a : b + 1, t])), t, a, b))
                 continue
