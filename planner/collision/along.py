@@ -74,6 +74,9 @@ MAX_EXACT_QUERIES = 300
 #: Runs of open samples at least this long are bounded by one swept hull (:mod:`.sweep`) before they are
 #: halved; shorter runs sample by sample (a probe costs ~10 us, a hull ~250 us).
 MIN_SWEPT_RUN = 8
+#: The longest window [samples] one swept hull covers in the certificate (a hull of a long curved run is
+#: loose; a failed one costs a query for nothing).
+SWEPT_WINDOW_MAX = 512
 #: Samples whose fine obstacle bounds the certificate evaluates at once where it needs one.
 FINE_BLOCK = 64
 #: Collision probes the figure may spend (~10 us each).
@@ -197,6 +200,10 @@ class AlongPath:
         #: Swept-hull queries of the figure (:mod:`.sweep`), and each task's body vertices (N, V, 3) for them.
         self.swept_queries = 0
         self._verts: dict[int, Array] = {}
+        #: The certificate's swept windows: each task's window length, and the sample before which a failed
+        #: window is not tried again.
+        self._window: dict[int, int] = {}
+        self._no_sweep: dict[int, int] = {}
         self.probes_used = 0
         # Reach along each piece: the slope bound of the whole path (every piece's ratio stays below the
         # largest sample ratio plus the largest deviation of any piece), as the motion check computes it.
@@ -385,14 +392,20 @@ class AlongPath:
         sk = np.ascontiguousarray(self.state[:, :nk])
         ci = np.zeros(CW_SIZE, dtype=np.int64)
         ci[CW_PENDING] = -1
-        k_ = self._kernels
-        args = (self._data, self._threshold, self._cum_k, self._reach_k, lk, sk, left)
-        while k_.cover_walk(ci, need[:nk], self.n_cabin, self.poses, *args) == COVER_EXACT:
+        need_k = np.ascontiguousarray(need[:nk])
+        d = self._data
+        args = (self._threshold, self._cum_k, self._reach_k, lk, sk, left)
+        code = self._kernels.cover_walk(ci, need_k, self.n_cabin, self.poses, d, *args)  # arguments checked
+        # The walk resumes on the same arrays (checked above, only written in place): straight to the entry.
+        walk = self._kernels.module.cover_walk
+        while code == COVER_EXACT:
             k, t = int(ci[CW_K]), int(ci[CW_TASK])
             if sk[k, t] < PROBED:
-                self.probe_at(k, t, float(need[t]), arrays=(lk, sk))
+                if not self._swept_cover(k, t, float(need[t]), lk, sk):
+                    self.probe_at(k, t, float(need[t]), arrays=(lk, sk))
             else:
                 self.exact_at(k, t, arrays=(lk, sk))
+            code = walk(ci, need_k, self.n_cabin, self.poses, d.fbuf, d.ibuf, d.grid, *args)
         if n_ob:
             self.lower[:, :nk] = lk
             self.state[:, :nk] = sk
@@ -405,6 +418,30 @@ class AlongPath:
             if not rep.valid:
                 return AlongReport(False, self.queries, walked, k, rep.contacts)
         return AlongReport(True, self.queries, walked)
+
+    def _swept_cover(self, k: int, t: int, need: float, lower: Array, state: IntArray) -> bool:
+        """Cover task t's pieces from sample k on by one swept-hull bound (:mod:`.sweep`), if it can.
+
+        Over the window k..j (its length adapts: doubled after a success, halved after a failure, from
+        :data:`MIN_SWEPT_RUN` to :data:`SWEPT_WINDOW_MAX` samples), the swept bound v is a certified lower
+        bound of every sample's distance; when v - need >= D_i / 2 for every piece i of the window, each is
+        covered (the cover's test, s_i + s_{i+1} >= D_i), and the window's entries are raised to v. A failed
+        window is not tried again from a sample inside it. Returns whether the window was covered.
+        """
+        w = self._window.get(t, MIN_SWEPT_RUN * 4)
+        j = min(self.n - 1, k + w - 1)
+        if j - k + 1 < MIN_SWEPT_RUN or k < self._no_sweep.get(t, 0):
+            return False
+        v = self.swept_at(k, j, t)
+        if v - need >= 0.5 * float(np.max(self.reach[k:j, t])):
+            seg, st = lower[k : j + 1, t], state[k : j + 1, t]
+            np.maximum(seg, v, out=seg)
+            st[st == SPREAD] = BOUND
+            self._window[t] = min(2 * w, SWEPT_WINDOW_MAX)
+            return True
+        self._window[t] = max(w // 2, MIN_SWEPT_RUN)
+        self._no_sweep[t] = j + 1
+        return False
 
     def _cover_column(self, t: int, need: float, left: BoolArray) -> None:
         """:func:`~planner.collision.kernels.along.cover_walk` for one task whose bounds are all evaluated.
@@ -439,7 +476,8 @@ class AlongPath:
                 k += 1
                 continue
             if st[s] < PROBED:
-                self.probe_at(s, t, need)
+                if not self._swept_cover(s, t, need, self.lower, self.state):
+                    self.probe_at(s, t, need)
             else:
                 self.exact_at(s, t)
             self._spread(s, t, float(col[s]), need)
