@@ -60,7 +60,7 @@ from planner.collision.motion import LIMIT_STEP
 from planner.collision.obstacles import ObstacleSet
 from planner.collision.probes import Probes
 from planner.collision.reports import BodyState, Contact, MotionReport, limit_contacts
-from planner.collision.sweep import body_vertices, relative_poses, shape_object, swept_bound
+from planner.collision.sweep import body_vertices, pose_steps, relative_poses, shape_object, swept_bound
 from planner.core.types import Array, BoolArray, IntArray
 from planner.robots.geometry import CollisionModel
 
@@ -222,8 +222,19 @@ class AlongPath:
             cols.append(rho[[b for b, _ in self.obstacle_tasks]])
         #: Reach (N - 1, T): how far any point of a task's bodies (pairs: relative) moves along each piece.
         self.reach = np.ascontiguousarray(dq @ np.concatenate(cols, axis=0).T)
-        #: Cumulative reach (N, T).
-        self.cum = np.ascontiguousarray(np.vstack([np.zeros((1, n_tasks)), np.cumsum(self.reach, axis=0)]))
+        # From sample to sample the bodies' vertices move exactly this far (a pair: both bodies' sum), often
+        # far less than the reach bound, which holds between samples too.
+        step = pose_steps(poses, bodies.shapes)  # (N - 1, B)
+        a_idx = np.array([a for a, _ in bodies.pairs], dtype=np.int64)
+        b_idx = np.array([b for _, b in bodies.pairs], dtype=np.int64)
+        steps = [step, step[:, a_idx] + step[:, b_idx]] if has_cabin else [step[:, a_idx] + step[:, b_idx]]
+        if self.obstacle_tasks:
+            steps.append(step[:, [b for b, _ in self.obstacle_tasks]])
+        #: Cumulative sample-to-sample bound (N, T): |d_t(q_j) - d_t(q_k)| <= |cum[j, t] - cum[k, t]|, each
+        #: step the smaller of the vertices' displacement and the piece's reach.
+        self.cum = np.ascontiguousarray(
+            np.vstack([np.zeros((1, n_tasks)), np.cumsum(np.minimum(self.reach, np.hstack(steps)), axis=0)])
+        )
         nk = self.n_kernel
         self._reach_k = np.ascontiguousarray(self.reach[:, :nk])
         self._cum_k = np.ascontiguousarray(self.cum[:, :nk])
