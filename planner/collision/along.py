@@ -435,24 +435,30 @@ class AlongPath:
 
         Over the window k..j (its length adapts: doubled after a success, halved after a failure, from
         :data:`MIN_SWEPT_RUN` to :data:`SWEPT_WINDOW_MAX` samples), the swept bound v is a certified lower
-        bound of every sample's distance; when v - need >= D_i / 2 for every piece i of the window, each is
-        covered (the cover's test, s_i + s_{i+1} >= D_i), and the window's entries are raised to v. A failed
-        window is not tried again from a sample inside it. Returns whether the window was covered.
+        bound of every sample's distance: the window's entries are raised to it; when v - need >= D_i / 2 for
+        every piece i of the window, each is covered (the cover's test, s_i + s_{i+1} >= D_i). A window that
+        does not cover is halved at once; when even the shortest fails, no window is tried again from a
+        sample inside it. Returns whether the window from k was covered.
         """
         w = self._window.get(t, MIN_SWEPT_RUN * 4)
-        j = min(self.n - 1, k + w - 1)
-        if j - k + 1 < MIN_SWEPT_RUN or k < self._no_sweep.get(t, 0):
+        if k < self._no_sweep.get(t, 0):
             return False
-        v = self.swept_at(k, j, t)
-        if v - need >= 0.5 * float(np.max(self.reach[k:j, t])):
+        while True:
+            j = min(self.n - 1, k + w - 1)
+            if j - k + 1 < MIN_SWEPT_RUN:
+                return False
+            v = self.swept_at(k, j, t)
             seg, st = lower[k : j + 1, t], state[k : j + 1, t]
-            np.maximum(seg, v, out=seg)
-            st[st == SPREAD] = BOUND
-            self._window[t] = min(2 * w, SWEPT_WINDOW_MAX)
-            return True
-        self._window[t] = max(w // 2, MIN_SWEPT_RUN)
-        self._no_sweep[t] = j + 1
-        return False
+            np.maximum(seg, v, out=seg)  # a certified bound of every sample of the window, whatever it proves
+            if v - need >= 0.5 * float(np.max(self.reach[k:j, t])):
+                st[st == SPREAD] = BOUND
+                self._window[t] = min(2 * w, SWEPT_WINDOW_MAX)
+                return True
+            if w <= MIN_SWEPT_RUN:  # not even the shortest window: the probes, sample by sample, to its end
+                self._window[t] = MIN_SWEPT_RUN
+                self._no_sweep[t] = j + 1
+                return False
+            w //= 2
 
     def _cover_column(self, t: int, need: float, left: BoolArray) -> None:
         """:func:`~planner.collision.kernels.along.cover_walk` for one task whose bounds are all evaluated.
