@@ -60,7 +60,14 @@ from planner.collision.motion import LIMIT_STEP
 from planner.collision.obstacles import ObstacleSet
 from planner.collision.probes import Probes
 from planner.collision.reports import BodyState, Contact, MotionReport, limit_contacts
-from planner.collision.sweep import body_vertices, pose_steps, relative_poses, shape_object, swept_bound
+from planner.collision.sweep import (
+    body_vertices,
+    pose_offsets,
+    pose_steps,
+    relative_poses,
+    shape_object,
+    swept_bound,
+)
 from planner.core.types import Array, BoolArray, IntArray
 from planner.robots.geometry import CollisionModel
 
@@ -81,8 +88,6 @@ SWEPT_WINDOW_MAX = 512
 FINE_BLOCK = 64
 #: Collision probes the figure may spend (~10 us each).
 MAX_PROBES = 20_000
-#: The figure's bounds are evaluated at every this-many-th sample up front (the rest on demand).
-BOUND_STRIDE = 4
 #: Spare clearances [m] beyond the clearance plus margin an FCL probe on the grown body tries to prove, the
 #: largest first (a collision query costs ~10 us; an exact distance to a nearby wall ~0.5 ms).
 PROBE_LEVELS = (0.016, 0.004, 0.001, 0.0)
@@ -224,16 +229,11 @@ class AlongPath:
         self.reach = np.ascontiguousarray(dq @ np.concatenate(cols, axis=0).T)
         # From sample to sample the bodies' vertices move exactly this far (a pair: both bodies' sum), often
         # far less than the reach bound, which holds between samples too.
-        step = pose_steps(poses, bodies.shapes)  # (N - 1, B)
-        a_idx = np.array([a for a, _ in bodies.pairs], dtype=np.int64)
-        b_idx = np.array([b for _, b in bodies.pairs], dtype=np.int64)
-        steps = [step, step[:, a_idx] + step[:, b_idx]] if has_cabin else [step[:, a_idx] + step[:, b_idx]]
-        if self.obstacle_tasks:
-            steps.append(step[:, [b for b, _ in self.obstacle_tasks]])
+        steps = self._per_task(pose_steps(poses, bodies.shapes))  # (N - 1, T)
         #: Cumulative sample-to-sample bound (N, T): |d_t(q_j) - d_t(q_k)| <= |cum[j, t] - cum[k, t]|, each
         #: step the smaller of the vertices' displacement and the piece's reach.
         self.cum = np.ascontiguousarray(
-            np.vstack([np.zeros((1, n_tasks)), np.cumsum(np.minimum(self.reach, np.hstack(steps)), axis=0)])
+            np.vstack([np.zeros((1, n_tasks)), np.cumsum(np.minimum(self.reach, steps), axis=0)])
         )
         nk = self.n_kernel
         self._reach_k = np.ascontiguousarray(self.reach[:, :nk])
@@ -249,6 +249,30 @@ class AlongPath:
             self._body_tasks = {
                 b: (nk + np.flatnonzero(b_idx == b), o_idx[b_idx == b]) for b in np.unique(b_idx).tolist()
             }
+
+    def _per_task(self, per_body: Array) -> Array:
+        """A per-body displacement (M, B) as each task's (M, T): a body's own, a pair's both summed."""
+        pairs = self.bodies.pairs
+        a_idx = np.array([a for a, _ in pairs], dtype=np.int64)
+        b_idx = np.array([b for _, b in pairs], dtype=np.int64)
+        cols = [per_body[:, a_idx] + per_body[:, b_idx]]
+        if self.n_cabin:
+            cols.insert(0, per_body)
+        if self.obstacle_tasks:
+            cols.append(per_body[:, [b for b, _ in self.obstacle_tasks]])
+        return np.hstack(cols)
+
+    def seed_from(self, other: AlongPath) -> None:
+        """Raise the bounds from another pass over nearby configurations of the same world.
+
+        Sample k's bodies here are within :func:`~planner.collision.sweep.pose_offsets` of their poses in
+        ``other`` (the rigid robot's pass, for the sagging robot's: the deflection moves them by a
+        millimetre or less), so every bound of ``other`` less that offset bounds the distance here.
+        """
+        if other.lower.shape != self.lower.shape:
+            raise ValueError(f"seed_from: passes of {other.lower.shape} and {self.lower.shape} tasks")
+        off = self._per_task(pose_offsets(other.poses, self.poses, self.bodies.shapes))
+        np.maximum(self.lower, other.lower - off, out=self.lower)
 
     # ---------------------------------------------------------------- bounds
     def _propagate(self, cols: IntArray) -> None:
@@ -509,9 +533,10 @@ class AlongPath:
     ) -> ClearanceAlong:
         """The exact minimum distance over the samples (branch and bound) and the bound between samples.
 
-        The certified bounds at every :data:`BOUND_STRIDE`-th sample (one kernel call; the obstacles' at
-        every sample), spread to the others along the cumulative reach. An entry is *open* while its bound
-        is below the best exact distance found (or ``cap_m``, a smaller figure found elsewhere) minus
+        It starts from the bounds the certificate proved (:meth:`certify`), spread along each column by the
+        sample-to-sample bound (the samples' own certified bounds are evaluated where a run comes down to a
+        few samples). An entry is *open* while its bound is below
+        the best exact distance found (or ``cap_m``, a smaller figure found elsewhere) minus
         ``tolerance_m``. Each task's runs of open samples are then settled best first (smallest bound
         first): a run of at least :data:`MIN_SWEPT_RUN` samples by one swept-hull bound (:mod:`.sweep`:
         exact for a body translating on a line, a carriage along its rail), halved while it does not
@@ -531,10 +556,7 @@ class AlongPath:
         cols = np.flatnonzero(sel)
         if len(cols) == 0:
             return ClearanceAlong(np.inf, np.inf, 0, ("", ""), 0, self.queries, 0.0)
-        if self.n_kernel and not allowed:
-            strided = np.unique(np.r_[np.arange(0, self.n, BOUND_STRIDE), self.n - 1]).astype(np.int64)
-            self._bounds(strided[(state[strided, : self.n_kernel] == SPREAD).any(axis=1)])
-            self._propagate(np.arange(self.n_kernel))
+        self._propagate(cols)  # what the certificate proved, spread along each column
         exact = (state == EXACT) & sel[None, :]
         if not exact.any():
             masked = np.where(sel[None, :], lower, np.inf)

@@ -57,22 +57,29 @@ def body_vertices(poses: Array, shape: Shape) -> Array:
     return np.stack([p - half, p + half], axis=1)
 
 
-def pose_steps(poses: Array, shapes: tuple[Shape, ...]) -> Array:
-    """How far any point of each body moves from each sample to the next: (N - 1, B) [m], an upper bound.
+def pose_offsets(poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...]) -> Array:
+    """How far any point of each body is between two poses of it: (M, B) [m], an upper bound.
 
-    From the poses (N, B, 13): a box's point p + R c (|c| <= h, its half-diagonal) moves by
+    From poses (M, B, 13) each: a box's point p + R c (|c| <= h, its half-diagonal) moves by
     |dp + dR c| <= |dp| + |dR|_F h; a capsule's axis end points p +- z L / 2 move by at most
     |dp| + |d(z L)| / 2, and every point of the capsule (a convex combination of its axis points, grown by
-    its radius) no farther. A distance to anything fixed changes by no more between the two samples.
+    its radius) no farther. A distance to anything fixed differs by no more between the two poses.
     """
-    d = np.diff(poses, axis=0)  # (N - 1, B, 13)
+    d = poses_b - poses_a
     dp = np.sqrt(np.sum(d[:, :, 9:12] ** 2, axis=2))
     box = np.array([s.kind == "box" for s in shapes])
     half = np.array([0.5 * float(np.linalg.norm(s.size)) if s.kind == "box" else 0.0 for s in shapes])
     dR = np.sqrt(np.sum(d[:, :, :9] ** 2, axis=2))  # Frobenius norm >= spectral norm
-    zl = poses[:, :, 6:9] * poses[:, :, 12:13]  # capsule axis (R's third column) times length
-    dzl = 0.5 * np.sqrt(np.sum(np.diff(zl, axis=0) ** 2, axis=2))
-    return dp + np.where(box[None, :], dR * half[None, :], dzl)
+    dzl = poses_b[:, :, 6:9] * poses_b[:, :, 12:13] - poses_a[:, :, 6:9] * poses_a[:, :, 12:13]
+    return dp + np.where(box[None, :], dR * half[None, :], 0.5 * np.sqrt(np.sum(dzl**2, axis=2)))
+
+
+def pose_steps(poses: Array, shapes: tuple[Shape, ...]) -> Array:
+    """How far any point of each body moves from each sample to the next: (N - 1, B) [m], an upper bound.
+
+    :func:`pose_offsets` of consecutive samples of poses (N, B, 13).
+    """
+    return pose_offsets(poses[:-1], poses[1:], shapes)
 
 
 def grown_radius(shape: Shape) -> float:

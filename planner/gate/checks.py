@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planner.collision.along import AlongReport, ClearanceAlong
+from planner.collision.along import AlongPath, AlongReport, ClearanceAlong
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
@@ -233,7 +233,7 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     if not (req.deflection_check and robot.desc.stiffness is not None):
         return Check("collision", True, done)
     q_def, sag = deflected_joints(robot, ctx.q, req.payload, req.T_tool_payload)
-    rep_def = sagging_certificate(world, q_def, req.clearance_m, req.motion_margin_m)
+    rep_def = sagging_certificate(world, q_def, req.clearance_m, req.motion_margin_m, along)
     if rep_def.valid:
         return Check(
             "collision",
@@ -253,16 +253,24 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
 
 
 def sagging_certificate(
-    world: CollisionWorld, q_def: Array, clearance_m: float, margin_m: float
+    world: CollisionWorld,
+    q_def: Array,
+    clearance_m: float,
+    margin_m: float,
+    rigid: AlongPath | None = None,
 ) -> AlongReport:
     """The polyline through the sagging robot's configurations (N, 8) certified in one batched pass.
 
     :meth:`CollisionWorld.along` on ``q_def`` (:func:`deflected_joints`): as strict as the certified walk
-    (:meth:`CollisionWorld.check_path`), the world's obstacles included. A single configuration (a leg at
-    rest) is its own path of two samples.
+    (:meth:`CollisionWorld.check_path`), the world's obstacles included; ``rigid``, the rigid robot's pass
+    over the same samples, seeds its bounds (:meth:`AlongPath.seed_from`: what the rigid pass proved, less
+    how far the sag moves each body). A single configuration (a leg at rest) is its own path of two samples.
     """
     q_def = np.ascontiguousarray(q_def if len(q_def) >= 2 else np.vstack([q_def, q_def]))
-    return world.along(q_def).certify(clearance_m, world.self_clearance, margin_m)
+    along = world.along(q_def)
+    if rigid is not None and rigid.n == along.n:
+        along.seed_from(rigid)
+    return along.certify(clearance_m, world.self_clearance, margin_m)
 
 
 #: cabin8's checks after the drive checks, in order (each a function of the profile and the context).

@@ -301,7 +301,7 @@ def _collision_checks(
             continue
         q_def, sag = deflected_joints(robot, rows, leg.payload, req.T_tool_unit)
         worst_sag = max(worst_sag, sag)
-        rep_def = sagging_certificate(leg.world, q_def, req.clearance_m, GATE_MOTION_MARGIN_M)
+        rep_def = sagging_certificate(leg.world, q_def, req.clearance_m, GATE_MOTION_MARGIN_M, along)
         exact += rep_def.exact_queries
         walked += rep_def.walked
         if not rep_def.valid:
