@@ -141,7 +141,7 @@ def test_the_figure_covers_obstacles_and_reports_allowed_pairs_apart(
     assert not bad.valid and any("unit X" in c.detail for c in bad.contacts)
     fig = along.clearance()
     assert fig.bodies == near
-    assert low - fig.tolerance_m <= fig.distance_m <= low + 1e-12
+    assert fig.distance_m - fig.tolerance_m <= low <= fig.distance_m + 1e-12
     assert fig.distance_m == pytest.approx(float(exact[fig.sample]), abs=1e-9)
     assert fig.bound_m <= low
     # Allowed: out of the certificate and the figure, measured on its own.
@@ -155,7 +155,7 @@ def test_the_figure_covers_obstacles_and_reports_allowed_pairs_apart(
     pair = along.allowed_clearance()
     assert pair is not None and pair.bodies == near
     d_pair = [allowed.obstacle_distance(allowed.flat_poses(x), obstacle="unit X").distance_m for x in q]
-    assert min(d_pair) - pair.tolerance_m <= pair.distance_m <= min(d_pair) + 1e-12
+    assert pair.distance_m - pair.tolerance_m <= min(d_pair) <= pair.distance_m + 1e-12
 
 
 def _swept_past(world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, gap_m: float) -> Obstacle | None:
