@@ -226,7 +226,12 @@ class AlongPath:
         if self.obstacle_tasks:
             cols.append(rho[[b for b, _ in self.obstacle_tasks]])
         #: Reach (N - 1, T): how far any point of a task's bodies (pairs: relative) moves along each piece.
-        self.reach = np.ascontiguousarray(dq @ np.concatenate(cols, axis=0).T)
+        rho_t = np.concatenate(cols, axis=0)  # (T, n)
+        # dq @ rho_t.T written out over the joints (a threaded BLAS call costs more than these few sums).
+        reach = np.zeros((len(dq), n_tasks))
+        for j in range(dq.shape[1]):
+            reach += dq[:, j, None] * rho_t[None, :, j]
+        self.reach = reach
         # From sample to sample the bodies' vertices move exactly this far (a pair: both bodies' sum), often
         # far less than the reach bound, which holds between samples too.
         steps = self._per_task(pose_steps(poses, bodies.shapes))  # (N - 1, T)

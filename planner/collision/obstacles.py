@@ -182,6 +182,15 @@ def _overlap_depth(a: Obstacle, b: Obstacle) -> float:
     return max(0.0, float(min(overlaps)))
 
 
+def _rows_times(local: Array, M: Array) -> Array:
+    """Local (S, 3) times each M (n, 3, 3): (n, S, 3), written out (no threaded BLAS call for 3 x 3)."""
+    return (
+        local[None, :, 0, None] * M[:, None, 0, :]
+        + local[None, :, 1, None] * M[:, None, 1, :]
+        + local[None, :, 2, None] * M[:, None, 2, :]
+    )
+
+
 def obstacle_contact(body: str, obstacle: str, margin: float) -> Contact:
     """The contact of a body with an obstacle within ``margin`` [m] (kind ``"obstacle"``)."""
     return Contact("obstacle", (body, obstacle), f"{body} within {margin:.4g} m of {obstacle}")
@@ -257,7 +266,13 @@ class ObstacleSet:
     def _box_distance(self, points: Array) -> Array:
         """Distances (P, O) of points (P, 3) to every obstacle's bounding box (0 inside)."""
         # In each box's axes: (x - p_o) R_o = x R_o - p_o R_o, one batched product for all boxes.
-        local = np.matmul(points[None, :, :], self._R_bound) - self._origin_local[:, None, :]  # (O, P, 3)
+        R = self._R_bound  # written out, not matmul: a threaded BLAS call costs more than these sums
+        local = (
+            points[None, :, 0, None] * R[:, None, 0, :]
+            + points[None, :, 1, None] * R[:, None, 1, :]
+            + points[None, :, 2, None] * R[:, None, 2, :]
+            - self._origin_local[:, None, :]
+        )  # (O, P, 3)
         outside = np.maximum(np.abs(local) - self._half[:, None, :], 0.0)
         return np.sqrt(np.sum(outside * outside, axis=2)).T
 
@@ -303,7 +318,7 @@ class ObstacleSet:
         Rt = poses_b[:, :9].reshape(-1, 3, 3)  # R^T (column-major storage), (n, 3, 3)
         centres = (
             poses_b[:, None, 9:12]
-            + np.matmul(self._local[sel][None, :, :], Rt)  # (R local)^T = local^T R^T
+            + _rows_times(self._local[sel], Rt)  # (R local)^T = local^T R^T
             + Rt[:, None, 2, :] * (self._frac[sel][None, :] * poses_b[:, 12][:, None])[..., None]
         )  # (n, S_b, 3)
         d = self._box_distance(centres.reshape(-1, 3)).reshape(len(poses_b), len(sel), len(self.obstacles))

@@ -52,7 +52,13 @@ def body_vertices(poses: Array, shape: Shape) -> Array:
     p = poses[:, 9:12]
     if shape.kind == "box":
         local = _SIGNS * (0.5 * np.asarray(shape.size, dtype=float))  # (8, 3)
-        return p[:, None, :] + np.matmul(local[None, :, :], R.transpose(0, 2, 1))  # (R local)^T
+        Rt = R.transpose(0, 2, 1)  # (R local)^T = local^T R^T, written out (no threaded BLAS for 3 x 3)
+        return (
+            p[:, None, :]
+            + local[None, :, 0, None] * Rt[:, None, 0, :]
+            + local[None, :, 1, None] * Rt[:, None, 1, :]
+            + local[None, :, 2, None] * Rt[:, None, 2, :]
+        )
     half = (0.5 * poses[:, 12])[:, None] * R[:, :, 2]  # (n, 3)
     return np.stack([p - half, p + half], axis=1)
 
