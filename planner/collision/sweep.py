@@ -35,8 +35,9 @@ from planner.robots.geometry import Shape
 
 #: Half size [m] of the cube each capsule end point is thickened to (a flat hull is no FCL convex).
 THICKEN_M = 1e-6
-#: Subtracted from every hull distance [m]: qhull's joggled facets (relative 1e-11) and GJK's tolerance.
-GJK_SLACK_M = 1e-8
+#: Subtracted from every hull distance [m]: qhull's joggled facets (~1e-10 m on cabin coordinates) and the
+#: tolerance of FCL's GJK (1e-6 relative): a micrometre, far below the figure's 0.1 mm.
+GJK_SLACK_M = 1e-6
 
 _SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
 _REQUEST = fcl.DistanceRequest()
@@ -68,8 +69,9 @@ def pose_offsets(poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...]) -> A
 
     From poses (M, B, 13) each: a box's point p + R c (|c| <= h, its half-diagonal) moves by
     |dp + dR c| <= |dp| + |dR|_F h; a capsule's axis end points p +- z L / 2 move by at most
-    |dp| + |d(z L)| / 2, and every point of the capsule (a convex combination of its axis points, grown by
-    its radius) no farther. A distance to anything fixed differs by no more between the two poses.
+    |dp| + |d(z L)| / 2, and so does every point of its axis segment (a convex combination of the two).
+    A box's distance to anything fixed, and a capsule's (its axis segment's less its radius), differ by no
+    more between the two poses.
     """
     d = poses_b - poses_a
     dp = np.sqrt(np.sum(d[:, :, 9:12] ** 2, axis=2))
