@@ -86,6 +86,8 @@ MIN_SWEPT_RUN = 8
 SWEPT_WINDOW_MAX = 512
 #: Samples whose fine obstacle bounds the certificate evaluates at once where it needs one.
 FINE_BLOCK = 64
+#: Exact distances the figure spends last, at the smallest bounds left below it (within the tolerance).
+POLISH_QUERIES = 8
 #: Collision probes the figure may spend (~10 us each).
 MAX_PROBES = 20_000
 #: Spare clearances [m] beyond the clearance plus margin an FCL probe on the grown body tries to prove, the
@@ -548,7 +550,8 @@ class AlongPath:
         settle; a shorter run sample by sample, by an FCL probe on the body grown to the floor (a collision
         query) and, where the probe touches, the exact distance. At most ``max_exact`` distance queries
         (exact and swept) and :data:`MAX_PROBES` probes in all; what they leave open is reported as the
-        tolerance reached (never a tolerance not proven).
+        tolerance reached (never a tolerance not proven). Last, up to :data:`POLISH_QUERIES` exact distances
+        where the smallest bounds left are, so that the figure is most often the minimum itself.
 
         ``allowed``: the figure of the world's allowed pairs instead (their own report).
         """
@@ -648,6 +651,17 @@ class AlongPath:
                 if d < best:
                     best, best_k, best_t = d, k, t
                 self._spread(k, t, d, floor_now())
+        # Polish: the exact distance where the smallest bounds left are (within the tolerance, the true
+        # minimum is most likely there), so the figure is more often the minimum itself.
+        for _ in range(POLISH_QUERIES):
+            remaining = np.where((state != EXACT) & sel[None, :], lower, np.inf)
+            flat_k = int(np.argmin(remaining))
+            k, t = flat_k // lower.shape[1], flat_k % lower.shape[1]
+            if not remaining[k, t] < best:
+                break
+            d = self.exact_at(k, t)
+            if d < best:
+                best, best_k, best_t = d, k, t
         remaining = np.where((state != EXACT) & sel[None, :], lower, np.inf)
         reached = max(tolerance_m, best - float(np.min(remaining)))
         lo_a, lo_b = lower[:-1][:, cols], lower[1:][:, cols]
