@@ -64,7 +64,7 @@ def main() -> None:
             t2 = time.perf_counter()
             if req.deflection_check and sc.robot.desc.stiffness is not None:
                 q_def, _ = deflected_joints(sc.robot, q, req.payload, req.T_tool_payload)
-                sagging_certificate(world, q_def, req.clearance_m, req.motion_margin_m)
+                sagging_certificate(world, q_def, req.clearance_m, req.motion_margin_m, path)
             t3 = time.perf_counter()
             gate.append(t1 - t0)
             along.append(t2 - t1)
