@@ -6,32 +6,35 @@ is one body against the cabin, one checked pair of bodies, or one body against o
 unit, a fixture: :mod:`.obstacles`); for task t, d_t(q) is its exact distance. A world's *allowed* pairs
 (body, obstacle) are tasks too, but only measured for their own report (:meth:`AlongPath.allowed_clearance`).
 
-One compiled call (:func:`~planner.collision.kernels.along.bounds_at`) gives, at every sample, the body
-poses, the admissibility values and a certified lower bound L[k, t] <= d_t(q_k) of every cabin and pair task
-(sphere covers on the cabin's clearance grid; pairs by their covers, exact for capsules); the obstacle
-tasks' bounds (each body's spheres against the obstacle's bounding box) are evaluated at every sample in one
-vectorised pass. Along piece k no point of a body moves more than D[k, t] = rho_t . |q_{k+1} - q_k| (the
-reach bounds of :mod:`planner.collision.bodies` with the slope bound of the whole path, pairs by their
-relative reach), so d_t is 1-Lipschitz in the cumulative reach C_t (C_t(q_0) = 0, growing by D[k, t] along
-piece k). Hence:
+One compiled call gives every sample's body poses and admissibility values; certified lower bounds
+L[k, t] <= d_t(q_k) come on demand (:func:`~planner.collision.kernels.along.bounds_at` and the compiled walk
+for the cabin and pair tasks: sphere covers on the cabin's clearance grid, pairs by their covers, exact for
+capsules; for the obstacle tasks each body's bounding sphere against the obstacle's bounding box at every
+sample in one vectorised pass, its fine sphere cover where that falls short). Along piece k no point of a
+body moves more than D[k, t] = rho_t . |q_{k+1} - q_k| (the reach bounds of :mod:`planner.collision.bodies`
+with the slope bound of the whole path, pairs by their relative reach), and from sample k to k + 1 no more
+than its vertices do (:func:`~planner.collision.sweep.pose_steps`); C_t, growing by the smaller of the two
+from sample to sample, makes d_t 1-Lipschitz over the samples (C_t(q_0) = 0). Hence:
 
 * an exact distance d at sample k bounds every other sample: L[j, t] >= d - |C_t(j) - C_t(k)| (the bounds
   are propagated both ways by running maxima);
 * on piece k, d_t >= max((L_k + L_{k+1} - D) / 2, max(L_k, L_{k+1}) - D) (two cones meeting), the lower
   bound *between* samples;
 * piece k keeps ``need`` (the clearance plus the walk's margin) everywhere when L_k, L_{k+1} >= need and
-  (L_k - need) + (L_{k+1} - need) >= D[k, t]: the spare clearance proven at its two ends covers it.
+  (L_k - need) + (L_{k+1} - need) >= D[k, t]: the spare clearance proven at its two ends covers it;
+* one swept-hull query (:mod:`.sweep`) bounds a body's distance at every sample of a run at once (exact for
+  a body translating on a line).
 
 :meth:`AlongPath.certify` proves every piece so -- the cabin's and the pairs' in one compiled walk
-(:func:`~planner.collision.kernels.along.cover_walk`), the obstacles' alike on their precomputed bounds:
-bounds on demand where the spare clearance proven so far runs out, FCL probes and exact distances (tens of
-microseconds for a box against the cabin) only where the bounds fall short, as the motion walk does; a
-piece whose two exact end distances still cannot cover it is walked by the world's certified motion check
+(:func:`~planner.collision.kernels.along.cover_walk`), the obstacles' alike on their bounds: bounds on
+demand where the spare clearance proven so far runs out, swept hulls over adaptive windows of samples, FCL
+probes and exact distances only where those fall short; a piece whose two exact end distances still cannot
+cover it is walked by the world's certified motion check
 (:meth:`~planner.collision.world.CollisionWorld.check_motion`, obstacles included), which decides. It is
 never weaker than ``check_path``: what it certifies keeps ``clearance + margin`` everywhere.
 :meth:`AlongPath.clearance` then finds the exact minimum of the sample distances of every task by branch
-and bound on the same bounds, with swept-hull bounds (:mod:`.sweep`) for long runs of samples where the
-distance is flat, and the certified lower bound between samples.
+and bound on the same bounds (swept hulls for long runs of samples, where a flat distance settles at
+once), and the certified lower bound between samples.
 """
 
 from __future__ import annotations
