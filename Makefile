@@ -16,7 +16,7 @@ $(STAMP): requirements.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade "pip>=24"
 	$(BIN)/python -m pip install --quiet -r requirements.lock
 	$(BIN)/python -m pip install --quiet --no-deps -e .
-	$(BIN)/python -m planner.collision.kernels.build && $(BIN)/python -m planner.timing.reference \
+	$(BIN)/python -m planner.collision.kernels.build && $(BIN)/python -m planner.timing.acc_reference \
 		|| echo "kernels: no ahead-of-time build (see above); plans will use numba's JIT"
 	touch $(STAMP)
 

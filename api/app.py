@@ -30,11 +30,14 @@ from api import problems
 from api.context import AppContext
 from api.db import Database
 from api.jobs import JobRunner, ProcessJobRunner, recover_jobs
+from api.jobstore import JobStore
 from api.metrics import QueueCollector, ServiceMetrics
 from api.openapi import install_openapi
 from api.ratelimit import TenantRateLimiter
 from api.routes import (
     cabins,
+    cycles,
+    exports,
     health,
     keys,
     kinematics,
@@ -239,11 +242,10 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         limiter=TenantRateLimiter(
             settings.rate_limit, settings.rate_limit_storage_uri, settings.rate_limit_namespace
         ),
+        jobs=JobStore(db),
     )
     service_metrics.registry.register(
-        QueueCollector(
-            lambda: health.queue_counts(db), job_runner.busy, lambda: job_runner.warming() is not None
-        )
+        QueueCollector(ctx.jobs.queue_counts, job_runner.busy, lambda: job_runner.warming() is not None)
     )
     feeder = SweepFeeder(db, settings, job_runner)
 
@@ -279,7 +281,21 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         body_timeout_s=settings.body_timeout_s,
     )
     templates: dict[int, str] = {}  # route object -> full path template, for the access log
-    for module in (health, robots, cabins, plans, sweeps, scene, kinematics, pprs6, stiffness, keys):
+    routers = [
+        health,
+        robots,
+        cabins,
+        plans,
+        exports,
+        cycles,
+        sweeps,
+        scene,
+        kinematics,
+        pprs6,
+        stiffness,
+        keys,
+    ]
+    for module in routers:
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
         templates.update({id(r): API_PREFIX + r.path for r in router.routes})

@@ -64,6 +64,23 @@ def create_key(ctx: AppContext, tenant: str, name: str = "", key: str | None = N
     return row, secret
 
 
+def list_keys(ctx: AppContext) -> list[ApiKey]:
+    """Every key's record, newest first."""
+    with ctx.db.session() as s:
+        return list(s.scalars(select(ApiKey).order_by(ApiKey.created_at.desc())).all())
+
+
+def revoke_key(ctx: AppContext, key_id: str) -> bool:
+    """Revoke the key ``key_id`` now (a revoked one stays revoked at its first time); ``False`` if unknown."""
+    with ctx.db.session() as s:
+        row = s.get(ApiKey, key_id)
+        if row is None:
+            return False
+        if row.revoked_at is None:
+            row.revoked_at = now_s()
+    return True
+
+
 def ensure_key(ctx: AppContext, tenant: str, secret: str, name: str) -> None:
     """Store ``secret`` as a key of ``tenant`` unless it is already stored (the local default key)."""
     with ctx.db.session() as s:

@@ -1,4 +1,4 @@
-"""The application context: settings, database, mesh store, job runner, metrics, rate limiter of one app."""
+"""The context of one app: settings, database, job store, mesh store, job runner, metrics, rate limiter."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 from fastapi import Request
 
 from api.db import Database
+from api.jobstore import JobStore
 from api.metrics import ServiceMetrics
 from api.ratelimit import TenantRateLimiter
 from api.settings import Settings
@@ -27,6 +28,8 @@ class AppContext:
     runner: JobRunner
     metrics: ServiceMetrics
     limiter: TenantRateLimiter
+    #: Every job state change and query (:mod:`api.jobstore`).
+    jobs: JobStore
 
 
 def get_context(request: Request) -> AppContext:

@@ -97,7 +97,7 @@ class MeshBlob(Base):
 
 
 class Job(Base):
-    """A planning job: the scenario as submitted, its state, and (when done) its result and files."""
+    """A job (a plan, or another kind): its input as submitted, its state, and (when done) its result."""
 
     __tablename__ = "jobs"
     __table_args__ = (
@@ -109,9 +109,13 @@ class Job(Base):
 
     id: Mapped[str] = mapped_column(String(32), primary_key=True)
     tenant: Mapped[str] = mapped_column(String(64))
+    #: The job's kind (:mod:`api.jobkinds`); ``None`` on rows written before kinds: plans.
+    kind: Mapped[str | None] = mapped_column(String(16), nullable=True)
     status: Mapped[str] = mapped_column(String(16))
     stage: Mapped[str | None] = mapped_column(String(32), nullable=True)
     progress: Mapped[float] = mapped_column(Float, default=0.0)
+    #: What the job reports beyond its stage and fraction (a campaign: ``{"units": [...]}``), JSON.
+    progress_detail: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     scenario: Mapped[dict[str, Any]] = mapped_column(JSON)
     scenario_name: Mapped[str] = mapped_column(String(100))
     request_sha256: Mapped[str] = mapped_column(String(64))
@@ -132,8 +136,19 @@ class Job(Base):
     result_json: Mapped[str | None] = mapped_column(Text, nullable=True, deferred=True)
     #: The result document packed by :func:`api.compact.pack_document` (new rows; ``result_json`` is None).
     result_packed: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True, deferred=True)
+    #: Files written by earlier versions with every result (now made on request: :class:`JobFile`).
     profile_csv: Mapped[str | None] = mapped_column(Text, nullable=True, deferred=True)
     plot_png: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True, deferred=True)
+
+
+class JobFile(Base):
+    """A file made from a finished job's result on its first request and kept (a plot); see api.jobkinds."""
+
+    __tablename__ = "job_files"
+
+    job_id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), primary_key=True)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
 
 
 def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
@@ -253,6 +268,7 @@ __all__ = [
     "Base",
     "Database",
     "Job",
+    "JobFile",
     "Mesh",
     "MeshBlob",
     "now_s",

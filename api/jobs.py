@@ -1,14 +1,20 @@
-"""Planning jobs: the runner that executes them in worker processes, and start-up recovery.
+"""Jobs: the runner that executes them in worker processes, and start-up recovery.
 
-Jobs live in the database (:class:`api.db.Job`); the runner only claims and executes them, so nothing
-submitted is lost when the service stops. :class:`ProcessJobRunner` (the default) runs each job in a
-fresh process forked from a forkserver that has imported the planner once (warm start, no shared
-state between jobs). A dispatcher thread, never the event loop:
+Jobs live in the database (:class:`api.db.Job`); every change of their state is one move of the state
+machine in :mod:`api.jobstore`, which the runner calls (it writes no SQL itself). The runner only claims
+and executes jobs, so nothing submitted is lost when the service stops. :class:`ProcessJobRunner` (the
+default) runs each job in a fresh process forked from a forkserver that has imported the planner once
+(warm start, no shared state between jobs); the job's kind (:mod:`api.jobkinds`) names the function the
+process runs. A dispatcher thread, never the event loop:
 
 * claims queued jobs oldest first (a conditional ``UPDATE ... WHERE status='queued'``, so a job is
   claimed once even with several service instances on one PostgreSQL database), up to ``workers`` at a
   time, and counts the attempt;
-* reads ``progress`` and ``done`` messages from each job's pipe and writes them to the database;
+* reads ``progress`` and ``done`` messages from each job's pipe and writes them to the database (the
+  latest progress once a pass, with its detail -- a campaign's units --, the outcome once);
+* stores the files a running job hands over to keep (``keep`` messages: a campaign's finished cycles,
+  :meth:`api.jobstore.JobStore.keep`) and gives them to the job's next attempt (``kept``), so a job whose
+  instance died resumes from them;
 * kills a job whose hard wall-clock limit (``time_limit_s + job_grace_s``) expires and marks it failed
   with reason ``time_limit_exceeded``: the process is gone, so its slot is free for the next job (the
   "worker" is replaced by construction);
@@ -45,20 +51,24 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from multiprocessing.context import ForkServerContext
 from multiprocessing.process import BaseProcess
-from typing import Any, Protocol, cast
+from typing import Any, Protocol
 
-from sqlalchemy import CursorResult, delete, func, or_, select, update
-
-from api.db import TERMINAL_STATES, Database, Job, now_s
+from api.db import Database
+from api.jobstore import (
+    KEEP_PREFIX,
+    MAX_ATTEMPTS,
+    JobStore,
+    expire_leases,
+    purge_expired,
+    recover_jobs,
+    rows_matched,
+)
 from api.lifeline import SERVER_PID_ENV
 from api.metrics import ServiceMetrics
 from api.settings import Settings
 from api.store import local_mesh_file
 
 _LOG = logging.getLogger(__name__)
-
-#: A job that ran this many times and was interrupted again is failed with reason ``interrupted``.
-MAX_ATTEMPTS = 2
 
 #: Stage reported (``/ready``, queued jobs) while the forkserver warms up.
 WARMUP_STAGE = "compiling kernels"
@@ -97,87 +107,6 @@ class JobRunner(Protocol):
 
     def warming(self) -> str | None:
         """The warm-up stage while the runner is not yet ready to run jobs, else ``None``."""
-
-
-def expire_leases(db: Database, now: float | None = None) -> dict[str, int]:
-    """Re-queue (or fail) the running jobs whose lease lapsed: their instance died. Returns the counts.
-
-    A lapsed job whose cancellation was requested becomes ``cancelled``; one with fewer than
-    :data:`MAX_ATTEMPTS` attempts goes back to ``queued``; the others fail with reason ``interrupted``.
-    Rows without a lease (written by an older version) count as lapsed.
-    """
-    t = now_s() if now is None else now
-    lapsed = (Job.status == "running", or_(Job.lease_expires_at.is_(None), Job.lease_expires_at < t))
-    free = {"owner": None, "lease_expires_at": None}
-    with db.session() as s:
-        # Read first: every instance runs this at each heartbeat, and an UPDATE is a write transaction
-        # (an fsync on SQLite) even when it matches nothing.
-        if not s.scalar(select(func.count()).select_from(Job).where(*lapsed)):
-            return {"requeued": 0, "failed": 0, "cancelled": 0}
-        cancelled = rows_matched(
-            s.execute(
-                update(Job)
-                .where(*lapsed, Job.cancel_requested.is_(True))
-                .values(
-                    status="cancelled",
-                    reason="cancelled",
-                    message="cancelled by the client while running (its instance stopped)",
-                    finished_at=t,
-                    **free,
-                )
-            )
-        )
-        requeued = rows_matched(
-            s.execute(
-                update(Job)
-                .where(*lapsed, Job.attempts < MAX_ATTEMPTS)
-                .values(status="queued", stage=None, progress=0.0, started_at=None, **free)
-            )
-        )
-        failed = rows_matched(
-            s.execute(
-                update(Job)
-                .where(*lapsed)
-                .values(
-                    status="failed",
-                    reason="interrupted",
-                    message=f"the service stopped while the job was running, {MAX_ATTEMPTS} times",
-                    finished_at=t,
-                    **free,
-                )
-            )
-        )
-    counts = {"requeued": requeued, "failed": failed, "cancelled": cancelled}
-    if requeued or failed or cancelled:
-        _LOG.warning("jobs of a stopped instance recovered: %s", counts)
-    return counts
-
-
-def recover_jobs(db: Database) -> dict[str, int]:
-    """Start-up recovery: :func:`expire_leases` now (jobs of live instances keep running)."""
-    counts = expire_leases(db)
-    return {"requeued": counts["requeued"], "failed": counts["failed"]}
-
-
-def purge_expired(db: Database, retention_s: float, now: float | None = None) -> int:
-    """Delete finished jobs that finished more than ``retention_s`` ago; returns how many."""
-    cutoff = (now_s() if now is None else now) - retention_s
-    with db.session() as s:
-        n = rows_matched(
-            s.execute(
-                delete(Job).where(
-                    Job.status.in_(TERMINAL_STATES), Job.finished_at.is_not(None), Job.finished_at < cutoff
-                )
-            )
-        )
-    if n:
-        _LOG.info("retention: deleted %d finished job(s) older than %.0f days", n, retention_s / 86400)
-    return n
-
-
-def rows_matched(result: Any) -> int:
-    """Rows matched by an UPDATE/DELETE result."""
-    return int(cast(CursorResult[Any], result).rowcount or 0)
 
 
 @dataclass
@@ -242,6 +171,7 @@ class ProcessJobRunner:
         self, db: Database, settings: Settings, metrics: ServiceMetrics | None = None, poll_s: float = 0.05
     ) -> None:
         self.db = db
+        self.store = JobStore(db)
         self.settings = settings
         self.metrics = metrics or ServiceMetrics()
         self.poll_s = poll_s
@@ -278,20 +208,7 @@ class ProcessJobRunner:
             self._running.clear()
         for r in running:
             self._kill(r)
-            with self.db.session() as s:
-                s.execute(
-                    update(Job)
-                    .where(Job.id == r.job_id, Job.status == "running", Job.owner == self.instance_id)
-                    .values(
-                        status="queued",
-                        stage=None,
-                        progress=0.0,
-                        started_at=None,
-                        attempts=Job.attempts - 1,
-                        owner=None,
-                        lease_expires_at=None,
-                    )
-                )
+            self.store.requeue(r.job_id, self.instance_id)
 
     def wake(self) -> None:
         """Look for queued work now."""
@@ -350,10 +267,10 @@ class ProcessJobRunner:
         if now - self._last_sync >= self.heartbeat_s:
             self._last_sync = now
             self._sync()
-            expire_leases(self.db)
+            self.store.expire_leases()
         if now - self._last_purge >= PURGE_PERIOD_S:
             self._last_purge = now
-            purge_expired(self.db, self.settings.retention_days * 86400.0)
+            self.store.purge_expired(self.settings.retention_days * 86400.0)
         self._fill()
         with self._lock:
             running = list(self._running.values())
@@ -388,15 +305,7 @@ class ProcessJobRunner:
             mine = dict(self._running)
         if not mine:
             return
-        with self.db.session() as s:
-            s.execute(
-                update(Job)
-                .where(Job.id.in_(list(mine)), Job.status == "running", Job.owner == self.instance_id)
-                .values(lease_expires_at=now_s() + self.settings.job_lease_s)
-            )
-            rows = s.execute(
-                select(Job.id, Job.status, Job.owner, Job.cancel_requested).where(Job.id.in_(list(mine)))
-            ).all()
+        rows = self.store.heartbeat(self.instance_id, mine, self.settings.job_lease_s)
         seen = set()
         for job_id, status, owner, cancel in rows:
             seen.add(job_id)
@@ -424,9 +333,7 @@ class ProcessJobRunner:
             pass
 
     def _hard_limit_s(self, job_id: str) -> float:
-        with self.db.session() as s:
-            limit = s.scalar(select(Job.time_limit_s).where(Job.id == job_id))
-        return float(limit or 0.0) + self.settings.job_grace_s
+        return self.store.time_limit_s(job_id) + self.settings.job_grace_s
 
     def _apply_cancels(self) -> None:
         """Kill the running jobs asked for; keep requests for jobs still being launched."""
@@ -435,14 +342,7 @@ class ProcessJobRunner:
             targets = [self._running[j] for j in cancels if j in self._running]
             pending = [j for j in cancels if j not in self._running]
         if pending:
-            with self.db.session() as s:
-                launching = set(
-                    s.scalars(
-                        select(Job.id).where(
-                            Job.id.in_(pending), Job.status == "running", Job.owner == self.instance_id
-                        )
-                    )
-                )
+            launching = self.store.launching(self.instance_id, pending)
             with self._lock:
                 self._cancel |= launching
         for r in targets:
@@ -459,39 +359,22 @@ class ProcessJobRunner:
                 return
 
     def _claim(self) -> dict[str, Any] | None:
-        """Claim the oldest queued job (conditional update); its launch description, or ``None``."""
-        with self.db.session() as s:
-            for job_id in s.scalars(
-                select(Job.id).where(Job.status == "queued").order_by(Job.created_at, Job.id).limit(8)
-            ).all():
-                claimed = rows_matched(
-                    s.execute(
-                        update(Job)
-                        .where(Job.id == job_id, Job.status == "queued")
-                        .values(
-                            status="running",
-                            started_at=now_s(),
-                            attempts=Job.attempts + 1,
-                            stage="starting",
-                            owner=self.instance_id,
-                            lease_expires_at=now_s() + self.settings.job_lease_s,
-                            cancel_requested=False,
-                        )
-                    )
-                )
-                if claimed:
-                    row = s.get(Job, job_id)
-                    assert row is not None
-                    return {
-                        "id": row.id,
-                        "scenario": row.scenario,
-                        "meshes": dict(row.meshes),
-                        "empty_dir": str(self.empty_dir),
-                        "time_limit_s": row.time_limit_s,
-                        "nice": self.settings.worker_nice,
-                        "server_pid": os.getpid(),
-                    }
-        return None
+        """Claim the oldest queued job (:meth:`JobStore.claim`); its launch description, or ``None``."""
+        row = self.store.claim(self.instance_id, self.settings.job_lease_s)
+        if row is None:
+            return None
+        kept = self.store.kept(row.id, KEEP_PREFIX)  # an earlier attempt's finished work (campaigns)
+        return {
+            "id": row.id,
+            "kind": row.kind,
+            "kept": kept,
+            "scenario": row.scenario,
+            "meshes": dict(row.meshes),
+            "empty_dir": str(self.empty_dir),
+            "time_limit_s": row.time_limit_s,
+            "nice": self.settings.worker_nice,
+            "server_pid": os.getpid(),
+        }
 
     def _launch(self, job: dict[str, Any]) -> bool:
         """Start the job's process; False when it went back to the queue (try again on a later pass)."""
@@ -531,52 +414,40 @@ class ProcessJobRunner:
 
     def _fail_unlaunched(self, job_id: str, reason: str, message: str) -> None:
         """Fail a job this instance claimed but could not start (only over its own ``running``)."""
-        with self.db.session() as s:
-            s.execute(
-                update(Job)
-                .where(Job.id == job_id, Job.status == "running", Job.owner == self.instance_id)
-                .values(status="failed", reason=reason, message=message, finished_at=now_s())
-            )
+        self.store.end(job_id, self.instance_id, "failed", reason=reason, message=message)
         self.metrics.job_outcomes.labels(status="failed", reason=reason).inc()
 
     def _requeue_unlaunched(self, job_id: str) -> None:
         """Put a job this instance claimed but could not start back in the queue, its attempt uncounted."""
         try:
-            with self.db.session() as s:
-                s.execute(
-                    update(Job)
-                    .where(Job.id == job_id, Job.status == "running", Job.owner == self.instance_id)
-                    .values(
-                        status="queued",
-                        stage=None,
-                        progress=0.0,
-                        started_at=None,
-                        owner=None,
-                        lease_expires_at=None,
-                        attempts=Job.attempts - 1,
-                    )
-                )
+            self.store.requeue(job_id, self.instance_id)
         except Exception:  # the database itself is away: the lease lapses and any instance re-queues it
             _LOG.exception("job %s: not re-queued now; its lease will lapse", job_id)
 
     def _drain(self, r: _Running) -> None:
+        """Read the job's messages; write its latest progress once (one database write a pass)."""
+        latest: tuple[str, float, dict[str, Any] | None] | None = None
+        detail: dict[str, Any] | None = None
         while not r.eof:
             try:
                 if not r.conn.poll(0):
-                    return
+                    break
                 msg = r.conn.recv()
             except (EOFError, OSError):
                 r.eof = True
-                return
+                break
             if msg[0] == "progress":
-                with self.db.session() as s:
-                    s.execute(
-                        update(Job)
-                        .where(Job.id == r.job_id, Job.status == "running", Job.owner == self.instance_id)
-                        .values(stage=str(msg[1])[:32], progress=float(msg[2]))
-                    )
+                if len(msg) > 3 and msg[3] is not None:
+                    detail = msg[3]
+                latest = (str(msg[1]), float(msg[2]), detail)
+            elif msg[0] == "keep":  # a file the job keeps for a relaunch (a campaign's finished cycle)
+                self.store.keep(r.job_id, self.instance_id, str(msg[1]), bytes(msg[2]))
             elif msg[0] == "done":
                 r.outcome = msg[1]
+        if latest is not None and r.outcome is None:  # a finished job's end write supersedes it
+            self.store.progress(r.job_id, self.instance_id, *latest)
+        elif detail is not None:  # the last units of a finished job stay in its document
+            self.store.progress(r.job_id, self.instance_id, "finishing", 0.99, detail)
 
     def _finish(self, r: _Running) -> None:
         out = r.outcome
@@ -598,7 +469,6 @@ class ProcessJobRunner:
             reason=out.get("reason"),
             message=out.get("message"),
             result_packed=out.get("packed"),
-            plot_png=out.get("png"),
             **values,
         )
 
@@ -621,22 +491,7 @@ class ProcessJobRunner:
         try:
             for attempt in range(END_WRITE_ATTEMPTS):
                 try:
-                    with self.db.session() as s:
-                        written = rows_matched(
-                            s.execute(
-                                update(Job)
-                                .where(
-                                    Job.id == r.job_id, Job.status == "running", Job.owner == self.instance_id
-                                )
-                                .values(
-                                    status=status,
-                                    finished_at=now_s(),
-                                    progress=1.0 if status == "succeeded" else Job.progress,
-                                    lease_expires_at=None,
-                                    **values,
-                                )
-                            )
-                        )
+                    written = int(self.store.end(r.job_id, self.instance_id, status, **values))
                     break
                 except Exception:  # a busy or dropped database: retry, then leave it to the lease expiry
                     if attempt == END_WRITE_ATTEMPTS - 1:

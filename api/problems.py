@@ -240,6 +240,21 @@ class SafeJSONResponse(JSONResponse):
             ).encode()
 
 
+def allowed_methods(app: Any, path: str) -> list[str]:
+    """Every method some route of ``app`` answers at ``path`` (sorted; ``HEAD`` with ``GET``).
+
+    FastAPI makes one route per operation, so the 405 Starlette raises lists only the methods of the
+    first route whose path matched (``POST`` at ``/cabins``, which also answers ``GET``): the ``Allow``
+    header of a 405 is made from every route instead (RFC 9110 section 15.5.6).
+    """
+    methods: set[str] = set()
+    for route in app.router.routes:
+        regex = getattr(route, "path_regex", None)
+        if regex is not None and getattr(route, "methods", None) and regex.match(path):
+            methods |= set(route.methods)
+    return sorted(methods)
+
+
 def install(app: FastAPI) -> None:
     """Register the exception handlers that turn every error into problem+json."""
 
@@ -269,7 +284,7 @@ def install(app: FastAPI) -> None:
         assert isinstance(exc, PlannerError)
         return from_planner_error(exc).response()
 
-    async def on_http(_request: Request, exc: Exception) -> JSONResponse:
+    async def on_http(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, StarletteHTTPException)
         code = STATUS_CODES.get(exc.status_code, "http_error")
         detail = exc.detail if isinstance(exc.detail, str) else _title(exc.status_code)
@@ -277,7 +292,10 @@ def install(app: FastAPI) -> None:
             detail = "no such resource"
         if exc.status_code == 400:
             return malformed_body(f"request body: {detail}").response()
-        return Problem(exc.status_code, code, detail, headers=exc.headers or {}).response()
+        headers = dict(exc.headers or {})
+        if exc.status_code == 405:  # every method of the path, not only those of the first route matched
+            headers["Allow"] = ", ".join(allowed_methods(request.app, request.url.path))
+        return Problem(exc.status_code, code, detail, headers=headers).response()
 
     async def on_unexpected(_request: Request, exc: Exception) -> JSONResponse:
         _LOG.exception("unexpected error")
@@ -294,6 +312,7 @@ __all__ = [
     "PROBLEM_JSON",
     "PROBLEM_SCHEMA",
     "STATUS_CODES",
+    "allowed_methods",
     "malformed_body",
     "problem_responses",
     "Problem",

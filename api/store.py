@@ -22,7 +22,8 @@ from sqlalchemy import delete, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from api.db import ACTIVE_STATES, Database, Job, Mesh, MeshBlob, now_s
+from api.db import Database, Mesh, MeshBlob, now_s
+from api.jobstore import JobStore
 from api.problems import Problem
 from meshes import reference_cabin_path
 from planner.core.exceptions import InvalidInput, InvalidMesh
@@ -118,6 +119,9 @@ def mesh_document(row: Mesh) -> dict[str, Any]:
         "n_vertices": row.n_vertices,
         "bounds_min_m": row.report.get("bounds_min_m"),
         "bounds_max_m": row.report.get("bounds_max_m"),
+        "format": row.report.get("format"),
+        "file_units": row.report.get("file_units"),
+        "surface_deviation_m": row.report.get("surface_deviation_m", 0.0),
         "is_closed": row.report.get("is_closed"),
         "reference": False,
         "created_at": row.created_at,
@@ -262,7 +266,7 @@ class MeshStore:
             if row is None:
                 return False
             path = self.path_of(row)
-            active = s.scalars(select(Job).where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))).all()
+            active = JobStore.active_jobs(s, tenant)
             # Jobs name the file by the path of the instance that took the upload: compare the names.
             users = sorted(j.id for j in active if path.name in _file_names(j.meshes))
             if users:

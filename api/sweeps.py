@@ -16,11 +16,13 @@ import time
 import uuid
 from typing import Any
 
-from sqlalchemy import JSON, Float, ForeignKey, Integer, String, func, select, update
+from sqlalchemy import JSON, Float, ForeignKey, Integer, String, delete, func, select, update
 from sqlalchemy.orm import Mapped, mapped_column
 
-from api.db import ACTIVE_STATES, TERMINAL_STATES, Base, Database, Job, now_s
+from api.db import TERMINAL_STATES, Base, Database, now_s
+from api.jobkinds import PLAN
 from api.jobs import JobRunner
+from api.jobstore import JobStore, new_job
 from api.settings import Settings
 
 _LOG = logging.getLogger(__name__)
@@ -73,6 +75,65 @@ def new_sweep(
     )
 
 
+class SweepStore:
+    """The sweep tables' queries and state changes; the jobs' own go through :class:`JobStore`.
+
+    A sweep is ``running`` until every plan has a job and every job ended (``finished``), or until it is
+    cancelled (``cancelled``: plans without a job are never fed; under the tenant's quota lock, which the
+    feeder holds while it queues, so no job is queued after it).
+
+    Args:
+        db: The service database.
+    """
+
+    def __init__(self, db: Database) -> None:
+        self.db = db
+        self.jobs = JobStore(db)
+
+    def add(self, row: Sweep) -> None:
+        """Store a new sweep."""
+        with self.db.session() as s:
+            s.add(row)
+
+    def get(self, tenant: str, sweep_id: str) -> Sweep | None:
+        """The tenant's sweep, or ``None``."""
+        with self.db.session() as s:
+            return s.scalar(select(Sweep).where(Sweep.id == sweep_id, Sweep.tenant == tenant))
+
+    def links(self, sweep_id: str) -> dict[int, str]:
+        """``{plan index: job id}`` of the sweep's plans that have a job."""
+        with self.db.session() as s:
+            rows = s.execute(
+                select(SweepJob.index, SweepJob.job_id).where(SweepJob.sweep_id == sweep_id)
+            ).all()
+        return {int(i): str(j) for i, j in rows}
+
+    def job_ids(self, sweep_id: str) -> list[str]:
+        """The ids of the sweep's jobs."""
+        return list(self.links(sweep_id).values())
+
+    def job_states(self, sweep_id: str) -> list[tuple[str, str | None]]:
+        """``(status, reason)`` of each of the sweep's jobs."""
+        return [(status, reason) for _, status, reason in self.jobs.statuses(self.job_ids(sweep_id))]
+
+    def cancel(self, row: Sweep, message: str) -> list[str]:
+        """Cancel a running sweep and its jobs (see :meth:`JobStore.cancel`); the running jobs' ids."""
+        with self.db.tenant_quota_session(row.tenant) as s:  # the lock the feeder queues under
+            s.execute(
+                update(Sweep)
+                .where(Sweep.id == row.id, Sweep.status == "running")
+                .values(status="cancelled", finished_at=now_s())
+            )
+        return self.jobs.cancel(self.job_ids(row.id), message).running
+
+    def delete(self, row: Sweep, job_ids: list[str]) -> None:
+        """Delete an ended sweep with its links and its (finished) jobs."""
+        with self.db.session() as s:
+            s.execute(delete(SweepJob).where(SweepJob.sweep_id == row.id))
+            self.jobs.delete_finished(job_ids, s)
+            s.execute(delete(Sweep).where(Sweep.id == row.id))
+
+
 class SweepFeeder:
     """Submits the plans of running sweeps as jobs while their tenant has room under its quota.
 
@@ -88,6 +149,7 @@ class SweepFeeder:
         self.settings = settings
         self.runner = runner
         self.poll_s = poll_s
+        self.jobs = JobStore(db)
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
@@ -137,48 +199,32 @@ class SweepFeeder:
         with self.db.tenant_quota_session(sweep.tenant) as s:  # the lock POST /plans counts the quota under
             if s.scalar(select(Sweep.status).where(Sweep.id == sweep.id)) != "running":
                 return 0  # cancelled (under this tenant's lock) since the pass listed it
-            active = s.scalar(
-                select(func.count())
-                .select_from(Job)
-                .where(Job.tenant == sweep.tenant, Job.status.in_(ACTIVE_STATES))
-            )
+            active = self.jobs.active_count(s, sweep.tenant)
             linked = s.scalar(select(func.count()).select_from(SweepJob).where(SweepJob.sweep_id == sweep.id))
-            room = self.settings.tenant_max_active_jobs - int(active or 0)
+            room = self.settings.tenant_max_active_jobs - active
             start = int(linked or 0)
             todo = sweep.plans["plans"][start : start + max(0, room)]
             for plan in todo:
-                job_id = uuid.uuid4().hex
                 scenario = plan["scenario"]
-                s.add(
-                    Job(
-                        id=job_id,
-                        tenant=sweep.tenant,
-                        status="queued",
-                        progress=0.0,
-                        scenario=scenario,
-                        scenario_name=scenario["name"],
-                        request_sha256=plan["sha256"],
-                        idempotency_key=None,
-                        meshes=dict(sweep.plans.get("meshes", {})),
-                        provenance={**sweep.plans.get("provenance", {}), "scenario_sha256": plan["sha256"]},
-                        time_limit_s=float(scenario["options"]["time_limit_s"]),
-                        attempts=0,
-                        created_at=now_s(),
-                    )
+                job = new_job(
+                    PLAN,
+                    sweep.tenant,
+                    scenario,
+                    scenario["name"],
+                    plan["sha256"],
+                    dict(sweep.plans.get("meshes", {})),
+                    {**sweep.plans.get("provenance", {}), "scenario_sha256": plan["sha256"]},
+                    float(scenario["options"]["time_limit_s"]),
                 )
-                s.flush()  # the job row before its link (foreign keys in order)
-                s.add(SweepJob(sweep_id=sweep.id, index=int(plan["index"]), job_id=job_id))
+                self.jobs.add_queued(s, job)  # the job row before its link (foreign keys in order)
+                s.add(SweepJob(sweep_id=sweep.id, index=int(plan["index"]), job_id=job.id))
         return len(todo)
 
     def _finish_if_done(self, sweep: Sweep) -> None:
+        states = self.jobs.statuses(SweepStore(self.db).job_ids(sweep.id))
+        ended = sum(status in TERMINAL_STATES for _, status, _ in states)
         with self.db.session() as s:
-            ended = s.scalar(
-                select(func.count())
-                .select_from(SweepJob)
-                .join(Job, Job.id == SweepJob.job_id)
-                .where(SweepJob.sweep_id == sweep.id, Job.status.in_(TERMINAL_STATES))
-            )
-            if int(ended or 0) >= sweep.total:
+            if ended >= sweep.total:
                 s.execute(
                     update(Sweep)
                     .where(Sweep.id == sweep.id, Sweep.status == "running")
@@ -186,4 +232,4 @@ class SweepFeeder:
                 )
 
 
-__all__ = ["SWEEP_STATES", "Sweep", "SweepFeeder", "SweepJob", "new_sweep"]
+__all__ = ["SWEEP_STATES", "Sweep", "SweepFeeder", "SweepJob", "SweepStore", "new_sweep"]

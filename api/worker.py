@@ -1,11 +1,15 @@
-"""The child side of a planning job: runs in its own process, talks to the parent through a pipe.
+"""The child side of a job: runs in its own process, talks to the parent through a pipe; and plan files.
 
-The parent (:mod:`api.jobs`) sends nothing after start: the job description (scenario as submitted and
-the tenant's mesh files it names) is the process argument. The child sends ``("progress", stage,
-fraction)`` messages while planning and one ``("done", outcome)`` at the end; the parent writes
-everything to the database. The plot and the packed result document (:mod:`api.compact`) are made
-here, never in the server's event loop. The process arms its parent-death signal first, so it ends
-with the service (:mod:`api.lifeline`).
+The parent (:mod:`api.jobs`) sends nothing after start: the job description (its kind, the scenario as
+submitted and the tenant's mesh files it names) is the process argument. The child runs its kind's
+function (:mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction,
+detail)`` messages while planning (``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)``
+for what a relaunch must not redo (a campaign's finished cycles) and one ``("done", outcome)`` at the
+end; the parent writes everything to the database. The packed result document (:mod:`api.compact`) is
+made here, never in the server's event loop; it is the only thing a job writes: the CSV and the plot are
+made on request (:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the plot
+kept once made). The process arms its parent-death signal first, so it ends with the service
+(:mod:`api.lifeline`).
 
 Importing this module imports the planner, so the forkserver can preload it once and every job forks
 warm.
@@ -13,28 +17,38 @@ warm.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
+import threading
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from api.compact import pack_document
+import numpy as np
+
+from api.compact import pack_value
+from api.jobkinds import FileSource, kind_of
 from api.lifeline import die_with_parent
 from api.store import scenario_mesh_resolver
+from planner.collision.world import CollisionWorld
 from planner.core.exceptions import PlannerError
 from planner.documents.output import refusal_document, result_document
-from planner.documents.plot import plan_png
+from planner.documents.plot import profile_png
 from planner.plan.pipeline import Planner
+from planner.robots import load_robot
+from planner.robots.cabin8 import Cabin8
 from planner.scenario.resolve import ResolvedScenario, resolve_scenario
 from planner.scenario.schema import scenario_from_dict
+from planner.timing.profile import DriveProfile
 
 _LOG = logging.getLogger(__name__)
 
 
 def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
-    """Plan one job; the outcome ``{"status", "reason", "message", "document", "provenance", "csv", "png"}``.
+    """Plan one job; the outcome ``{"status", "reason", "message", "document", "provenance"}``.
+
+    The document is the result (or refusal) document as a dict; nothing else is made here (the CSV
+    and the plot are made on request from the stored document: :func:`profile_csv`, :func:`plot_png`).
 
     Args:
         job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}`` (and ``nice``,
@@ -56,7 +70,7 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
             "status": "failed",
             "reason": exc.reason,
             "message": exc.message,
-            "document": json.dumps(doc),
+            "document": doc,
             "provenance": doc.get("provenance"),
         }
     doc = result_document(sc, result)
@@ -64,18 +78,16 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
         "status": "succeeded",
         "reason": None,
         "message": f"{sc.spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
-        "document": json.dumps(doc),
+        "document": doc,
         "provenance": doc["provenance"],
-        "csv": result.profile.to_csv(),
-        "png": plan_png(sc, result, planner.world),
     }
 
 
 def run_job(job: dict[str, Any], conn: Connection) -> None:
-    """Process entry point: plan ``job`` and send progress and the outcome through ``conn``.
+    """Process entry point: run ``job`` (its kind's function) and send progress and the outcome.
 
-    The outcome carries the result document packed (``packed``), not its text, and no CSV (made on
-    request from the document).
+    The outcome carries the result document packed (``packed``, :func:`api.compact.pack_value`), not
+    its text.
     """
     die_with_parent(job.get("server_pid"))
 
@@ -85,14 +97,22 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
         except OSError:  # the server is gone (its end of the pipe closed): its lease re-queues the job
             os._exit(0)  # quietly, before the parent-death signal: no traceback in the server's log
 
-    def progress(stage: str, fraction: float) -> None:
-        send(("progress", str(stage), float(fraction)))
+    class Progress:
+        """What the job's function reports through: ``(stage, fraction[, detail])``, and files to keep."""
+
+        def __call__(self, stage: str, fraction: float, detail: dict[str, Any] | None = None) -> None:
+            send(("progress", str(stage), float(fraction), detail))
+
+        def keep(self, name: str, data: bytes) -> None:
+            send(("keep", str(name), bytes(data)))
+
+    progress = Progress()
 
     if job.get("nice"):
         os.nice(int(job["nice"]))  # planning yields the CPU to the service's event loop
 
     try:
-        outcome = plan_job(job, progress)
+        outcome = kind_of(job.get("kind")).run()(job, progress)
     except Exception as exc:  # a bug in the planner: report it as a failed job, never hang
         _LOG.exception("job %s crashed", job.get("id"))
         outcome = {
@@ -102,10 +122,66 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
             "document": None,
         }
     document = outcome.pop("document", None)
-    outcome.pop("csv", None)
-    outcome["packed"] = pack_document(document) if document is not None else None
+    outcome["packed"] = pack_value(document) if document is not None else None
     send(("done", outcome))
     conn.close()
 
 
-__all__ = ["plan_job", "run_job"]
+# ---------------------------------------------------------------- files made on request (server side)
+_PLOT_LOCK = threading.Lock()
+
+
+def _resolved(source: FileSource) -> ResolvedScenario:
+    spec = scenario_from_dict(source.input, source="plan")
+    return resolve_scenario(
+        spec, base_dir=Path(source.empty_dir), mesh_resolver=scenario_mesh_resolver(source.meshes)
+    )
+
+
+def profile_csv(source: FileSource) -> bytes:
+    """The drive profile of a succeeded plan as CSV (``t_s``, then position, velocity, ... per drive)."""
+    robot = load_robot(str(source.document["robot"]))
+    if not isinstance(robot, Cabin8):  # planning jobs are cabin8 plans
+        raise ValueError(f"no drive profile CSV for robot {robot.name!r}")
+    return DriveProfile.from_dict(source.document, robot).to_csv().encode()
+
+
+def plot_png(source: FileSource) -> bytes:
+    """The plot of a succeeded plan: the profile against its limits, the clearance and the deflection.
+
+    As the planner's own plot (:func:`planner.documents.plot.plan_png`): the clearance is the exact
+    distance (:meth:`CollisionWorld.clearance_profile`) at about 200 samples (every ``N // 200``-th and
+    the last); the deflection is the report's predicted series (``report.deflection.along``, model
+    predictions at up to 100 samples) drawn through the profile's samples.
+    """
+    sc = _resolved(source)
+    doc = source.document
+    profile = DriveProfile.from_dict(doc, sc.robot)
+    with _PLOT_LOCK:  # pyplot's figure registry is global: one plot at a time per server process
+        return _plot(sc, doc, profile)
+
+
+def _plot(sc: ResolvedScenario, doc: dict[str, Any], profile: DriveProfile) -> bytes:
+    q = profile.joints
+    idx = np.unique(np.concatenate([np.arange(0, len(q), max(1, len(q) // 200)), [len(q) - 1]]))
+    clearance = None
+    if sc.cabin is not None:
+        clearance = CollisionWorld(sc.robot, sc.cabin, sc.payload).clearance_profile(q[idx])
+    deflection = None
+    along = ((doc.get("report") or {}).get("deflection") or {}).get("along")
+    if along and along.get("t_s"):
+        t_s = np.asarray(along["t_s"], dtype=float)
+        x = np.hstack([np.asarray(along["translation_m"]), np.asarray(along["rotation_rad"])])
+        deflection = np.column_stack([np.interp(profile.t, t_s, x[:, j]) for j in range(6)])
+    return profile_png(
+        profile,
+        sc.robot,
+        profile.t[idx],
+        clearance,
+        sc.options.clearance_m,
+        title=f"{sc.spec.name}: {profile.duration_s:.2f} s",
+        deflection=deflection,
+    )
+
+
+__all__ = ["plan_job", "plot_png", "profile_csv", "run_job"]

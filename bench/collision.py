@@ -5,7 +5,7 @@
 * exact minimum-distance queries (reports and clearance profiles)
 
 Each figure is also measured, in the same run and on the same inputs, on the reference route
-(:class:`~planner.collision.reference.ReferenceWorld`: CasADi poses, the motion walk in Python with the
+(:class:`~planner.collision.oracle.ReferenceWorld`: CasADi poses, the motion walk in Python with the
 original always-probe policy), so the speed-up is not blurred by the load of a shared machine.
 
 Configurations: random admissible joints along the whole rail, payload 0.45 x 0.35 x 0.50 m held 0.30 m
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.reference import ReferenceWorld
+from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.meshio import load_mesh
 from planner.redundancy.ik import random_admissible_joints

@@ -43,6 +43,8 @@ import numpy as np
 import yaml
 from pebble import ProcessPool
 
+from bench import ompl_log
+
 ROOT = Path(__file__).resolve().parents[1]
 SUITE = ROOT / "tests" / "scenarios"
 #: Exhaustive variants: (OMPL planner, seed, motion_margin_m or None for the scenario's).
@@ -120,6 +122,7 @@ def plan_file(path: str, options: dict[str, Any] | None = None) -> dict[str, Any
         min_clearance_m=float(res.gate.min_clearance_m),
         search=(rep.get("search") or {}).get("method"),
         gate_passed=bool(res.gate.passed),
+        path_length=ompl_log.path_length(res.profile.position),
     )
     doc = json.loads(json.dumps(result_document(sc, res)))
     recheck = check_profile(sc, doc)
@@ -207,6 +210,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-exhaustive", action="store_true")
     parser.add_argument("--no-suite", action="store_true")
     parser.add_argument("--clearance-m", type=float, default=0.01)
+    parser.add_argument(
+        "--ompl-log", type=Path, default=None, help="also write OMPL benchmark logs (one per case) here"
+    )
     args = parser.parse_args(argv)
     count = 12 if args.quick else args.count
     ex_limit = 30.0 if args.quick else args.exhaustive_time_limit_s
@@ -359,6 +365,15 @@ def main(argv: list[str] | None = None) -> int:
             f"p95 {suite_sum['planning_time_p95_s']:.3f} s; duration ratio median "
             f"{suite_sum['duration_ratio_median']:.3f}; gate failures {suite_sum['gate_failures']}"
         )
+    if args.ompl_log is not None:
+        from planner.core.provenance import package_version
+
+        limits = {c["name"]: _time_limit(Path(c["scenario"])) for c in cases}
+        experiments = ompl_log.generalization_experiments(
+            cases, default, exhaustive, seed=args.seed, time_limits_s=limits, version=package_version()
+        )
+        written = ompl_log.write_generalization_logs(args.ompl_log, experiments)
+        print(f"OMPL benchmark logs: {len(written)} -> {args.ompl_log}")
     print(f"total wall time {time.perf_counter() - t_start:.0f} s")
     if args.out is not None:
         doc = {

@@ -8,6 +8,12 @@ one at a time on the idle server first (each cancelled at once), and how many re
 validation gate: the gate report stored with each plan, and an independent re-run of the gate through
 ``POST /plans:validate``.
 
+In the same run, before the server starts, ``--workers`` in-process planners (one process each, warmed
+up on every scenario first, at the niceness of the service's job processes) plan the same list of plans
+the clients submit: plans a minute in process,
+next to the service's, and their ratio (the service's overhead: a job's process, its documents, the
+database and the polling). The load average is printed at the start and the end (a shared machine).
+
     python -m bench.load [--clients 20] [--workers 2]
 """
 
@@ -29,6 +35,8 @@ from typing import Any
 import httpx
 import numpy as np
 import yaml
+
+from api.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "tests" / "scenarios"
@@ -69,6 +77,61 @@ def probe(url: str, headers: dict[str, str], job_id: str, stop: Any, out: Any) -
     out.put((health, status, slow))
 
 
+def _plan_in_process(
+    scenarios: list[dict[str, Any]], mine: list[int], start: Any, out: Any, nice: int
+) -> None:
+    """One in-process planner: warm up on every scenario, wait for ``start``, plan ``mine`` in order.
+
+    At the niceness the service gives its job processes (``nice``), so that on a shared machine both
+    get the same share of the CPU.
+    """
+    os.nice(nice)
+    from planner.plan.pipeline import Planner
+    from planner.scenario import resolve_scenario, scenario_from_dict
+
+    empty = Path(tempfile.mkdtemp(prefix="cabinplan-inproc-"))
+
+    def plan(sc: dict[str, Any]) -> float:
+        t = time.perf_counter()
+        Planner(resolve_scenario(scenario_from_dict(sc), base_dir=empty)).plan()
+        return time.perf_counter() - t
+
+    for sc in scenarios:  # what the service's forkserver warm-up and the cache folder give its jobs
+        plan(sc)
+    start.wait()  # every planner warm: they plan at the same time, as the service's workers do
+    t0 = time.perf_counter()
+    times = [(scenarios[k]["name"], plan(scenarios[k])) for k in mine]
+    out.put((time.perf_counter() - t0, times))
+
+
+def in_process_rate(
+    scenarios: list[dict[str, Any]], n: int, planners: int
+) -> tuple[float, dict[str, list[float]]]:
+    """Plans a minute of ``planners`` warm in-process planners on plans ``k % len(scenarios)``, k < n.
+
+    Returns the rate and each scenario's plan times [s] (resolve + plan, no document).
+    """
+    mp = multiprocessing.get_context("spawn")
+    start, out = mp.Barrier(planners), mp.Queue()
+    nice = int(os.environ.get("CABINPLAN_WORKER_NICE", Settings.model_fields["worker_nice"].default))
+    order = [k % len(scenarios) for k in range(n)]
+    procs = [
+        mp.Process(target=_plan_in_process, args=(scenarios, order[i::planners], start, out, nice))
+        for i in range(planners)
+    ]
+    for p in procs:
+        p.start()
+    results = [out.get(timeout=1800) for _ in procs]
+    for p in procs:
+        p.join()
+    wall = max(r[0] for r in results)
+    times: dict[str, list[float]] = {}
+    for _, ts in results:
+        for name, dt in ts:
+            times.setdefault(name, []).append(dt)
+    return 60.0 * n / wall, times
+
+
 def _pct(values: list[float]) -> str:
     a = 1e3 * np.asarray(values)
     p50, p95 = np.percentile(a, 50), np.percentile(a, 95)
@@ -80,6 +143,10 @@ def main() -> None:
     ap.add_argument("--clients", type=int, default=20)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
+
+    load_start = os.getloadavg()
+    scenarios = reference_scenarios()
+    inproc_rate, inproc_times = in_process_rate(scenarios, args.clients, args.workers)
 
     data = Path(tempfile.mkdtemp(prefix="cabinplan-load-"))
     port = _free_port()
@@ -108,7 +175,6 @@ def main() -> None:
                 raise SystemExit(f"server did not start; see {data / 'server.log'}")
             time.sleep(0.1)
         headers = {"X-API-Key": (data / "local-api-key").read_text().strip()}
-        scenarios = reference_scenarios()
         idle_post_s: list[float] = []
         with httpx.Client(base_url=url, timeout=60, headers=headers) as c:
             for k in range(2 * len(scenarios)):
@@ -176,13 +242,21 @@ def main() -> None:
         for r in ok:
             d = r["doc"]
             by_name.setdefault(d["scenario"]["name"], []).append(d["finished_at"] - d["started_at"])
+        rate = 60 * len(results) / wall
+        load_end = os.getloadavg()
         print(f"clients {args.clients}, workers {args.workers}, scenarios {len(scenarios)} (round robin)")
+        print(f"load average at start {load_start[0]:.2f}, at end {load_end[0]:.2f} (1 min)")
+        print(f"wall {wall:.1f} s, {len(ok)}/{len(results)} succeeded, throughput {rate:.1f} plans/min")
         print(
-            f"wall {wall:.1f} s, {len(ok)}/{len(results)} succeeded, "
-            f"throughput {60 * len(results) / wall:.1f} plans/min"
+            f"in process ({args.workers} warm planners, the same {args.clients} plans): "
+            f"{inproc_rate:.1f} plans/min; service / in process {rate / inproc_rate:.0%}"
         )
         for name, ts in sorted(by_name.items()):
-            print(f"  {name:<22} run time {np.mean(ts):6.2f} s (n={len(ts)})")
+            ip = inproc_times.get(name, [float("nan")])
+            print(
+                f"  {name:<22} job run time median {np.median(ts):5.2f} s (n={len(ts)}); "
+                f"in process {np.median(ip):5.2f} s (n={len(ip)})"
+            )
         failed = [
             (r["doc"]["scenario"]["name"], r["doc"]["reason"])
             for r in results

@@ -43,6 +43,12 @@ _PUBLIC: dict[str, str] = {
     "plan_cycle": "planner.task.cycle",
     "check_cycle": "planner.task.check",
     "cycle_document": "planner.documents.cycle",
+    # campaigns
+    "Campaign": "planner.task.campaign_schema",
+    "campaign_from_dict": "planner.task.campaign_schema",
+    "load_campaign_file": "planner.task.campaign_schema",
+    "CampaignRun": "planner.campaign.run",
+    "CampaignResult": "planner.campaign.run",
     # gate
     "check_profile": "planner.gate.check_profile",
     "validate_profile": "planner.gate.checks",
@@ -67,6 +73,7 @@ _PUBLIC: dict[str, str] = {
 }
 
 if TYPE_CHECKING:
+    from planner.campaign.run import CampaignResult, CampaignRun
     from planner.collision.world import CollisionWorld
     from planner.core.exceptions import InvalidInput, PlannerError, PlanRefused, ValidationFailed
     from planner.core.schemas import Pose
@@ -81,6 +88,7 @@ if TYPE_CHECKING:
     from planner.robots.registry import available_robots, load_robot
     from planner.scenario.resolve import ResolvedScenario, load_scenario, resolve_scenario
     from planner.scenario.schema import Scenario, scenario_from_dict
+    from planner.task.campaign_schema import Campaign, campaign_from_dict, load_campaign_file
     from planner.task.check import check_cycle
     from planner.task.cycle import CycleResult, plan_cycle
     from planner.task.resolve import ResolvedCycle, load_cycle, resolve_cycle
@@ -105,6 +113,9 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
+    "Campaign",
+    "CampaignResult",
+    "CampaignRun",
     "Clearances",
     "CollisionWorld",
     "Cycle",
@@ -125,11 +136,13 @@ __all__ = [
     "ValidationFailed",
     "__version__",
     "available_robots",
+    "campaign_from_dict",
     "check_cycle",
     "check_profile",
     "cycle_document",
     "cycle_from_dict",
     "kinematics_tools",
+    "load_campaign_file",
     "load_cycle",
     "load_mesh",
     "load_robot",

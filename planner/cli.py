@@ -30,7 +30,7 @@ from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
 
 if TYPE_CHECKING:
-    from planner.gate.drive_checks import GateReport
+    pass
 
 app = typer.Typer(
     add_completion=False,
@@ -274,7 +274,7 @@ def plan(
     The JSON written to --output is the profile on success and the refusal document otherwise.
     """
     from planner.core.exceptions import PlanRefused
-    from planner.documents.output import document_bytes, refusal_document, result_document
+    from planner.documents.output import clearance_phrase, document_bytes, refusal_document, result_document
     from planner.plan.pipeline import Planner
 
     sc = _load(scenario)
@@ -323,7 +323,7 @@ def cycle(
     """
     from planner.core.exceptions import PlanRefused
     from planner.documents.cycle import cycle_document, cycle_png, cycle_refusal_document
-    from planner.documents.output import document_bytes
+    from planner.documents.output import clearance_phrase, document_bytes
     from planner.task.cycle import plan_cycle
     from planner.task.resolve import load_cycle
 
@@ -350,19 +350,6 @@ def cycle(
         f"samples, {len(result.legs)} legs, {clearance_phrase(result.gate)}, "
         f"spring-back {springs} -> {output}",
         err=True,
-    )
-
-
-def clearance_phrase(gate: GateReport) -> str:
-    """The report's clearance in words: the exact minimum over every sample, where, and the bound between."""
-    at = gate.min_clearance_at
-    if at is None or gate.min_clearance_bound_m is None:
-        return f"min clearance {1e3 * gate.min_clearance_m:.1f} mm"
-    a, b = at["bodies"]
-    leg = f" on {at['leg']}" if at.get("leg") else ""  # a cycle's figure names its leg
-    return (
-        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b}{leg} at {at['t_s']:.2f} s; "
-        f">= {1e3 * gate.min_clearance_bound_m:.1f} mm between samples)"
     )
 
 
@@ -486,6 +473,62 @@ def sweep(
 
 @app.command()
 @handle_errors
+def export(
+    plan_document: Annotated[
+        Path,
+        typer.Argument(
+            help="a succeeded plan or cycle document (JSON, as written by `plan`)", dir_okay=False
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="goal file, or the bag folder for mcap")],
+    fmt: Annotated[
+        str,
+        typer.Option("--format", help="ros2-json | ros2-yaml (FollowJointTrajectory goal) | mcap (rosbag2)"),
+    ] = "ros2-yaml",
+    spacing_s: Annotated[
+        float | None,
+        typer.Option(
+            "--spacing-s", help="thin the trajectory points to this spacing [s] (default: every sample)"
+        ),
+    ] = None,
+    scenario: Annotated[
+        Path | None,
+        typer.Option("--scenario", help="mcap: the plan's scenario, for the exact clearance along the plan"),
+    ] = None,
+) -> None:
+    """Export a plan for a controller or a tool: a FollowJointTrajectory goal (JSON/YAML) or a rosbag2 MCAP.
+
+    Thinning keeps every sample within 1e-5 (m or rad) and the drive limits under the controller's quintic
+    interpolation, adding points where it must. Exit 2 for a document that is not a succeeded plan.
+    """
+    from planner.documents import exports
+
+    if fmt not in exports.FORMATS:
+        _fail(f"--format: must be one of {', '.join(exports.FORMATS)}, got {fmt!r}", EXIT_INVALID)
+    try:
+        doc = json.loads(plan_document.read_text(encoding="utf-8"))
+    except OSError as exc:
+        _fail(f"plan: cannot read {plan_document} ({exc.strerror})", EXIT_INVALID)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        _fail(f"plan: {plan_document} is not a JSON document ({exc})", EXIT_INVALID)
+    if not isinstance(doc, dict):
+        _fail(f"plan: {plan_document} is not a plan document (a JSON object)", EXIT_INVALID)
+    if fmt == "mcap":
+        if output.exists():
+            _fail(f"--output: {output} exists; a rosbag2 bag is a new folder", EXIT_INVALID)
+        exports.profile_of(doc)  # refuse a bad document before anything is computed or written
+        clearance = exports.clearance_series(_load(scenario), doc) if scenario is not None else None
+        exports.write_rosbag(doc, output, spacing_s=spacing_s, clearance=clearance)
+        size = sum(p.stat().st_size for p in output.iterdir())
+    else:
+        data, _ = exports.export_bytes(doc, fmt, spacing_s=spacing_s)
+        _write(output, data, "--output")
+        size = len(data)
+    typer.echo(f"cabinplan: export {fmt}: {size} bytes -> {output}")
+
+
+@app.command()
+@handle_errors
 def check(
     scenario: ScenarioArg,
     profile: Annotated[
@@ -558,7 +601,7 @@ def profile(
         Path | None, typer.Option("--plot", help="also plot the drive displacements (PNG)")
     ] = None,
 ) -> None:
-    """Pose path -> validated drive profile (TOPP-RA under the drive limits), or exit 3 with the reason."""
+    """Pose path -> validated drive profile (timed under the drive limits), or exit 3 with the reason."""
     if robot != "pprs6":
         load_robot(robot)
         _fail(
@@ -624,6 +667,98 @@ def generate(
         cases.append(case)
     write_manifest(cases, out, seed)
     _emit({"out": str(out), "seed": seed, "scenarios": [f"{c.name}.yaml" for c in cases]})
+
+
+class _CampaignProgress(_Bar):
+    """Campaign progress on stderr when it is a terminal: one row per unit (status, cycles planned)."""
+
+    def __init__(self, enabled: bool, units: list[str]) -> None:
+        self.tasks: dict[str, Any] = {}
+        if enabled:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(
+                TextColumn("{task.description:<12}"),
+                BarColumn(bar_width=20),
+                TextColumn("{task.fields[status]:<11} cycles {task.fields[cycles]}"),
+                TimeElapsedColumn(),
+            )
+            for u in units:
+                self.tasks[u] = self.bar.add_task(u, total=1, status="waiting", cycles=0)
+
+    def __call__(self, status: dict[str, Any]) -> None:
+        if self.bar is None:
+            return
+        for u, st in status.items():
+            done = st.status in ("planned", "refused", "not_planned")
+            self.bar.update(
+                self.tasks[u],
+                completed=1 if done else 0,
+                status=st.status,
+                cycles=st.cycles_planned + st.cycles_cached,
+            )
+
+
+@app.command()
+@handle_errors
+def campaign(
+    spec: Annotated[Path, typer.Argument(help="campaign file (.yaml, .yml or .json)", dir_okay=False)],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="output folder (cycle documents, summary.json)")
+    ],
+    workers: Annotated[
+        int, typer.Option("--workers", min=1, max=256, help="cycles at a time (local processes or Ray CPUs)")
+    ] = max(1, os.cpu_count() or 1),
+    ray: Annotated[bool, typer.Option("--ray", help="run the cycles as Ray tasks")] = False,
+    ray_address: Annotated[
+        str | None,
+        typer.Option("--ray-address", help="Ray cluster address (default RAY_ADDRESS, else a local Ray)"),
+    ] = None,
+) -> None:
+    """Install a campaign's units one cycle at a time: the cycle documents in install order + summary.json.
+
+    Resumable: cycles with a row in OUTPUT's journal (keyed by the cycle's hash) are not planned again.
+    Exit 0 when every unit is installed, 3 when a cycle is refused (given order) or no order is found.
+    """
+    from planner.campaign.run import CYCLE_RUNNER, CampaignRun, campaign_meshes
+    from planner.sweep.run import WARMUP_TIME_LIMIT_S, EmbeddedExecutor, RayExecutor
+    from planner.task.campaign import check_campaign
+    from planner.task.campaign_schema import load_campaign_file
+
+    camp = load_campaign_file(spec)
+    base_dir = spec.parent.resolve()
+    check_campaign(camp, base_dir)
+    executor: Any = None
+    try:
+        with _CampaignProgress(sys.stderr.isatty(), camp.ids) as progress:
+            run = CampaignRun(camp, output, None, base_dir=base_dir, progress=progress)
+            first = run.job(camp.ids[0], ())
+            warm: dict[str, Any] | None = None
+            if not run.journal.done(first.sha256):  # something to plan: warm the workers on it
+                warm = {"runner": CYCLE_RUNNER, "cycle": first.document, "base_dir": str(base_dir)}
+                warm["cycle"] = {**warm["cycle"], "options": {**warm["cycle"]["options"]}}
+                limit = warm["cycle"]["options"].get("time_limit_s", 30.0)
+                warm["cycle"]["options"]["time_limit_s"] = min(float(limit), WARMUP_TIME_LIMIT_S)
+            if ray:
+                executor = RayExecutor(ray_address, workers, None, campaign_meshes(camp, base_dir), warm)
+            else:
+                executor = EmbeddedExecutor(workers, warm)
+            run.executor = executor
+            result = run.run()
+    except KeyboardInterrupt:
+        _fail(f"campaign {camp.name}: interrupted; the cycles so far are in {output}, rerun to resume", 130)
+    finally:
+        if executor is not None:
+            executor.close()
+    total = sum(e["duration_s"] or 0.0 for e in result.units if e["status"] == "planned")
+    typer.echo(
+        f"cabinplan: campaign {camp.name}: {result.message}; {len(result.order)} units in order "
+        f"{' '.join(result.order) or '-'}, campaign {total:.1f} s; {result.cycles_planned} cycles planned, "
+        f"{result.cycles_cached} already done -> {output}",
+        err=True,
+    )
+    if not result.succeeded:
+        raise typer.Exit(EXIT_INFEASIBLE)
 
 
 def main() -> None:

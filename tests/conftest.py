@@ -54,9 +54,9 @@ def compiled_kernels() -> None:
     not make the first kernel call build the kernels into its temporary folder.
     """
     from planner.collision.kernels.entries import DEFAULT
-    from planner.timing import reference
+    from planner.timing import acc_reference
 
-    for module in (DEFAULT.module, reference.kernels()):
+    for module in (DEFAULT.module, acc_reference.kernels()):
         built = getattr(module, "__file__", "")
         if built.endswith(importlib.machinery.EXTENSION_SUFFIXES[0]):
             SESSION_BUILDS.append(Path(built))

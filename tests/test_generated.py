@@ -18,10 +18,10 @@ from typer.testing import CliRunner
 from planner.cli import app
 from planner.collision.world import CollisionWorld
 from planner.core.schemas import Pose
+from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.gate.requirements import GATE_MOTION_MARGIN_M
 from planner.meshio.load import load_mesh
-from planner.plan.goals import StaticForceCheck
 from planner.plan.pipeline import plan_scenario as plan
 from planner.scenario import load_scenario
 from planner.tools.generate import (

@@ -27,7 +27,9 @@ FLOORS = (
     "task",
     "documents",
     "tools",
+    "generate",
     "sweep",
+    "campaign",
     "cli",
 )
 #: Engines and edge libraries, and the only rooms that may import them.

@@ -5,27 +5,11 @@ from __future__ import annotations
 from typing import Any
 
 from fastapi import APIRouter
-from sqlalchemy import func, select
 
-from api.db import Database, Job
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 
 router = APIRouter(tags=["health"])
-
-
-def queue_counts(db: Database) -> tuple[int, int]:
-    """``(queued, running)`` jobs of the whole database (every instance)."""
-    with db.session() as s:
-        rows: dict[str, int] = {
-            str(status): int(n)
-            for status, n in s.execute(
-                select(Job.status, func.count())
-                .where(Job.status.in_(("queued", "running")))
-                .group_by(Job.status)
-            ).all()
-        }
-    return int(rows.get("queued", 0)), int(rows.get("running", 0))
 
 
 @router.get("/health", summary="Liveness: the process answers")
@@ -61,7 +45,7 @@ def ready(ctx: Ctx) -> dict[str, Any]:
             stage=warming,
             headers={"Retry-After": "5"},
         )
-    queued, running = queue_counts(ctx.db)
+    queued, running = ctx.jobs.queue_counts()
     return {
         "status": "ready",
         "instance": ctx.runner.instance_id,

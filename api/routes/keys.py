@@ -6,10 +6,10 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Response
 from pydantic import BaseModel, ConfigDict, Field
-from sqlalchemy import select
 
+from api import auth
 from api.auth import ADMIN_TENANT, LOCAL_TENANT, AdminPrincipal, create_key
-from api.db import ApiKey, now_s
+from api.db import ApiKey
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 
@@ -58,18 +58,12 @@ def create(body: KeyRequest, ctx: Ctx, _admin: AdminPrincipal) -> dict[str, Any]
 @router.get("/keys", summary="List API keys (admin; no secrets)")
 def list_keys(ctx: Ctx, _admin: AdminPrincipal) -> dict[str, Any]:
     """Every key's record, newest first."""
-    with ctx.db.session() as s:
-        rows = s.scalars(select(ApiKey).order_by(ApiKey.created_at.desc())).all()
-        return {"items": [_doc(r) for r in rows]}
+    return {"items": [_doc(r) for r in auth.list_keys(ctx)]}
 
 
 @router.delete("/keys/{key_id}", status_code=204, summary="Revoke an API key (admin)")
 def revoke(key_id: str, ctx: Ctx, _admin: AdminPrincipal) -> Response:
     """Revoke the key at once (204); unknown ids give 404."""
-    with ctx.db.session() as s:
-        row = s.get(ApiKey, key_id)
-        if row is None:
-            raise Problem(404, "not_found", f"no key {key_id!r}")
-        if row.revoked_at is None:
-            row.revoked_at = now_s()
+    if not auth.revoke_key(ctx, key_id):
+        raise Problem(404, "not_found", f"no key {key_id!r}")
     return Response(status_code=204)

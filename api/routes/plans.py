@@ -6,42 +6,35 @@ reference cabin name or the id of one of the tenant's uploaded cabins), checks t
 ceiling and the tenant's quota, and commits the job (``queued``) *before* answering 202 with its id and
 ``Location``. An ``Idempotency-Key`` header makes a retry return the same job instead of planning twice.
 
-Results are stored packed (:mod:`api.compact`, about 7x smaller than the JSON text); the JSON document
-(``GET /plans/{id}``) and the CSV (``GET /plans/{id}/profile.csv``) are made from it on request.
-``DELETE /plans/{id}`` cancels a queued or running plan and deletes a finished one.
+Plans are jobs of kind :data:`api.jobkinds.PLAN`: these routes check the scenario and call the helpers
+every job kind shares (:mod:`api.routes.jobroutes`), which call the job store (:mod:`api.jobstore`).
+Results are stored packed (:mod:`api.compact`, about 5x smaller than the JSON text); the JSON document
+(``GET /plans/{id}``), the CSV (``GET /plans/{id}/profile.csv``) and the plot (``plot.png``, kept once
+made) are made from it on request. ``DELETE /plans/{id}`` cancels a queued or running plan and deletes
+a finished one.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import threading
-import time
-import uuid
-from collections import OrderedDict
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Body, Header, Query, Request, Response
-from sqlalchemy import delete, func, select, update
-from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 
 from api.auth import CurrentPrincipal
 from api.bodies import parse_body
-from api.compact import unpack_document, unpack_text
 from api.context import AppContext
-from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
+from api.db import Job
 from api.examples import docked
-from api.jobs import rows_matched
+from api.jobkinds import PLAN
+from api.jobstore import new_job
 from api.openapi import scenario_request_body
 from api.problems import Problem, problem_responses
+from api.routes import jobroutes
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
 from meshes import reference_cabin_path, reference_cabins
-from planner.robots import load_robot
-from planner.robots.cabin8 import Cabin8
 from planner.scenario import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
-from planner.timing.profile import DriveProfile
 
 router = APIRouter(tags=["plans"])
 
@@ -61,50 +54,12 @@ _SCENARIO_EXAMPLE: dict[str, Any] = {
 }
 
 
-def _canonical_sha256(data: Any) -> str:
-    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
 def job_document(row: Job, warming: str | None = None) -> dict[str, Any]:
-    """The public job document (without the result: :func:`get_plan` adds it).
-
-    Args:
-        row: The job.
-        warming: The runner's warm-up stage, shown as the stage of a queued job while it lasts.
-    """
-    base = f"/api/v1/plans/{row.id}"
-    stage = warming if row.status == "queued" and warming is not None else row.stage
-    doc: dict[str, Any] = {
-        "id": row.id,
-        "status": row.status,
-        "stage": stage,
-        "progress": row.progress,
-        "scenario": {"name": row.scenario_name, "sha256": row.provenance.get("scenario_sha256")},
-        "time_limit_s": row.time_limit_s,
-        "attempts": row.attempts,
-        "created_at": row.created_at,
-        "started_at": row.started_at,
-        "finished_at": row.finished_at,
-        "reason": row.reason,
-        "message": row.message,
-        "provenance": row.provenance,
-        "links": {"self": base},
-    }
-    if row.status == "succeeded":
-        doc["links"].update(profile_csv=f"{base}/profile.csv", plot_png=f"{base}/plot.png")
-    return doc
+    """The public document of a planning job (see :func:`api.routes.jobroutes.job_document`)."""
+    return jobroutes.job_document(PLAN, row, warming)
 
 
-def _tenant_job(ctx: AppContext, tenant: str, job_id: str, *columns: Any) -> Job:
-    with ctx.db.session() as s:
-        row = s.scalar(select(Job).options(*columns).where(Job.id == job_id, Job.tenant == tenant))
-    if row is None:
-        raise Problem(404, "not_found", f"no plan {job_id!r}")
-    return row
-
-
-def _mesh_map(ctx: AppContext, tenant: str, spec: Scenario) -> dict[str, str]:
+def mesh_map(ctx: AppContext, tenant: str, spec: Scenario) -> dict[str, str]:
     """Stored files of the tenant's meshes the scenario names; 422 for any other mesh name."""
     meshes: dict[str, str] = {}
     names: list[tuple[str, str, str, bool]] = []
@@ -148,32 +103,11 @@ def _resolve(ctx: AppContext, tenant: str, body: Any) -> tuple[Scenario, Resolve
             f"{ceiling} s",
             errors=[{"field": "options.time_limit_s", "reason": f"must be at most {ceiling}"}],
         )
-    meshes = _mesh_map(ctx, tenant, spec)
+    meshes = mesh_map(ctx, tenant, spec)
     empty = ctx.settings.data_dir / "empty"
     empty.mkdir(parents=True, exist_ok=True)
     resolved = resolve_scenario(spec, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes))
     return spec, resolved, meshes
-
-
-def _replay(
-    ctx: AppContext, tenant: str, key: str, request_sha256: str, response: Response
-) -> dict[str, Any] | None:
-    with ctx.db.session() as s:
-        row = s.scalar(select(Job).where(Job.tenant == tenant, Job.idempotency_key == key))
-    if row is None:
-        return None
-    if row.request_sha256 != request_sha256:
-        raise Problem(
-            422,
-            "idempotency_key_reused",
-            "this Idempotency-Key was already used with a different request body",
-            errors=[{"field": "Idempotency-Key", "reason": "reused with a different body"}],
-            plan_id=row.id,
-        )
-    response.status_code = 200
-    response.headers["Location"] = f"/api/v1/plans/{row.id}"
-    response.headers["Idempotent-Replayed"] = "true"
-    return job_document(row)
 
 
 @router.post(
@@ -207,62 +141,25 @@ async def submit(
 def _submit(
     ctx: AppContext, tenant: str, response: Response, body: Any, idempotency_key: str | None
 ) -> dict[str, Any]:
-    request_sha256 = _canonical_sha256(body)
-    if idempotency_key is not None:
-        replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
-        if replay is not None:
-            return replay
+    request_sha256 = jobroutes.canonical_sha256(body)
+    replay = jobroutes.replay(ctx, PLAN, response, tenant, idempotency_key, request_sha256)
+    if replay is not None:
+        return replay
     spec, resolved, meshes = _resolve(ctx, tenant, body)
     from planner.documents.output import provenance
 
-    # Count and insert in one transaction under the tenant's quota lock (every instance sharing the
-    # database takes it), so concurrent submissions cannot pass the quota together.
-    row = Job(
-        id=uuid.uuid4().hex,
-        tenant=tenant,
-        status="queued",
-        progress=0.0,
-        scenario=spec.model_dump(mode="json"),
-        scenario_name=spec.name,
-        request_sha256=request_sha256,
-        idempotency_key=idempotency_key,
-        meshes=meshes,
-        provenance=provenance(resolved),
-        time_limit_s=float(spec.options.time_limit_s),
-        attempts=0,
-        created_at=now_s(),
+    job = new_job(
+        PLAN,
+        tenant,
+        spec.model_dump(mode="json"),
+        spec.name,
+        request_sha256,
+        meshes,
+        provenance(resolved),
+        spec.options.time_limit_s,
+        idempotency_key,
     )
-    limit = ctx.settings.tenant_max_active_jobs
-    try:
-        with ctx.db.tenant_quota_session(tenant) as s:
-            active = int(
-                s.scalar(
-                    select(func.count())
-                    .select_from(Job)
-                    .where(Job.tenant == tenant, Job.status.in_(ACTIVE_STATES))
-                )
-                or 0
-            )
-            if active >= limit:
-                raise Problem(
-                    429,
-                    "quota_exceeded",
-                    f"{active} jobs queued or running; this tenant may have at most {limit} at a time",
-                    headers={"Retry-After": str(ctx.settings.retry_after_s)},
-                    active_jobs=active,
-                    limit=limit,
-                )
-            s.add(row)
-    except IntegrityError:  # a concurrent request with the same Idempotency-Key won the race
-        if idempotency_key is None:
-            raise
-        replay = _replay(ctx, tenant, idempotency_key, request_sha256, response)
-        if replay is None:
-            raise
-        return replay
-    ctx.runner.wake()
-    response.headers["Location"] = f"/api/v1/plans/{row.id}"
-    return job_document(row)
+    return jobroutes.submit(ctx, PLAN, response, job)
 
 
 @router.get("/plans", summary="List the tenant's plans (paged, newest first)")
@@ -274,50 +171,7 @@ def list_plans(
     offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
 ) -> dict[str, Any]:
     """``{"items": [job, ...], "total", "limit", "offset"}`` without results."""
-    limit = min(limit, ctx.settings.page_size_max)
-    where = [Job.tenant == principal.tenant]
-    if status is not None:
-        where.append(Job.status == status)
-    with ctx.db.session() as s:
-        rows = s.scalars(
-            select(Job).where(*where).order_by(Job.created_at.desc(), Job.id).limit(limit).offset(offset)
-        ).all()
-        total = s.scalar(select(func.count()).select_from(Job).where(*where)) or 0
-    warming = ctx.runner.warming()
-    items = [job_document(r, warming) for r in rows]
-    return {"items": items, "total": int(total), "limit": limit, "offset": offset}
-
-
-#: Decoded result texts of the last few plans read (finished results never change).
-_RESULTS: OrderedDict[str, str] = OrderedDict()
-_RESULTS_MAX = 8
-_RESULTS_LOCK = threading.Lock()
-
-
-def result_text(ctx: AppContext, row: Job) -> str | None:
-    """The result document's JSON text (unpacked from storage, or a legacy text row), or ``None``."""
-    if row.status in ACTIVE_STATES:
-        return None
-    with _RESULTS_LOCK:
-        if row.id in _RESULTS:
-            _RESULTS.move_to_end(row.id)
-            return _RESULTS[row.id]
-    with ctx.db.session() as s:
-        packed, legacy = s.execute(
-            select(Job.result_packed, Job.result_json).where(Job.id == row.id)
-        ).one_or_none() or (None, None)
-    text = unpack_text(packed) if packed is not None else legacy
-    if text is not None:
-        with _RESULTS_LOCK:
-            _RESULTS[row.id] = text
-            while len(_RESULTS) > _RESULTS_MAX:
-                _RESULTS.popitem(last=False)
-    return text
-
-
-def _forget_result(job_id: str) -> None:
-    with _RESULTS_LOCK:
-        _RESULTS.pop(job_id, None)
+    return jobroutes.page(ctx, PLAN, principal.tenant, status, limit, offset)
 
 
 @router.get(
@@ -332,36 +186,7 @@ def get_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     The stored result is unpacked into its JSON text once and spliced into the answer (a few recent
     results are kept decoded), so that polling stays cheap for the server.
     """
-    row = _tenant_job(ctx, principal.tenant, plan_id)
-    head = json.dumps(job_document(row, ctx.runner.warming()), allow_nan=False, separators=(",", ":"))
-    body = f'{head[:-1]},"result":{result_text(ctx, row) or "null"}}}'
-    return Response(body, media_type="application/json")
-
-
-def _succeeded(ctx: AppContext, tenant: str, plan_id: str, what: str) -> Job:
-    row = _tenant_job(ctx, tenant, plan_id)
-    if row.status in ACTIVE_STATES:
-        raise Problem(
-            409, "not_finished", f"plan {plan_id} is {row.status}; the {what} exists once it succeeds"
-        )
-    if row.status != "succeeded":
-        raise Problem(404, "not_found", f"plan {plan_id} {row.status}: it has no {what}")
-    return row
-
-
-def profile_csv(ctx: AppContext, row: Job) -> str | None:
-    """The drive profile of a succeeded plan as CSV, made from its stored document (or a legacy CSV)."""
-    with ctx.db.session() as s:
-        packed, legacy = s.execute(
-            select(Job.result_packed, Job.profile_csv).where(Job.id == row.id)
-        ).one_or_none() or (None, None)
-    if packed is None:
-        return legacy
-    doc = unpack_document(packed)
-    robot = load_robot(str(doc["robot"]))
-    if not isinstance(robot, Cabin8):  # planning jobs are cabin8 plans
-        return None
-    return DriveProfile.from_dict(doc, robot).to_csv()
+    return jobroutes.job_answer(ctx, PLAN, principal.tenant, plan_id)
 
 
 @router.get(
@@ -372,11 +197,7 @@ def profile_csv(ctx: AppContext, row: Job) -> str | None:
 )
 def get_profile_csv(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """One row per sample: ``t_s``, then position, velocity, acceleration, effort of each drive."""
-    row = _succeeded(ctx, principal.tenant, plan_id, "profile")
-    csv = profile_csv(ctx, row)
-    if csv is None:
-        raise Problem(404, "not_found", f"plan {plan_id}: it has no profile")
-    return Response(csv, media_type="text/csv; charset=utf-8")
+    return jobroutes.file_answer(ctx, PLAN, principal.tenant, plan_id, "profile.csv", "profile")
 
 
 @router.get(
@@ -386,13 +207,8 @@ def get_profile_csv(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Resp
     responses={200: {"content": {"image/png": {}}}, **problem_responses(409)},
 )
 def get_plot_png(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
-    """The plot made by the worker when the job finished."""
-    row = _succeeded(ctx, principal.tenant, plan_id, "plot")
-    with ctx.db.session() as s:
-        png = s.scalar(select(Job.plot_png).where(Job.id == row.id))
-    if png is None:
-        raise Problem(404, "not_found", f"plan {plan_id}: it has no plot")
-    return Response(png, media_type="image/png")
+    """Made from the stored profile on the first request (exact clearances: about a second), then kept."""
+    return jobroutes.file_answer(ctx, PLAN, principal.tenant, plan_id, "plot.png", "plot")
 
 
 @router.delete(
@@ -404,51 +220,13 @@ def get_plot_png(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Respons
         **problem_responses(409),
     },
 )
-def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal, response: Response) -> Response:
+def cancel_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """Queued -> cancelled; running -> its worker is killed (on whichever instance runs it), cancelled.
 
     200 with the cancelled job; 202 when the kill of a running job is still pending after 10 s. A
     finished plan (succeeded, failed or cancelled) is deleted with its result and plot: 204.
     """
-    row = _tenant_job(ctx, principal.tenant, plan_id)
-    if row.status in TERMINAL_STATES:
-        with ctx.db.session() as s:
-            s.execute(delete(Job).where(Job.id == plan_id, Job.status.in_(TERMINAL_STATES)))
-        _forget_result(plan_id)
-        return Response(status_code=204)
-    with ctx.db.session() as s:
-        cancelled = rows_matched(
-            s.execute(
-                update(Job)
-                .where(Job.id == plan_id, Job.status == "queued")
-                .values(
-                    status="cancelled",
-                    reason="cancelled",
-                    message="cancelled by the client",
-                    finished_at=now_s(),
-                )
-            )
-        )
-        if not cancelled:  # running: its owner (this instance or another) kills it at its next heartbeat
-            s.execute(
-                update(Job).where(Job.id == plan_id, Job.status == "running").values(cancel_requested=True)
-            )
-    if not cancelled:
-        ctx.runner.cancel(plan_id)
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline:
-            row = _tenant_job(ctx, principal.tenant, plan_id)
-            if row.status in TERMINAL_STATES:
-                break
-            time.sleep(0.05)
-    row = _tenant_job(ctx, principal.tenant, plan_id)
-    status = 200
-    if row.status in ACTIVE_STATES:  # the kill is still pending (e.g. the process is being started)
-        status = 202
-    elif row.status != "cancelled":
-        raise Problem(409, "already_finished", f"plan {plan_id} {row.status} before it could be cancelled")
-    body = json.dumps(job_document(row), allow_nan=False, separators=(",", ":"))
-    return Response(body, status_code=status, media_type="application/json")
+    return jobroutes.cancel_or_delete(ctx, PLAN, principal.tenant, plan_id)
 
 
 @router.post("/plans:validate", summary="Run the validation gate on a caller's drive profile")

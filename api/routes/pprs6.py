@@ -82,7 +82,18 @@ def _workspace(body: WorkspaceRequest, png: bool) -> tuple[dict[str, Any], bytes
     return pprs6_tools.workspace_document(body.orientation.model_dump(), body.step_m, png=png)
 
 
-@router.post("/robots/pprs6/workspace", summary="pprs6 workspace at an orientation (JSON or PNG)")
+#: The two answers of an operation with ``?format=json|png`` (both documented: a client reads either).
+_JSON_OR_PNG: dict[int | str, dict[str, Any]] = {
+    200: {"content": {"application/json": {}, "image/png": {}}, "description": "JSON, or PNG with format=png"}
+}
+
+
+@router.post(
+    "/robots/pprs6/workspace",
+    summary="pprs6 workspace at an orientation (JSON or PNG)",
+    response_class=Response,
+    responses=_JSON_OR_PNG,
+)
 def workspace(body: WorkspaceRequest, _principal: CurrentPrincipal, format: Format = "json") -> Response:
     """Volume [m^3], extents [m], sizes and conditioning over the reachable grid; or the three views.
 
@@ -94,7 +105,12 @@ def workspace(body: WorkspaceRequest, _principal: CurrentPrincipal, format: Form
     return SafeJSONResponse(doc)
 
 
-@router.post("/robots/pprs6/profiles", summary="pprs6 pose path -> validated drive profile (JSON or PNG)")
+@router.post(
+    "/robots/pprs6/profiles",
+    summary="pprs6 pose path -> validated drive profile (JSON or PNG)",
+    response_class=Response,
+    responses=_JSON_OR_PNG,
+)
 def profile(body: ProfileRequest, _principal: CurrentPrincipal, format: Format = "json") -> Response:
     """Drive positions, velocities and accelerations at the controller period, every sample validated.
 

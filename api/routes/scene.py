@@ -28,15 +28,14 @@ from typing import Annotated, Any
 import numpy as np
 from fastapi import APIRouter, Response
 from pydantic import BaseModel, ConfigDict, Field
-from sqlalchemy import select
-from sqlalchemy.orm import undefer
 
 from api.auth import CurrentPrincipal
 from api.context import AppContext
 from api.db import ACTIVE_STATES, Job
+from api.jobkinds import PLAN
 from api.problems import Problem
 from api.routes.deps import Ctx
-from api.routes.plans import result_text
+from api.routes.jobroutes import result_text
 from api.routes.pprs6 import Orientation, PosePath
 from api.store import scenario_mesh_resolver
 from planner.core.exceptions import InvalidInput, InvalidMesh
@@ -75,10 +74,7 @@ _GLBS = _LRU(4)
 
 
 def _finished_job(ctx: AppContext, tenant: str, plan_id: str) -> Job:
-    with ctx.db.session() as s:
-        row = s.scalar(
-            select(Job).options(undefer(Job.result_json)).where(Job.id == plan_id, Job.tenant == tenant)
-        )
+    row = ctx.jobs.get(tenant, plan_id, PLAN)
     if row is None:
         raise Problem(404, "not_found", f"no plan {plan_id!r}")
     if row.status in ACTIVE_STATES:
@@ -167,8 +163,7 @@ def get_cabin_glb(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Respon
     """The cabin the plan was made in, as GLB (vertices in the robot base frame); 404 in free space."""
     import trimesh
 
-    with ctx.db.session() as s:
-        row = s.scalar(select(Job).where(Job.id == plan_id, Job.tenant == principal.tenant))
+    row = ctx.jobs.get(principal.tenant, plan_id, PLAN)
     if row is None:
         raise Problem(404, "not_found", f"no plan {plan_id!r}")
     sc = _resolved(ctx, row)

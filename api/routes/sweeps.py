@@ -19,18 +19,17 @@ from collections import Counter
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Response
-from sqlalchemy import delete, select, update
-from sqlalchemy.orm import undefer
 
 from api.auth import CurrentPrincipal
 from api.context import AppContext
-from api.db import ACTIVE_STATES, TERMINAL_STATES, Job, now_s
 from api.examples import aisle_bay_goal, docked
+from api.openapi import BODY_SCHEMA_KEY
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
-from api.routes.plans import _forget_result, _mesh_map, result_text
+from api.routes.jobroutes import forget_result, result_text
+from api.routes.plans import mesh_map
 from api.store import scenario_mesh_resolver
-from api.sweeps import Sweep, SweepJob, new_sweep
+from api.sweeps import Sweep, SweepStore, new_sweep
 from planner.core.exceptions import InvalidInput
 from planner.documents.output import provenance
 from planner.scenario import resolve_scenario, scenario_from_dict
@@ -60,12 +59,7 @@ _SWEEP_BODY = Body(
 
 def _sweep_document(ctx: AppContext, row: Sweep) -> dict[str, Any]:
     base = f"/api/v1/sweeps/{row.id}"
-    with ctx.db.session() as s:
-        states = s.execute(
-            select(Job.status, Job.reason)
-            .join(SweepJob, SweepJob.job_id == Job.id)
-            .where(SweepJob.sweep_id == row.id)
-        ).all()
+    states = SweepStore(ctx.db).job_states(row.id)
     counts = Counter(status for status, _ in states)
     reasons = Counter(reason for status, reason in states if status in ("failed", "cancelled"))
     return {
@@ -94,14 +88,18 @@ def _sweep_document(ctx: AppContext, row: Sweep) -> dict[str, Any]:
 
 
 def _tenant_sweep(ctx: AppContext, tenant: str, sweep_id: str) -> Sweep:
-    with ctx.db.session() as s:
-        row = s.scalar(select(Sweep).where(Sweep.id == sweep_id, Sweep.tenant == tenant))
+    row = SweepStore(ctx.db).get(tenant, sweep_id)
     if row is None:
         raise Problem(404, "not_found", f"no sweep {sweep_id!r}")
     return row
 
 
-@router.post("/sweeps", status_code=202, summary="Submit a feasibility sweep")
+@router.post(
+    "/sweeps",
+    status_code=202,
+    summary="Submit a feasibility sweep",
+    openapi_extra={BODY_SCHEMA_KEY: "Sweep"},
+)
 def submit_sweep(
     ctx: Ctx,
     principal: CurrentPrincipal,
@@ -131,7 +129,7 @@ def submit_sweep(
                 field="options.time_limit_s",
             )
     tenant = principal.tenant
-    meshes = _mesh_map(ctx, tenant, plans[0].scenario)  # the axes vary neither the cabin nor a mesh payload
+    meshes = mesh_map(ctx, tenant, plans[0].scenario)  # the axes vary neither the cabin nor a mesh payload
     empty = ctx.settings.data_dir / "empty"
     empty.mkdir(parents=True, exist_ok=True)
     resolved = resolve_scenario(
@@ -153,8 +151,7 @@ def submit_sweep(
         stored,
         {"meshes": meshes, "provenance": provenance(resolved)},
     )
-    with ctx.db.session() as s:
-        s.add(row)
+    SweepStore(ctx.db).add(row)
     response.headers["Location"] = f"/api/v1/sweeps/{row.id}"
     return _sweep_document(ctx, row)
 
@@ -163,43 +160,6 @@ def submit_sweep(
 def get_sweep(sweep_id: str, ctx: Ctx, principal: CurrentPrincipal) -> dict[str, Any]:
     """Counts of the plans waiting for a job, queued, running and ended, and the outcome summary."""
     return _sweep_document(ctx, _tenant_sweep(ctx, principal.tenant, sweep_id))
-
-
-def _job_ids(ctx: AppContext, sweep_id: str) -> list[str]:
-    with ctx.db.session() as s:
-        return list(s.scalars(select(SweepJob.job_id).where(SweepJob.sweep_id == sweep_id)).all())
-
-
-def _cancel_jobs(ctx: AppContext, job_ids: list[str]) -> list[str]:
-    """Cancel the queued jobs, ask the owners of the running ones to kill them; the running ones' ids."""
-    if not job_ids:
-        return []
-    with ctx.db.session() as s:
-        s.execute(
-            update(Job)
-            .where(Job.id.in_(job_ids), Job.status == "queued")
-            .values(
-                status="cancelled",
-                reason="cancelled",
-                message="cancelled by the client (its sweep was cancelled)",
-                finished_at=now_s(),
-            )
-        )
-        running = list(s.scalars(select(Job.id).where(Job.id.in_(job_ids), Job.status == "running")).all())
-        if running:  # their owner (this instance or another) kills them at its next heartbeat
-            s.execute(
-                update(Job).where(Job.id.in_(running), Job.status == "running").values(cancel_requested=True)
-            )
-    for job_id in running:
-        ctx.runner.cancel(job_id)
-    return running
-
-
-def _active(ctx: AppContext, job_ids: list[str]) -> int:
-    if not job_ids:
-        return 0
-    with ctx.db.session() as s:
-        return len(s.scalars(select(Job.id).where(Job.id.in_(job_ids), Job.status.in_(ACTIVE_STATES))).all())
 
 
 @router.delete(
@@ -219,29 +179,20 @@ def delete_sweep(sweep_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Respon
     results: 204.
     """
     row = _tenant_sweep(ctx, principal.tenant, sweep_id)
-    job_ids = _job_ids(ctx, row.id)
-    if row.status != "running" and not _active(ctx, job_ids):
-        with ctx.db.session() as s:
-            s.execute(delete(SweepJob).where(SweepJob.sweep_id == row.id))
-            if job_ids:
-                s.execute(delete(Job).where(Job.id.in_(job_ids), Job.status.in_(TERMINAL_STATES)))
-            s.execute(delete(Sweep).where(Sweep.id == row.id))
+    store = SweepStore(ctx.db)
+    job_ids = store.job_ids(row.id)
+    if row.status != "running" and not ctx.jobs.active_of(job_ids):
+        store.delete(row, job_ids)
         for job_id in job_ids:
-            _forget_result(job_id)
+            forget_result(job_id)
         return Response(status_code=204)
-    # Under the tenant's lock the feeder holds while it queues a sweep's jobs: no job is queued after this.
-    with ctx.db.tenant_quota_session(row.tenant) as s:
-        s.execute(
-            update(Sweep)
-            .where(Sweep.id == row.id, Sweep.status == "running")
-            .values(status="cancelled", finished_at=now_s())
-        )
-    job_ids = _job_ids(ctx, row.id)
-    running = _cancel_jobs(ctx, job_ids)
+    running = store.cancel(row, "cancelled by the client (its sweep was cancelled)")
+    for job_id in running:  # their owner (this instance or another) kills them at its next heartbeat
+        ctx.runner.cancel(job_id)
     deadline = time.monotonic() + 10.0
-    while running and _active(ctx, running) and time.monotonic() < deadline:
+    while running and ctx.jobs.active_of(running) and time.monotonic() < deadline:
         time.sleep(0.05)
-    status = 202 if _active(ctx, job_ids) else 200
+    status = 202 if ctx.jobs.active_of(store.job_ids(row.id)) else 200
     doc = _sweep_document(ctx, _tenant_sweep(ctx, principal.tenant, sweep_id))
     body = json.dumps(doc, allow_nan=False, separators=(",", ":"))
     return Response(body, status_code=status, media_type="application/json")
@@ -249,16 +200,9 @@ def delete_sweep(sweep_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Respon
 
 def _rows(ctx: AppContext, row: Sweep) -> list[dict[str, Any]]:
     """Result rows of the plans whose job ended, in plan order."""
-    with ctx.db.session() as s:
-        jobs = {
-            link.index: job
-            for link, job in s.execute(
-                select(SweepJob, Job)
-                .join(Job, Job.id == SweepJob.job_id)
-                .where(SweepJob.sweep_id == row.id)
-                .options(undefer(Job.result_json))
-            ).all()
-        }
+    links = SweepStore(ctx.db).links(row.id)
+    by_id = {job.id: job for job in ctx.jobs.rows(list(links.values()))}
+    jobs = {index: by_id[job_id] for index, job_id in links.items() if job_id in by_id}
     out = []
     for stored in row.plans["plans"]:
         job = jobs.get(int(stored["index"]))

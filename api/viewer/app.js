@@ -1,4 +1,6 @@
-// cabinplan operator page: plan list, submit form, 3D scene, clearance and drive curves.
+// cabinplan operator page: plan list, submit form, 3D scene, clearance and drive curves; assembly cycles (legs
+// and events on the time axis, the unit on its dock, held, then in its bay) and campaigns (the units with
+// their status, the cabin filling up as the scrub runs through the units).
 // Every pose drawn here comes from the service (GET /api/v1/plans/{id}/scene, computed by the planner's own
 // robot model); this file does no kinematics. A read-only hook, window.cabinplanViewer.state(), reports
 // what is drawn (for the browser tests and for support).
@@ -12,8 +14,10 @@ const $ = (sel) => document.querySelector(sel);
 
 const state = {
   view: null,
-  mode: null,          // 'plan' | 'refusal' | 'pprs6'
+  mode: null,          // 'plan' | 'refusal' | 'pprs6' | 'cycle' | 'campaign'
   planId: null,
+  jobPath: null,       // '/plans/{id}', '/cycles/{id}', '/campaigns/{id}'
+  job: null,           // the job document (cycles and campaigns)
   scene: null,         // the scene document
   result: null,        // the plan's result document (profile or refusal)
   frame: 0,
@@ -108,6 +112,8 @@ function route() {
   status('');
   const m = hash.match(/^#\/plan\/([0-9a-f]+)$/);
   if (m) { state.view = 'plan'; $('#view-plan').hidden = false; openPlan(m[1]); return; }
+  const t = hash.match(/^#\/(cycle|campaign)\/([0-9a-f]+)$/);
+  if (t) { state.view = t[1]; $('#view-plan').hidden = false; openTask(t[1], t[2]); return; }
   if (hash === '#/pprs6') {
     state.view = 'pprs6';
     $('#view-pprs6').hidden = false;
@@ -146,9 +152,40 @@ async function loadPlans() {
     body.appendChild(tr);
   }
   $('#plan-empty').hidden = page.items.length > 0;
-  if (page.items.some((j) => j.status === 'queued' || j.status === 'running')) {
+  const active = await loadTasks();
+  if (active || page.items.some((j) => j.status === 'queued' || j.status === 'running')) {
     listTimer = setTimeout(loadPlans, 1500);
   }
+}
+
+// The tenant's cycles and campaigns, newest first; whether any is still active.
+async function loadTasks() {
+  let cycles;
+  let campaigns;
+  try {
+    [cycles, campaigns] = await Promise.all([api('/cycles?limit=25'), api('/campaigns?limit=25')]);
+  } catch (err) { if (err.status !== 401) status(describeError(err), true); return false; }
+  const jobs = [...cycles.items.map((j) => ['cycle', j]), ...campaigns.items.map((j) => ['campaign', j])]
+    .sort((a, b) => b[1].created_at - a[1].created_at);
+  const body = $('#task-table tbody');
+  body.innerHTML = '';
+  for (const [kind, job] of jobs) {
+    const tr = document.createElement('tr');
+    tr.dataset.kind = kind;
+    tr.dataset.job = job.id;
+    const units = job.units ? ` (${job.units.filter((u) => u.status === 'planned').length}/${job.units.length} units planned)` : '';
+    const progress = job.status === 'running' || job.status === 'queued'
+      ? `<progress max="1" value="${job.progress || 0}"></progress> ${Math.round(100 * (job.progress || 0))}% ${esc(job.stage || '')}${esc(units)}`
+      : (job.status === 'succeeded' ? `100%${esc(units)}` : esc(units));
+    const reason = job.reason ? `<b>${esc(job.reason.replaceAll('_', ' '))}</b>: ${esc(job.message || '')}` : '';
+    const name = (job[kind] && job[kind].name) || job.id.slice(0, 8);
+    tr.innerHTML = `<td>${kind}</td><td>${esc(name)}</td><td class="status-${job.status}">${job.status}</td>` +
+      `<td>${progress}</td><td>${reason}</td><td>${when(job.created_at)}</td>`;
+    tr.addEventListener('click', () => { location.hash = `#/${kind}/${job.id}`; });
+    body.appendChild(tr);
+  }
+  $('#task-empty').hidden = jobs.length > 0;
+  return jobs.some(([, j]) => j.status === 'queued' || j.status === 'running');
 }
 
 async function loadExamples() {
@@ -208,8 +245,13 @@ function resetPlanView(title) {
   state.mode = null;
   state.scene = null;
   state.result = null;
+  state.job = null;
+  state.jobPath = null;
   state.error = null;
   $('#plan-title').textContent = title;
+  $('#timeline').hidden = true;
+  $('#leg-readout').hidden = true;
+  $('#units-panel').hidden = true;
   $('#refusal').hidden = true;
   $('#plan-progress').hidden = true;
   $('#figures').innerHTML = '';
@@ -229,6 +271,7 @@ function resetPlanView(title) {
 async function openPlan(id) {
   resetPlanView(`plan ${id.slice(0, 12)}`);
   state.planId = id;
+  state.jobPath = `/plans/${id}`;
   if (!apiKey()) { showAuthProblem(new ApiError(401, null)); return; }
   let job;
   try { job = await api(`/plans/${id}`); } catch (err) {
@@ -279,7 +322,7 @@ async function buildScene(scene, withCabin) {
   v.setBodies(scene.bodies);
   if (scene.frames) v.showFrame(scene.frames, 0, null); // posed before the camera frames them
   if (withCabin) {
-    try { await v.loadCabin(`${API}/plans/${state.planId}/cabin.glb`, apiKey()); } catch (err) {
+    try { await v.loadCabin(`${API}${state.jobPath}/cabin.glb`, apiKey()); } catch (err) {
       status(`the cabin mesh could not be loaded: ${err.message}`, true);
     }
   }
@@ -377,6 +420,8 @@ function figures(job, scene) {
       ? `${gate.min_clearance_at.bodies.join(' – ')}${gate.min_clearance_at.leg ? ` on ${gate.min_clearance_at.leg}` : ''} at ${fmt(gate.min_clearance_at.t_s, 2)} s` : '–', ''),
     row('min clearance (these frames)', mm(scene.min_clearance_m)),
     row('requested clearance', mm(scene.clearance_m)),
+    ...(scene.certified_clearance_m > scene.clearance_m
+      ? [row('certified (+ STEP tessellation)', mm(scene.certified_clearance_m))] : []),
     row('planning time', `${fmt(rep.planning_time_s, 2)} s`),
     row('gate', gate.passed ? `passed (${(gate.checks || []).length} checks)` : 'FAILED', ''),
     row('peak velocity / limit', `${fmt(100 * (peaks.velocity || 0), 1)} %`),
@@ -389,7 +434,7 @@ function figures(job, scene) {
 function provenance(p) {
   const code = p.code || {};
   $('#provenance').innerHTML = [
-    row('scenario', p.scenario_sha256 || '–', 'hash'),
+    row(p.cycle_sha256 ? 'cycle' : 'scenario', p.cycle_sha256 || p.scenario_sha256 || '–', 'hash'),
     row('robot description', p.robot_description_sha256 || '–', 'hash'),
     row('cabin mesh', p.cabin_mesh_sha256 || 'free space', 'hash'),
     row('cabin', p.cabin_source || '–', ''),
@@ -438,6 +483,8 @@ function setTime(t) {
     $('#clearance-value').dataset.distanceM = String(c.distance_m[i]);
   } else if (scene.kind === 'pprs6' && viewer3d) {
     viewer3d.showPprs6Frame(scene.frames, i);
+  } else if (scene.kind === 'cycle' || scene.kind === 'campaign') {
+    showTaskTime(scene, i, t);
   }
   if (clearanceChart) clearanceChart.cursor(times[i]);
   if (driveCharts) driveCharts.cursor(times[i]);
@@ -496,6 +543,204 @@ async function submitPprs6(ev) {
   state.ready = true;
 }
 
+// --------------------------------------------------------------------------------- cycles and campaigns
+const LEG_COLORS = {
+  pre_grasp: '#2563eb', grasp_line: '#0891b2', grasp: '#16a34a', lift_off: '#65a30d', transit: '#7c3aed',
+  insertion: '#c026d3', release: '#db2777', retract: '#ea580c', park: '#64748b',
+};
+
+async function openTask(kind, id) {
+  resetPlanView(`${kind} ${id.slice(0, 12)}`);
+  state.planId = id;
+  state.jobPath = `/${kind}s/${id}`;
+  if (!apiKey()) { showAuthProblem(new ApiError(401, null)); return; }
+  let job;
+  try { job = await api(state.jobPath); } catch (err) {
+    if (err.status !== 401) status(describeError(err), true);
+    return;
+  }
+  state.job = job;
+  const name = (job[kind] && job[kind].name) || kind;
+  $('#plan-title').textContent = `${kind} ${name} – ${job.status}`;
+  const units = (job.result && job.result.units) || job.units;
+  if (kind === 'campaign') renderUnits(units || [], null);
+  if (job.status === 'queued' || job.status === 'running') {
+    const box = $('#plan-progress');
+    box.hidden = false;
+    box.querySelector('progress').value = job.progress || 0;
+    box.querySelector('span').textContent = `${job.status} ${job.stage || ''} ${Math.round(100 * (job.progress || 0))}%`;
+    planTimer = setTimeout(() => openTask(kind, id), 1000);
+    return;
+  }
+  state.result = job.result;
+  let scene;
+  try { scene = await api(`${state.jobPath}/scene`); } catch (err) { status(describeError(err), true); return; }
+  state.scene = scene;
+  if (scene.kind === 'refusal') { showTaskRefusal(kind, job, scene); return; }
+  await showTask(kind, job, scene);
+}
+
+function renderUnits(units, scene) {
+  const panel = $('#units-panel');
+  panel.hidden = false;
+  const body = $('#unit-table tbody');
+  body.innerHTML = '';
+  for (const [k, u] of units.entries()) {
+    const tr = document.createElement('tr');
+    tr.dataset.unit = u.id;
+    tr.dataset.status = u.status;
+    const dur = u.duration_s !== undefined && u.duration_s !== null ? `${fmt(u.duration_s, 1)} s` : '';
+    tr.innerHTML = `<td>${u.position || k + 1}</td><td>${esc(u.id)}</td>` +
+      `<td class="status-${esc(u.status)}" title="${esc(u.message || '')}">${esc(u.status.replaceAll('_', ' '))}</td><td>${dur}</td>`;
+    if (scene) {
+      const entry = scene.units.find((x) => x.id === u.id);
+      if (entry && entry.cycle !== null && entry.cycle !== undefined) {
+        tr.style.cursor = 'pointer';
+        tr.addEventListener('click', () => setTime(scene.cycles[entry.cycle].t_start_s));
+      }
+    }
+    body.appendChild(tr);
+  }
+  const planned = units.filter((u) => u.status === 'planned').length;
+  $('#units-count').textContent = `${planned} of ${units.length} planned`;
+}
+
+function renderTimeline(scene) {
+  const box = $('#timeline');
+  box.hidden = false;
+  const bands = box.querySelector('.bands');
+  bands.innerHTML = '';
+  const total = scene.duration_s;
+  const pct = (t) => `${(100 * t) / total}%`;
+  for (const c of scene.cycles) {
+    const start = document.createElement('div');
+    start.className = 'cycle-start';
+    start.style.left = pct(c.t_start_s);
+    start.title = `unit ${c.unit}`;
+    bands.appendChild(start);
+    for (const leg of c.legs) {
+      const el = document.createElement('div');
+      el.className = `band ${leg.kind}`;
+      el.dataset.leg = leg.name;
+      el.dataset.unit = c.unit;
+      el.style.left = pct(leg.t_start_s);
+      el.style.width = pct(Math.max(leg.t_end_s - leg.t_start_s, 0));
+      el.style.background = LEG_COLORS[leg.name] || '#475569';
+      el.title = `${c.unit}: ${leg.name} (${leg.kind}${leg.payload ? `, holding ${leg.payload}` : ''}) ` +
+        `${fmt(leg.t_start_s, 2)}–${fmt(leg.t_end_s, 2)} s`;
+      el.textContent = scene.cycles.length > 2 ? '' : leg.name.replace('_', ' ');
+      bands.appendChild(el);
+    }
+    for (const e of c.events) {
+      const el = document.createElement('div');
+      el.className = `event ${e.kind}`;
+      el.style.left = pct(e.t_s);
+      el.title = `${e.kind} ${e.unit} at ${fmt(e.t_s, 3)} s, spring-back ${fmt(1000 * e.springback_m, 2)} mm`;
+      bands.appendChild(el);
+    }
+  }
+  box.onclick = (ev) => {
+    const r = box.getBoundingClientRect();
+    setTime(((ev.clientX - r.left) / r.width) * total);
+  };
+}
+
+// The campaign's drive profile: its cycles' samples one after the other (times shifted, nothing computed).
+function joinedProfile(kind, job) {
+  if (kind === 'cycle') return job.result;
+  const cycles = job.result.cycles.filter((c) => c.status === 'succeeded');
+  const out = { drives: cycles[0].drives, units: cycles[0].units, t: [] };
+  const keys = ['position', 'velocity', 'acceleration', 'jerk', 'effort'].filter((k) => cycles[0][k]);
+  for (const k of keys) out[k] = [];
+  let offset = 0;
+  for (const c of cycles) {
+    for (const t of c.t) out.t.push(t + offset);
+    for (const k of keys) for (const row of c[k]) out[k].push(row);
+    offset += c.t[c.t.length - 1];
+  }
+  return out;
+}
+
+async function showTask(kind, job, scene) {
+  state.mode = kind;
+  await buildScene(scene, scene.has_cabin);
+  if (viewer3d) { viewer3d.setTask(scene); viewer3d.frameTask(); }
+  $('#legend').innerHTML = [['#8fa3bf', 'robot bodies'], ['#f59e0b', 'unit'], ['#60a5fa', 'installed before'],
+    ['#92400e', 'dock fixture'], ['#22c55e', 'bay'], ['#ef4444', 'closest pair'], ['#9ca3af', 'cabin']]
+    .map(([c, t]) => `<div><span style="background:${c}"></span>${t}</div>`).join('');
+  renderTimeline(scene);
+  if (kind === 'campaign') renderUnits(job.result.units, scene);
+  const r = job.result;
+  const rows = kind === 'cycle'
+    ? [
+      row('cycle time', `${fmt(r.duration_s)} s`),
+      row('samples', `${r.t.length} every ${fmt(1000 * r.sample_period_s, 1)} ms`),
+      ...r.events.map((e) => row(`${e.kind} ${e.unit} spring-back`, `${fmt(1000 * e.springback_m, 3)} mm`)),
+      row('min clearance (report)', mm(r.min_clearance_m)),
+      row('requested clearance', mm(scene.clearance_m)),
+      row('planning time', `${fmt((r.report || {}).planning_time_s, 2)} s`),
+      row('gate', ((r.report || {}).gate || {}).passed ? 'passed' : 'FAILED', ''),
+    ]
+    : [
+      row('status', r.status, ''),
+      row('order', (r.order || []).join(' → ') || '–', ''),
+      row('campaign time', r.campaign_duration_s === null ? '–' : `${fmt(r.campaign_duration_s, 1)} s`),
+      row('cycles planned', String(r.cycles_planned)),
+      row('cycles kept from an earlier run', String(r.cycles_cached)),
+      row('min clearance (these frames)', mm(scene.min_clearance_m)),
+      row('result', r.message, ''),
+    ];
+  $('#figures').innerHTML = rows.join('');
+  provenance(r.provenance || {});
+  if (kind === 'campaign') {
+    $('#provenance').innerHTML = row('campaign', (job.campaign || {}).sha256 || '–', 'hash');
+  }
+  setupPlayer(scene.duration_s, 0.001);
+  $('#clearance-panel').hidden = false;
+  clearanceChart = new ClearanceChart($('#clearance-chart'), scene.clearance, scene.clearance_m, (t) => setTime(t));
+  $('#drive-panel').hidden = false;
+  driveCharts = new DriveCharts($('#drive-charts'), $('#drive-select'), joinedProfile(kind, job), scene, (t) => setTime(t));
+  setTime(0);
+  state.ready = true;
+}
+
+function showTaskRefusal(kind, job, scene) {
+  state.mode = 'refusal';
+  const box = $('#refusal');
+  box.hidden = false;
+  $('#refusal-reason').textContent = (job.reason || job.status).replaceAll('_', ' ');
+  $('#refusal-message').textContent = job.message || '';
+  const details = (job.result && job.result.details) || {};
+  $('#refusal-details').innerHTML = Object.entries(details)
+    .map(([k, v]) => `<tr><th>${esc(k)}</th><td>${esc(evidenceText(k, v))}</td></tr>`).join('') ||
+    '<tr><td class="muted">no further evidence</td></tr>';
+  $('#refusal-config').textContent = '';
+  $('#player').hidden = true;
+  if (kind === 'campaign') renderUnits((job.result && job.result.units) || job.units || [], null);
+  state.ready = true;
+}
+
+function showTaskTime(scene, i, t) {
+  const c = scene.clearance;
+  const pair = c.pair[i];
+  if (viewer3d) viewer3d.showTaskFrame(scene, i, { pair: pair || [], a: c.point_a_m[i], b: c.point_b_m[i] });
+  const k = scene.frames.cycle[i];
+  const cyc = scene.cycles[k];
+  const leg = cyc.legs[scene.frames.leg[i]];
+  const held = scene.frames.unit_held[i];
+  $('#leg-readout').hidden = false;
+  $('#leg-readout').textContent = `unit ${cyc.unit}, leg ${leg.name} (${leg.kind}` +
+    `${held ? `, holding ${cyc.unit}` : ''}); closest pair: ${pair ? `${pair[0]} – ${pair[1]}: ${mm(c.distance_m[i])}` : '–'}`;
+  $('#clearance-value').textContent = `clearance at t = ${scene.frames.t_s[i].toFixed(3)} s: ${mm(c.distance_m[i])}` +
+    (pair ? ` (${pair[0]} – ${pair[1]})` : '');
+  const cursor = $('#timeline .cursor');
+  if (cursor) cursor.style.left = `${(100 * t) / scene.duration_s}%`;
+  for (const tr of document.querySelectorAll('#unit-table tbody tr')) {
+    const entry = scene.units.find((u) => u.id === tr.dataset.unit);
+    tr.classList.toggle('current', !!entry && entry.cycle === k);
+  }
+}
+
 // ------------------------------------------------------------------------------------------ test hook
 function snapshot() {
   const s = state;
@@ -511,6 +756,19 @@ function snapshot() {
     out.frameTime = s.scene.frames.t_s[s.frame];
   }
   if (viewer3d) out.payload = viewer3d.payloadPose();
+  if (s.scene && (s.scene.kind === 'cycle' || s.scene.kind === 'campaign')) {
+    const f = s.scene.frames;
+    const k = f.cycle[s.frame];
+    out.cycle = k;
+    out.leg = s.scene.cycles[k].legs[f.leg[s.frame]].name;
+    out.units = viewer3d ? viewer3d.taskUnits() : {};
+    out.unitRows = [...document.querySelectorAll('#unit-table tbody tr')].map((tr) => ({
+      id: tr.dataset.unit, status: tr.dataset.status, current: tr.classList.contains('current'),
+    }));
+    out.legBands = document.querySelectorAll('#timeline .band').length;
+    out.eventMarkers = document.querySelectorAll('#timeline .event').length;
+    out.closest = { distance_m: s.scene.clearance.distance_m[s.frame], pair: s.scene.clearance.pair[s.frame] };
+  }
   if (s.scene && s.scene.kind === 'plan') {
     const el = $('#clearance-value');
     out.clearanceCursor = {

@@ -21,6 +21,9 @@ export function webglAvailable() {
 const BODY_COLOR = 0x8fa3bf;
 const PAYLOAD_COLOR = 0xf59e0b;
 const HIGHLIGHT = 0xef4444;
+const INSTALLED_COLOR = 0x60a5fa;
+const FIXTURE_COLOR = 0x92400e;
+const BAY_COLOR = 0x22c55e;
 
 function matrixOf(R, p) {
   const m = new THREE.Matrix4();
@@ -55,6 +58,7 @@ export class Scene3D {
     this.highlight = [];
     this.renderCount = 0;
     this.pprs6 = null;
+    this.task = null;
     this.witness = this._witness();
     this.root.add(this.witness);
     new ResizeObserver(() => this.resize()).observe(canvas);
@@ -81,6 +85,7 @@ export class Scene3D {
     this.bodies = [];
     this.cabin = null;
     this.pprs6 = null;
+    this.task = null;
     this.highlight = [];
     this.witness.visible = false;
     this.render();
@@ -182,12 +187,34 @@ export class Scene3D {
     const box = new THREE.Box3();
     for (const b of this.bodies) { b.group.updateMatrixWorld(true); box.expandByObject(b.group); }
     if (this.pprs6) box.expandByObject(this.pprs6.group);
+    if (this.task) box.expandByObject(this.task.group);
     box.expandByObject(this.markers);
     if (box.isEmpty()) return;
     const centre = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3()).length();
     const d = Math.max(size * 0.8, 0.25);
     this.camera.position.set(centre.x + 0.9 * d, centre.y + 0.7 * d, centre.z - 0.8 * d);
+    this.camera.near = d / 200;
+    this.camera.far = d * 50;
+    this.camera.updateProjectionMatrix();
+    this.controls.target.copy(centre);
+    this.controls.update();
+    this.render();
+  }
+
+  // A task's view: the robot, the docks and every bay framed from above the aisle, looking across at the
+  // bays (the cabin wall is see-through), so that the unit is seen on its dock, carried and in its bay.
+  frameTask() {
+    if (!this.task) { this.frameCamera(); return; }
+    const box = new THREE.Box3();
+    for (const b of this.bodies) { b.group.updateMatrixWorld(true); box.expandByObject(b.group); }
+    this.task.group.updateMatrixWorld(true);
+    box.expandByObject(this.task.group);
+    if (box.isEmpty()) return;
+    const centre = box.getCenter(new THREE.Vector3());
+    const size = box.getSize(new THREE.Vector3()).length();
+    const d = Math.max(size * 0.55, 0.25);
+    this.camera.position.set(centre.x - 0.75 * d, centre.y + 0.85 * d, centre.z - 0.35 * d);
     this.camera.near = d / 200;
     this.camera.far = d * 50;
     this.camera.updateProjectionMatrix();
@@ -253,6 +280,88 @@ export class Scene3D {
       position: [e[12], e[13], e[14]],
       rotation: [[e[0], e[4], e[8]], [e[1], e[5], e[9]], [e[2], e[6], e[10]]],
     };
+  }
+
+  // ------------------------------------------------------------------------------------- cycles, campaigns
+  // The fixed obstacles (units installed before, the docks' fixtures), one box per unit the task installs
+  // (posed per frame from the scene document: on its dock, held, or in its bay) and a wireframe at every bay.
+  setTask(scene) {
+    const group = new THREE.Group();
+    const solid = (spec, color, opacity = 1) => {
+      const material = new THREE.MeshStandardMaterial({ color, roughness: 0.7, transparent: opacity < 1, opacity });
+      let geom;
+      if (spec.kind === 'mesh') {
+        geom = new THREE.BufferGeometry();
+        geom.setAttribute('position', new THREE.Float32BufferAttribute(spec.vertices_m.flat(), 3));
+        geom.setIndex(spec.faces.flat());
+        geom.computeVertexNormals();
+      } else {
+        geom = new THREE.BoxGeometry(...spec.size_m);
+      }
+      const mesh = new THREE.Mesh(geom, material);
+      mesh.matrixAutoUpdate = false;
+      if (spec.position) mesh.matrix.copy(matrixOf(spec.rotation, spec.position));
+      mesh.userData = { name: spec.name };
+      group.add(mesh);
+      return mesh;
+    };
+    for (const o of scene.installed || []) solid(o, INSTALLED_COLOR, 0.85);
+    for (const f of scene.fixtures || []) solid(f, FIXTURE_COLOR, 0.9);
+    const units = {};
+    for (const u of scene.units || []) {
+      if (u.cycle === null || u.cycle === undefined || !u.size_m) continue;
+      const box = solid({ kind: 'box', size_m: u.size_m, name: `unit ${u.id}` }, PAYLOAD_COLOR);
+      box.visible = false;
+      const bay = new THREE.LineSegments(new THREE.EdgesGeometry(new THREE.BoxGeometry(...u.size_m)),
+        new THREE.LineBasicMaterial({ color: BAY_COLOR }));
+      bay.matrixAutoUpdate = false;
+      bay.matrix.copy(matrixOf(u.bay.rotation, u.bay.position));
+      group.add(bay);
+      units[u.id] = { box, cycle: u.cycle, bay: u.bay, state: 'absent' };
+    }
+    this.root.add(group);
+    this.task = { group, units };
+  }
+
+  // Frame i of a task scene: the robot's bodies, and every unit where the scene puts it at that frame.
+  showTaskFrame(scene, i, closest) {
+    const frames = scene.frames;
+    const k = frames.cycle[i];
+    if (this.task) {
+      for (const [id, u] of Object.entries(this.task.units)) {
+        if (u.cycle < k) {
+          u.box.matrix.copy(matrixOf(u.bay.rotation, u.bay.position));
+          u.state = 'installed';
+        } else if (u.cycle === k) {
+          const p = frames.unit_pose[i];
+          u.box.matrix.copy(matrixOf(p.rotation, p.position));
+          u.state = frames.unit_held[i] ? 'held' : (frames.leg[i] >= scene.cycles[k].legs.findIndex((x) => x.name === 'release') ? 'installed' : 'dock');
+        } else {
+          u.state = 'absent';
+        }
+        u.box.visible = u.state !== 'absent';
+        u.box.matrixWorldNeedsUpdate = true;
+        void id;
+      }
+    }
+    this.showFrame(frames, i, closest);
+  }
+
+  // Every task unit as drawn: its state (absent, dock, held, installed) and its box pose (base frame).
+  taskUnits() {
+    if (!this.task) return {};
+    const out = {};
+    for (const [id, u] of Object.entries(this.task.units)) {
+      u.box.updateMatrixWorld(true);
+      const e = u.box.matrixWorld.elements;
+      out[id] = {
+        state: u.state,
+        visible: u.box.visible,
+        position: [e[12], e[13], e[14]],
+        rotation: [[e[0], e[4], e[8]], [e[1], e[5], e[9]], [e[2], e[6], e[10]]],
+      };
+    }
+    return out;
   }
 
   // --------------------------------------------------------------------------------------------- pprs6

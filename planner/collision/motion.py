@@ -5,7 +5,7 @@ of at most :data:`LIMIT_STEP`; reach bounds D (how far any point of a body, or a
 position, can move over the segment); then :func:`~planner.collision.kernels.walk.motion_walk`, which
 advances each body and pair with certified steps (its proven spare clearance E over D) and returns here
 only when a state needs FCL probes on a grown body (:class:`~planner.collision.probes.Probes`).
-The pure-Python walk with the same schedule is :mod:`planner.collision.reference` (the tests' oracle).
+The pure-Python walk with the same schedule is :mod:`planner.collision.oracle` (the tests' oracle).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Values the collision world returns and passes around: contacts, state/motion/path reports, distances.
 
 All frozen: a report compares equal field for field, which is how the tests hold the compiled route to
-the reference route (:mod:`planner.collision.reference`). :class:`BodyState` is the internal value of one
+the reference route (:mod:`planner.collision.oracle`). :class:`BodyState` is the internal value of one
 evaluated configuration (poses and certified bounds) that the FCL probes read.
 """
 

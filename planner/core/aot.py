@@ -6,21 +6,26 @@ and 2-20 ms per further kernel. An extension module built by ``numba.pycc`` from
 in well under a millisecond and needs neither numba nor llvmlite at run time.
 
 A layer describes its extension as an :class:`Extension`: the module name, the source files the kernels
-are compiled from, the module holding the ``@njit`` kernels and the exported entries with their argument
+are compiled from, the module holding the ``@njit`` kernels (a function returning it, so that numba is
+imported only when the JIT is used) and the exported entries with their argument
 types (:class:`Entry`, in a small type language: ``"f8"``, ``"i8"``, ``"b1"`` scalars, ``"f8[2]"`` a
 read-only C-contiguous 2-D float64 array, ``"f8[2]w"`` a writable one, tuples ``"(i8,f8[1])"``,
 ``"none"``). :func:`kernels` gives the entries of the extension when its build for this key is in the
 cache folder (``cache_dir()/native/<name>-<key><suffix>``), building it first when it is missing (in a
-subprocess, under a file lock, atomically renamed into place), and numba's JIT dispatchers of the same
-functions otherwise: no cache folder (``CABINPLAN_CACHE_DIR=""``), ``CABINPLAN_KERNELS=jit``, or a build
-that failed (no C compiler: one warning, and a marker file so later processes do not try again for a
-day; a build killed by a signal or a timeout leaves none, and a build that does not load is set aside and
-made again once).
+subprocess), and numba's JIT dispatchers of the same functions otherwise: no cache folder
+(``CABINPLAN_CACHE_DIR=""``), ``CABINPLAN_KERNELS=jit``, or a build that failed (no C compiler: one
+warning). The lock, the key, the failure marker (later processes do not try again for a day; a build
+killed by a signal or a timeout leaves none) and the damaged file set aside and made again once are the
+cache policy of every native build, :mod:`planner.core.builds`.
 
 The key is a hash of the kernel source files (and of this module), the numba, llvmlite, numpy and Python
-versions, the platform and the target CPU (the build is compiled for this machine's CPU; its model and
-feature flags are part of the key, so a cache folder shared with another machine never loads code for the
-wrong CPU).
+versions, the platform and the target CPU. By default a build is compiled for this machine's CPU (``host``):
+its model and feature flags are part of the key, so a cache folder shared with another machine never loads
+code for the wrong CPU. ``CABINPLAN_AOT_CPU=generic`` compiles for the architecture's baseline instead
+(x86-64 without AVX, say): a portable build, whose key holds only the architecture, that loads on any
+machine of it -- a container image builds its kernels that way, in a stage with a C compiler, for machines
+it has never seen. :func:`kernels` takes this machine's own build when there is one, else a portable one,
+and builds only when neither is there (for the target ``CABINPLAN_AOT_CPU`` says).
 
 The extension's entries do not check their arguments: an array of another dtype, layout or number of
 dimensions is read as if it had the declared one (wrong numbers or a crash). Each layer therefore reaches
@@ -31,19 +36,17 @@ This module imports numba only to build.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import importlib.machinery
 import importlib.util
 import logging
 import os
 import platform
-import shutil
 import subprocess
 import sys
 import sysconfig
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -51,18 +54,23 @@ from typing import Any
 
 import numpy as np
 
-from planner.core.cache import STALE_TMP_S, cache_dir, prune, touch
+from planner.core import builds
+from planner.core.builds import BuildFailed, BuildInterrupted, NativeBuild
+from planner.core.cache import prune, touch
 
 log = logging.getLogger(__name__)
 
 #: ``CABINPLAN_KERNELS``: ``auto`` (the default: the ahead-of-time build, built on first use) or ``jit``.
 MODES = ("auto", "jit")
-#: Target CPU of the builds: the machine's own (as numba's JIT; its identity is part of the key).
+#: Target CPUs of the builds: ``host``, the machine's own (as numba's JIT; its identity is part of the key),
+#: and ``generic``, the architecture's baseline (portable: only the architecture is in the key).
+CPU_TARGETS = ("host", "generic")
+#: The default target (``CABINPLAN_AOT_CPU`` unset).
 TARGET_CPU = "host"
 #: Longest a build may take [s] before the JIT is used instead.
 BUILD_TIMEOUT_S = 900.0
-#: After a failed build, plans use the JIT without trying again for this long [s] (a day).
-FAILED_RETRY_S = 86400.0
+#: After a failed build, plans use the JIT without trying again for this long [s] (the cache policy's).
+FAILED_RETRY_S = builds.FAILED_RETRY_S
 #: Set by a first-use build for its child process: the build lock is already held.
 LOCK_HELD_ENV = "CABINPLAN_AOT_LOCK_HELD"
 
@@ -84,14 +92,16 @@ class Extension:
 
     Attributes:
         name: The extension module's name (``[A-Za-z0-9_]``), also the stem of its cache entries.
-        kernels_module: The dotted name of the module holding the ``@njit`` functions of ``entries``.
-        builder_module: The dotted name of the module that builds it when run as ``python -m``.
+        kernels_module: Returns the module holding the ``@njit`` functions of ``entries`` (importing it:
+            numba is imported then).
+        builder_module: The dotted name of the module that builds it when run as ``python -m`` (the
+            child process of a first-use build).
         sources: Every source file the kernels are compiled from (their bytes are in the key).
         entries: The exported kernels.
     """
 
     name: str
-    kernels_module: str
+    kernels_module: Callable[[], ModuleType]
     builder_module: str
     sources: tuple[Path, ...]
     entries: tuple[Entry, ...]
@@ -103,6 +113,15 @@ def mode() -> str:
     if value not in MODES:
         log.warning("CABINPLAN_KERNELS=%r is neither of %s; using auto", value, MODES)
         return "auto"
+    return value
+
+
+def target_cpu() -> str:
+    """The CPU new builds target: ``CABINPLAN_AOT_CPU`` (``host`` unless set to ``generic``)."""
+    value = os.environ.get("CABINPLAN_AOT_CPU", TARGET_CPU).strip().lower() or TARGET_CPU
+    if value not in CPU_TARGETS:
+        log.warning("CABINPLAN_AOT_CPU=%r is neither of %s; using %s", value, CPU_TARGETS, TARGET_CPU)
+        return TARGET_CPU
     return value
 
 
@@ -132,24 +151,29 @@ def _version_file(package: str) -> str:
         return spec.origin
 
 
-def key(ext: Extension) -> str:
-    """The hash of everything the build depends on (24 hex digits)."""
-    h = hashlib.sha256()
-    for path in (*ext.sources, Path(__file__)):  # this module's build steps are part of the build
-        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    for part in (
-        repr(ext.entries),
-        _version_file("numba"),
-        _version_file("llvmlite"),
-        np.__version__,
-        sys.version,
-        sysconfig.get_platform(),
-        _suffix(),
-        TARGET_CPU,
-        _cpu_identity(),
-    ):
-        h.update(part.encode() + b"\0")
-    return h.hexdigest()[:24]
+def key(ext: Extension, cpu: str | None = None) -> str:
+    """The hash of everything the build for ``cpu`` (default :func:`target_cpu`) depends on (24 hex digits).
+
+    A ``host`` build's key holds this machine's CPU model and feature flags; a ``generic`` one's only the
+    architecture (``platform.machine()``), so it is the same on every machine of that architecture
+    (:func:`planner.core.builds.digest`).
+    """
+    cpu = target_cpu() if cpu is None else cpu
+    files = (path.name.encode() + b"\0" + path.read_bytes() for path in (*ext.sources, Path(__file__)))
+    return builds.digest(  # this module's build steps are part of the build
+        (
+            *files,
+            repr(ext.entries),
+            _version_file("numba"),
+            _version_file("llvmlite"),
+            np.__version__,
+            sys.version,
+            sysconfig.get_platform(),
+            _suffix(),
+            cpu,
+            _cpu_identity() if cpu == "host" else platform.machine(),
+        )
+    )
 
 
 def _suffix() -> str:
@@ -158,19 +182,23 @@ def _suffix() -> str:
 
 def folder() -> Path | None:
     """The folder of the builds (``cache_dir()/native``), or None without a cache folder."""
-    root = cache_dir()
-    return None if root is None else root / "native"
+    return builds.folder()
 
 
-def path(ext: Extension) -> Path | None:
-    """Where the build of ``ext`` for the current key lives (None without a cache folder)."""
-    where = folder()
-    return None if where is None else where / f"{ext.name}-{key(ext)}{_suffix()}"
+def native_build(ext: Extension, cpu: str | None = None) -> NativeBuild | None:
+    """The place of the build of ``ext`` for ``cpu`` (default :func:`target_cpu`; None without a cache)."""
+    return NativeBuild.of(ext.name, key(ext, cpu), _suffix())
 
 
-def load(ext: Extension) -> ModuleType | None:
-    """The extension built for the current key, loaded, or None when it is not in the cache."""
-    lib = path(ext)
+def path(ext: Extension, cpu: str | None = None) -> Path | None:
+    """Where the build of ``ext`` for ``cpu`` (default :func:`target_cpu`) lives (None without a cache)."""
+    build = native_build(ext, cpu)
+    return None if build is None else build.path
+
+
+def load(ext: Extension, cpu: str | None = None) -> ModuleType | None:
+    """The extension built for ``cpu`` (default :func:`target_cpu`), loaded, or None when it is not there."""
+    lib = path(ext, cpu)
     if lib is None or not lib.is_file():
         return None
     module = _LOADED.get(str(lib))
@@ -191,7 +219,7 @@ _LOADED: dict[str, ModuleType] = {}
 
 def jit_kernels(ext: Extension) -> ModuleType:
     """The module of numba's JIT dispatchers of the entries (imports numba)."""
-    return importlib.import_module(ext.kernels_module)
+    return ext.kernels_module()
 
 
 _WARNED: set[str] = set()
@@ -205,14 +233,17 @@ def kernels(ext: Extension) -> Any:
     if mode() == "jit" or folder() is None:
         return jit_kernels(ext)
     try:
-        try:
-            module = load(ext)
-        except ImportError as exc:  # a damaged file: set it aside and build again, once
-            lib = path(ext)
-            assert lib is not None
-            log.warning("kernels %s: %s does not load (%s); building it again", ext.name, lib, exc)
-            os.replace(lib, lib.with_name(lib.name + ".bad"))
-            module = None
+        module = None
+        for cpu in dict.fromkeys((target_cpu(), "generic")):  # this machine's own build, else a portable one
+            try:
+                module = load(ext, cpu)
+            except ImportError as exc:  # a damaged file: set it aside and build again, once
+                place = native_build(ext, cpu)
+                assert place is not None
+                log.warning("kernels %s: %s does not load (%s); building it again", ext.name, place.path, exc)
+                place.set_aside()
+            if module is not None:
+                break
         if module is None:
             module = _build_in_subprocess(ext)
         if module is not None:
@@ -228,104 +259,42 @@ def _warn(ext: Extension, reason: str) -> None:
         log.warning("kernels %s: no ahead-of-time build (%s); using numba's JIT", ext.name, reason)
 
 
-def _failed_marker(lib: Path) -> Path:
-    return lib.with_name(lib.name + ".failed")
-
-
-def _failed_recently(marker: Path) -> bool:
-    """Whether a build failed less than :data:`FAILED_RETRY_S` ago (an older marker is removed)."""
-    try:
-        age = time.time() - marker.stat().st_mtime
-    except FileNotFoundError:
-        return False
-    if age < FAILED_RETRY_S:
-        return True
-    marker.unlink(missing_ok=True)
-    return False
-
-
-def _remove_stale_build_folders(ext: Extension, where: Path) -> None:
-    """Delete the temporary build folders of ``ext`` that a killed build left (older than STALE_TMP_S)."""
-    now = time.time()
-    for stale in where.glob(f"{ext.name}-build-*"):
-        try:
-            if stale.is_dir() and now - stale.stat().st_mtime > STALE_TMP_S:
-                shutil.rmtree(stale, ignore_errors=True)
-        except OSError:
-            pass
-
-
 def _build_in_subprocess(ext: Extension) -> ModuleType | None:
-    """Build ``ext`` in a child process under a file lock (another process may be building it).
+    """Build ``ext`` in a child process under the cache policy (:func:`planner.core.builds.build_once`).
 
     A build that exits with an error leaves a ``.failed`` marker with its output: later processes use the
     JIT without trying again for :data:`FAILED_RETRY_S`. A build killed by a signal or past
     :data:`BUILD_TIMEOUT_S` leaves none (the next plan tries again).
     """
-    lib = path(ext)
-    assert lib is not None
-    marker = _failed_marker(lib)
-    if _failed_recently(marker):
-        _warn(ext, f"an earlier build failed, see {marker}")
-        return None
-    lib.parent.mkdir(parents=True, exist_ok=True)
-    with _Lock(lock_path(ext, lib.parent)):
-        _remove_stale_build_folders(ext, lib.parent)
-        if not lib.is_file() and not _failed_recently(marker):
-            log.info("kernels %s: building the ahead-of-time extension (once per install)", ext.name)
-            started = time.perf_counter()
-            root = str(Path(__file__).resolve().parents[2])  # the folder holding the planner package
-            paths = [root, *(p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p)]
-            env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths), LOCK_HELD_ENV: "1"}
-            run = subprocess.run(
-                [sys.executable, "-m", ext.builder_module],
-                env=env,
-                capture_output=True,
-                text=True,
-                timeout=BUILD_TIMEOUT_S,
-            )
-            if run.returncode != 0 or not lib.is_file():
-                reason = (run.stderr or run.stdout).strip().splitlines()[-1:] or ["no output"]
-                if run.returncode > 0:  # an error, not a signal: the next build would fail the same way
-                    marker.write_text(
-                        f"exit code {run.returncode} at {time.strftime('%Y-%m-%dT%H:%M:%S%z')}\n"
-                        + run.stderr[-20000:]
-                        + run.stdout[-5000:],
-                        encoding="utf-8",
-                    )
-                _warn(ext, f"the build failed (exit code {run.returncode}): {reason[0]}")
-                return None
-            log.info("kernels %s: built in %.0f s", ext.name, time.perf_counter() - started)
-    if _failed_recently(marker):
-        _warn(ext, f"the build failed, see {marker}")
+    place = native_build(ext)
+    assert place is not None
+
+    def make() -> None:
+        log.info("kernels %s: building the ahead-of-time extension (once per install)", ext.name)
+        started = time.perf_counter()
+        root = str(Path(__file__).resolve().parents[2])  # the folder holding the planner package
+        paths = [root, *(p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p)]
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths), LOCK_HELD_ENV: "1"}
+        run = subprocess.run(
+            [sys.executable, "-m", ext.builder_module],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=BUILD_TIMEOUT_S,
+        )
+        if run.returncode != 0 or not place.path.is_file():
+            last = (run.stderr or run.stdout).strip().splitlines()[-1:] or ["no output"]
+            reason = f"exit code {run.returncode}: {last[0]}"
+            if run.returncode > 0:  # an error, not a signal: the next build would fail the same way
+                raise BuildFailed(
+                    reason, builds.failure_report(run.returncode, run.stderr[-20000:] + run.stdout[-5000:])
+                )
+            raise BuildInterrupted(reason)
+        log.info("kernels %s: built in %.0f s", ext.name, time.perf_counter() - started)
+
+    if not builds.build_once(place, make, lambda reason: _warn(ext, reason)):
         return None
     return load(ext)
-
-
-def lock_path(ext: Extension, where: Path) -> Path:
-    """The lock file that serialises the builds of ``ext`` in the folder ``where``."""
-    return where / f"{ext.name}.lock"
-
-
-class _Lock:
-    """An exclusive ``flock`` on a file for the ``with`` block (no lock where ``fcntl`` is missing)."""
-
-    def __init__(self, lock_path: Path) -> None:
-        self.path = lock_path
-        self.fd: int | None = None
-
-    def __enter__(self) -> None:
-        try:
-            import fcntl
-        except ImportError:  # pragma: no cover - not POSIX
-            return
-        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        fcntl.flock(self.fd, fcntl.LOCK_EX)
-
-    def __exit__(self, *exc: object) -> None:
-        if self.fd is not None:
-            os.close(self.fd)  # closing releases the lock
-            self.fd = None
 
 
 def build(ext: Extension) -> Path:
@@ -338,12 +307,13 @@ def build(ext: Extension) -> Path:
         OSError: no cache folder, or the build could not be written.
         Exception: whatever numba or the C compiler raise when the build fails.
     """
-    lib = path(ext)
-    if lib is None:
+    place = native_build(ext)
+    if place is None:
         raise OSError("no cache folder (CABINPLAN_CACHE_DIR is empty)")
+    lib = place.path
     from numba.pycc import CC  # noqa: PLC0415 - numba only to build
 
-    kernels_module = importlib.import_module(ext.kernels_module)
+    kernels_module = ext.kernels_module()
     lib.parent.mkdir(parents=True, exist_ok=True)
     with (
         tempfile.TemporaryDirectory(dir=lib.parent, prefix=f"{ext.name}-build-") as tmp,
@@ -351,7 +321,7 @@ def build(ext: Extension) -> Path:
     ):
         cc = CC(ext.name)
         cc.output_dir = tmp
-        cc.target_cpu = TARGET_CPU
+        cc.target_cpu = target_cpu()
         cc.verbose = False
         for entry in ext.entries:
             dispatcher = getattr(kernels_module, entry.name)
@@ -359,7 +329,7 @@ def build(ext: Extension) -> Path:
         cc.compile()
         built = next(Path(tmp).glob(f"{ext.name}*{_suffix()}"))
         os.replace(built, lib)
-    _failed_marker(lib).unlink(missing_ok=True)
+    place.clear_failure()
     prune(lib.parent, (f"{ext.name}-*{_suffix()}",))
     return lib
 
@@ -370,7 +340,7 @@ def _trampoline(dispatcher: Any, n_args: int) -> Any:
     ``numba.pycc`` compiles an exported function with its default options, not the dispatcher's: exported
     directly, an entry's own body would run under Python's error model (a division by zero raises) where
     the JIT kernel has ``error_model="numpy"`` (inf or NaN). Exporting this call instead compiles the
-    kernel with its own options, as the JIT does (``tests/test_aot.py`` compares edge inputs).
+    kernel with its own options, as the JIT does (``tests/core/test_aot.py`` compares edge inputs).
     """
     names = ", ".join(f"a{i}" for i in range(n_args))
     namespace: dict[str, Any] = {"kernel": dispatcher}
@@ -387,7 +357,7 @@ def _arrays_boxed_with_a_cached_type() -> Iterator[None]:
     every array it returns (measured: +0.35 us an array, +1 us on a state check returning three). This
     boxes them as numba does, with the type added to the environment's constants like the dtype already
     is (unpickled once, when the extension is imported). Only the boxing of results differs: the compiled
-    arithmetic is the same (``tests/test_aot.py`` compares the bits).
+    arithmetic is the same (``tests/core/test_aot.py`` compares the bits).
     """
     from llvmlite import ir  # type: ignore[import-untyped]  # noqa: PLC0415 - numba only to build
     from numba.core import boxing, cgutils, types  # noqa: PLC0415
@@ -492,11 +462,10 @@ def main(ext: Extension) -> None:
     for its child, saying so in ``$CABINPLAN_AOT_LOCK_HELD``), so a build by hand and one at first use
     never write at once.
     """
-    where = folder()
-    if where is None or os.environ.get(LOCK_HELD_ENV) == "1":
+    place = native_build(ext)
+    if place is None or os.environ.get(LOCK_HELD_ENV) == "1":
         sys.stdout.write(f"{build(ext)}\n")
         return
-    where.mkdir(parents=True, exist_ok=True)
-    with _Lock(lock_path(ext, where)):
-        _remove_stale_build_folders(ext, where)
+    with place.locked():
+        place.remove_stale_build_folders()
         sys.stdout.write(f"{build(ext)}\n")

@@ -18,9 +18,10 @@ def _finite(v: float) -> float:
     return v
 
 
-#: A finite real number, lax (pydantic's float coercion: ``"0.3"`` and ``true`` pass): poses and wrenches of
-#: the CLI and the HTTP API.
-Finite = Annotated[float, AfterValidator(_finite)]
+#: A finite real number: ints and floats only (a numeric string or a boolean is refused, as the published
+#: OpenAPI document's ``number`` says), checked for NaN/inf after any bound: poses and wrenches of the CLI
+#: and the HTTP API.
+Finite = Annotated[float, Strict(), AfterValidator(_finite)]
 
 #: A finite real number, strict: ints and floats only (no numeric strings, no booleans, no NaN/inf),
 #: checked *before* any bound, so ``.nan`` is reported as "not finite" rather than as "not <= 0.2"; bounds
@@ -78,3 +79,23 @@ class Pose(BaseModel):
             position=(float(p[0]), float(p[1]), float(p[2])),
             orientation=Quaternion(w=float(w), x=float(x), y=float(y), z=float(z)),
         )
+
+
+class Limits(BaseModel):
+    """Wall-clock limits of each plan process of a sweep or a campaign (beyond ``options.time_limit_s``)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    grace_s: StrictFinite = Field(
+        15.0,
+        ge=0.0,
+        le=600.0,
+        description="Wall-clock grace beyond a plan's time_limit_s before it is killed.",
+    )
+    wall_time_limit_s: StrictFinite | None = Field(
+        None,
+        gt=0.0,
+        le=3600.0,
+        description="If set, every plan is killed after this many seconds of wall clock, whatever its "
+        "time_limit_s + grace_s.",
+    )

@@ -14,6 +14,12 @@ shows comes from the same model the planner and the validation gate use.
 * :func:`refusal_scene` (cabin8): the configuration a refusal is about -- the start for ``start_*``
   reasons, the goal configuration for a joint goal, else the planner's IK solution of the goal pose -- with
   every contact the state check finds there (the offending pairs) and the closest pair.
+* :func:`task_scene` (cabin8): an assembly cycle, or a campaign's cycles one after another on one timeline:
+  the robot's bodies (the gripper as ``gripper``) posed per frame, the leg of every frame, the pose of the
+  unit the cycle installs at every frame (on its dock before the grasp, at the tool's grasp while held, at
+  its bay from the release on), the units installed before, the docks' fixtures, each cycle's legs and
+  events on the timeline, and the closest pair per frame in that leg's own world (its obstacles and its
+  allowed pair, :func:`planner.task.legs.leg_world`).
 * :func:`pprs6_scene`: the pprs6 platform along a validated pose-path profile (sphere centres C_i, slider
   points B_i and link ends D_i of each chain per frame, from the closed-form inverse kinematics) and its
   reachable workspace at the path's first orientation as a boundary point cloud.
@@ -24,7 +30,8 @@ row-major 3x3 (``R[i][j]``, body axes in the base frame as columns), positions i
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -37,6 +44,7 @@ if TYPE_CHECKING:
     from planner.robots.cabin8 import Cabin8
     from planner.robots.pprs6 import Pprs6
     from planner.scenario import ResolvedScenario
+    from planner.task.resolve import ResolvedCycle
 
 Array = NDArray[np.float64]
 
@@ -144,7 +152,10 @@ def _context(sc: ResolvedScenario, world: CollisionWorld) -> dict[str, Any]:
         "bodies": _bodies(world),
         "has_cabin": sc.cabin is not None,
         "payload_body": "payload" if "payload" in world.names else None,
-        "clearance_m": float(sc.options.clearance_m),
+        # What the scenario asked for; the gate certified it plus the STEP tessellation's deviation
+        # (``certified_clearance_m``, equal without a STEP mesh) against the loaded triangles.
+        "clearance_m": float(sc.requested_clearance_m),
+        "certified_clearance_m": float(sc.options.clearance_m),
         "start": _pose(T_start),
         "goal": None if T_goal is None else _pose(T_goal),
         "approach": approach,
@@ -265,6 +276,210 @@ def refusal_scene(sc: ResolvedScenario, reason: str, details: Mapping[str, Any])
     return doc
 
 
+# ------------------------------------------------------------------------------------------ cycles
+@dataclass(frozen=True)
+class PlannedCycle:
+    """One planned cycle as a scene needs it: the resolved cycle and its profile document's timeline.
+
+    Attributes:
+        cycle: The resolved cycle.
+        joints: Joint positions of every sample, (N, 8) [m, rad].
+        t: Sample times (N,) [s], from 0 at the cycle's start.
+        leg_of: The leg index of every sample (N,) (the document's ``leg``).
+        legs: The document's ``legs`` entries.
+        events: The document's ``events`` entries.
+    """
+
+    cycle: ResolvedCycle
+    joints: Array
+    t: Array
+    leg_of: NDArray[np.int64]
+    legs: Sequence[Mapping[str, Any]]
+    events: Sequence[Mapping[str, Any]]
+
+
+def _obstacle_doc(obstacle: Any) -> dict[str, Any]:
+    """An obstacle (box or mesh) for drawing: its name, shape and pose in the base frame."""
+    doc: dict[str, Any] = {"name": obstacle.name, **_pose(np.asarray(obstacle.T_base_obstacle))}
+    if obstacle.size is not None:
+        doc.update(kind="box", size_m=list(obstacle.size))
+    else:
+        doc.update(
+            kind="mesh",
+            vertices_m=np.asarray(obstacle.vertices).tolist(),
+            faces=np.asarray(obstacle.faces).tolist(),
+        )
+    return doc
+
+
+def unit_box_poses(
+    cyc: ResolvedCycle, q: Array, held: NDArray[np.bool_], after_release: NDArray[np.bool_]
+) -> Array:
+    """The unit's box frame in the base frame at joint rows q (F, 8): (F, 4, 4).
+
+    Held: ``FK(q) T_tool_unit T_unit_box``; before the grasp: on its dock, ``T_base_unit_dock T_unit_box``;
+    from the release on: in its bay, ``T_base_unit_bay T_unit_box`` (the installed obstacle's own pose).
+    """
+    T_unit_box = np.linalg.inv(cyc.T_base_unit_dock) @ cyc.dock_unit.T_base_obstacle
+    out = np.empty((len(q), 4, 4))
+    for k, row in enumerate(np.asarray(q, dtype=float)):
+        if held[k]:
+            out[k] = cyc.robot.fk(row) @ cyc.T_tool_unit @ T_unit_box
+        elif after_release[k]:
+            out[k] = cyc.bay_unit.T_base_obstacle
+        else:
+            out[k] = cyc.dock_unit.T_base_obstacle
+    return out
+
+
+def task_scene(
+    cycles: Sequence[PlannedCycle],
+    units: Sequence[Mapping[str, Any]] | None = None,
+    max_frames: int = MAX_FRAMES,
+    kind: str = "cycle",
+) -> dict[str, Any]:
+    """The scene of a planned cycle, or of a campaign's planned cycles in install order on one timeline.
+
+    Cycle ``k`` starts on the timeline where cycle ``k - 1`` ended (each from park to park); its frames are
+    the samples of :func:`frame_indices` with ``max_frames // len(cycles)`` strided frames (at least 60), its
+    legs and events are shifted by its start. A frame's unit pose is :func:`unit_box_poses`; its closest
+    pair is measured in the world of its leg (:func:`planner.task.legs.leg_world`: that cycle's installed
+    units, the fixture, the unit on its dock or in its bay, the leg's allowed pair left out), the tool body
+    named as reports name it (the unit when held, else ``gripper``).
+
+    Args:
+        cycles: The planned cycles in install order (at least one).
+        units: Every unit of a campaign with its status (``{"id", "status", "position", ...}``), passed
+            through to the document (default: the cycles' units, ``planned``).
+        max_frames: Strided frames over the whole timeline (the probes of each cycle come on top).
+        kind: ``"cycle"`` or ``"campaign"``.
+
+    Returns:
+        ``{"kind", robot, drives, drive_units, limits, "bodies" (robot bodies, the gripper as
+        ``gripper``), "clearance_m", "has_cabin", "installed" (units in the cabin before the first cycle),
+        "fixtures", "units" (with ``size_m``, ``dock`` and ``bay`` poses and ``cycle``: the index of the
+        cycle installing it, or null), "cycles": [{"unit", "t_start_s", "t_end_s", "legs", "events",
+        "frame_start", "frame_end"}], "frames": {"sample", "t_s", "cycle", "leg", "R", "p_m", "length_m",
+        "unit_pose", "unit_held"}, "clearance": {"t_s", "distance_m", "pair", ...}, "min_clearance_m"}``;
+        sample indices are each cycle's own, times are on the whole timeline.
+    """
+    from planner.collision.world import CollisionWorld as World
+    from planner.robots.geometry import PAYLOAD
+    from planner.task.legs import LEGS, body_label, leg_world
+
+    if not cycles:
+        raise ValueError("a task scene needs at least one planned cycle")
+    first = cycles[0].cycle
+    robot = first.robot
+    draw = World(robot, None, first.gripper)
+    bodies = _bodies(draw)
+    for b in bodies:
+        if b["name"] == PAYLOAD:
+            b["name"] = "gripper"
+    per_cycle = max(60, max_frames // len(cycles))
+    frames: dict[str, list[Any]] = {
+        k: [] for k in ("sample", "t_s", "cycle", "leg", "R", "p_m", "length_m", "unit_pose", "unit_held")
+    }
+    clearance: dict[str, list[Any]] = {k: [] for k in ("t_s", "distance_m", "pair", "point_a_m", "point_b_m")}
+    cycle_docs: list[dict[str, Any]] = []
+    fixtures: list[dict[str, Any]] = []
+    offset = 0.0
+    for k, pc in enumerate(cycles):
+        cyc = pc.cycle
+        q = np.asarray(pc.joints, dtype=float)
+        t = np.asarray(pc.t, dtype=float)
+        leg_of = np.asarray(pc.leg_of, dtype=np.int64)
+        if q.ndim != 2 or q.shape[1] != 8 or t.shape != (q.shape[0],) or leg_of.shape != t.shape:
+            raise ValueError(f"cycle {k}: joints (N, 8), t (N,) and leg (N,) expected")
+        idx = frame_indices(q.shape[0], per_cycle)
+        qf = np.ascontiguousarray(q[idx])
+        names = [str(x["name"]) for x in pc.legs]
+        states = [LEGS[[s.name for s in LEGS].index(n)] for n in names]
+        release = next((i for i, n in enumerate(names) if n == "release"), len(names))
+        held = np.array([states[int(leg_of[s])].held for s in idx], dtype=bool)
+        after = np.array([int(leg_of[s]) >= release for s in idx], dtype=bool)
+        R, p, length = draw.poses(qf)
+        T_unit = unit_box_poses(cyc, qf, held, after)
+        start = len(frames["sample"])
+        frames["sample"] += idx.tolist()
+        frames["t_s"] += (t[idx] + offset).tolist()
+        frames["cycle"] += [k] * len(idx)
+        frames["leg"] += leg_of[idx].tolist()
+        frames["R"] += R.tolist()
+        frames["p_m"] += p.tolist()
+        frames["length_m"] += length.tolist()
+        frames["unit_pose"] += [_pose(T) for T in T_unit]
+        frames["unit_held"] += held.tolist()
+        worlds = {i: leg_world(cyc, s) for i, s in enumerate(states)}
+        for s, row in zip(idx, qf, strict=True):
+            i = int(leg_of[s])
+            c = _closest(worlds[i], row)
+            if c["pair"] is not None:
+                c["pair"] = [body_label(cyc, states[i], n) for n in c["pair"]]
+            for key in ("distance_m", "pair", "point_a_m", "point_b_m"):
+                clearance[key].append(c[key])
+        clearance["t_s"] += (t[idx] + offset).tolist()
+        fixtures.append(_obstacle_doc(cyc.fixture))
+        cycle_docs.append(
+            {
+                "unit": cyc.spec.unit.id,
+                "name": cyc.spec.name,
+                "t_start_s": offset,
+                "t_end_s": offset + float(t[-1]),
+                "legs": [
+                    {
+                        **x,
+                        "t_start_s": offset + float(x["t_start_s"]),
+                        "t_end_s": offset + float(x["t_end_s"]),
+                    }
+                    for x in pc.legs
+                ],
+                "events": [{**e, "t_s": offset + float(e["t_s"])} for e in pc.events],
+                "frame_start": start,
+                "frame_end": len(frames["sample"]),
+            }
+        )
+        offset += float(t[-1])
+    by_id = {c.cycle.spec.unit.id: (k, c.cycle) for k, c in enumerate(cycles)}
+    listed = (
+        list(units)
+        if units is not None
+        else [
+            {"id": c.cycle.spec.unit.id, "status": "planned", "position": k + 1} for k, c in enumerate(cycles)
+        ]
+    )
+    unit_docs = []
+    for u in listed:
+        entry: dict[str, Any] = dict(u)
+        found = by_id.get(str(u["id"]))
+        entry["cycle"] = None if found is None else found[0]
+        if found is not None:
+            cyc = found[1]
+            entry["size_m"] = list(cyc.dock_unit.size or ())
+            entry["dock"] = _pose(np.asarray(cyc.dock_unit.T_base_obstacle))
+            entry["bay"] = _pose(np.asarray(cyc.bay_unit.T_base_obstacle))
+        unit_docs.append(entry)
+    finite = [d for d in clearance["distance_m"] if d is not None]
+    return {
+        "kind": kind,
+        "robot": robot.name,
+        "drives": list(robot.drive_names),
+        "drive_units": list(robot.drive_units),
+        "limits": _limits(robot),
+        "bodies": bodies,
+        "clearance_m": float(first.base.options.clearance_m),
+        "has_cabin": first.base.cabin is not None,
+        "installed": [_obstacle_doc(o) for o in first.installed],
+        "fixtures": fixtures,
+        "units": unit_docs,
+        "cycles": cycle_docs,
+        "duration_s": offset,
+        "frames": frames,
+        "clearance": clearance,
+        "min_clearance_m": min(finite) if finite else None,
+    }
+
+
 # ------------------------------------------------------------------------------------------------ pprs6
 def pprs6_chain_points(robot: Pprs6, poses: Array, drives: Array) -> dict[str, Array]:
     """Joint points of the three chains for poses (N, 6) and their drives (N, 6): each (N, 3 chains, 3).
@@ -359,11 +574,14 @@ def workspace_boundary_points(inside: NDArray[np.bool_], axes: tuple[Array, Arra
 
 __all__ = [
     "MAX_FRAMES",
+    "PlannedCycle",
     "frame_indices",
     "plan_scene",
     "pprs6_chain_points",
     "pprs6_scene",
     "refusal_configuration",
     "refusal_scene",
+    "task_scene",
+    "unit_box_poses",
     "workspace_boundary_points",
 ]

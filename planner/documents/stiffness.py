@@ -17,7 +17,7 @@ from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Finite, Pose
 from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload, box_inertia
-from planner.dynamics.stiffness import StaticDeflection, stiffness_model
+from planner.dynamics.stiffness import LoadCase, StaticDeflection, stiffness_model
 
 #: Input bounds of :func:`stiffness_document` (beyond them the linear model means nothing and overflows).
 MAX_PAYLOAD_KG = 1e5
@@ -156,7 +156,7 @@ def stiffness_document(
     }
     total = grav.twist
     if w is not None:
-        dw = model.deflection(q, None, T_tf, w, gravity=False)
+        dw = model.static_deflection(q, LoadCase(None, T_tf, w, gravity=False))
         out["deflection"]["wrench"] = dw.to_dict()
         total = total + dw.twist
     out["deflection"]["total"] = StaticDeflection(total[:3], total[3:]).to_dict()

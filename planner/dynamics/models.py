@@ -1,42 +1,41 @@
 """Which robot has a dynamics model: the force model the timing stage and the gate use, if any.
 
-A mechanism without one (pprs6: the paper gives no masses) is timed and gated under its drive velocity and
-acceleration limits only, and its profiles carry no forces.
+The force models are held by the robot registry (:mod:`planner.robots.registry`); this module registers
+cabin8's (the Lagrange model of :mod:`planner.dynamics.lagrange`) and looks them up. A mechanism without one
+(pprs6: the paper gives no masses) is timed and gated under its drive velocity and acceleration limits
+only, and its profiles carry no forces.
 """
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import cast
 
-from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload
+from planner.robots import base
 from planner.robots.base import RobotModel
+from planner.robots.registry import force_model_of, register_forces
+
+#: A force model taking the planner's payload (:class:`~planner.robots.base.DriveDynamics` bound to
+#: :class:`~planner.dynamics.payload.RigidPayload`).
+DriveDynamics = base.DriveDynamics[RigidPayload]
 
 
-class DriveDynamics(Protocol):
-    """Inverse dynamics in drive space, batched over (N, n) arrays, SI units."""
+def _cabin8_forces(robot: RobotModel) -> DriveDynamics:
+    """cabin8's inverse dynamics (:class:`~planner.dynamics.lagrange.Cabin8Dynamics`, once per model)."""
+    from planner.dynamics.lagrange import Cabin8Dynamics
+    from planner.robots.cabin8 import Cabin8
 
-    def drive_forces_batch(
-        self, q: Array, qd: Array, qdd: Array, payload: RigidPayload | None = None
-    ) -> Array:
-        """Drive forces / torques (N, n_drives) of the joint motion (q, q', q'')."""
-        ...
+    if not isinstance(robot, Cabin8):
+        raise TypeError(f"cabin8's force model needs a Cabin8 model, got {type(robot).__name__}")
+    return Cabin8Dynamics.of(robot)
 
-    def static_forces_batch(self, q: Array, payload: RigidPayload | None = None) -> Array:
-        """Drive forces (N, n_drives) that hold the configurations at rest."""
-        ...
 
-    def joint_rates_batch(self, q: Array, ud: Array, udd: Array) -> tuple[Array, Array]:
-        """Joint velocities and accelerations (N, n) of drive velocities and accelerations at q."""
-        ...
+register_forces("cabin8", _cabin8_forces)
 
 
 def drive_dynamics(robot: RobotModel) -> DriveDynamics | None:
     """The robot's dynamics model (built once per model), or None where it has none."""
-    from planner.robots.cabin8 import Cabin8
+    return cast(DriveDynamics | None, force_model_of(robot))
 
-    if isinstance(robot, Cabin8):
-        from planner.dynamics.lagrange import Cabin8Dynamics
 
-        return Cabin8Dynamics.of(robot)
-    return None
+__all__ = ["DriveDynamics", "drive_dynamics"]

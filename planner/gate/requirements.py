@@ -16,6 +16,7 @@ from planner.core.description import TRUSTED_STIFFNESS_SOURCES
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
 from planner.dynamics.payload import RigidPayload
+from planner.timing import stages
 
 if TYPE_CHECKING:
     from planner.scenario.resolve import ResolvedScenario
@@ -70,7 +71,7 @@ class GateRequirements:
     #: The controller period the scenario asks for [s]: the profile must be sampled at exactly it (a
     #: profile timed at another period runs faster or slower on the controller than it was checked).
     sample_period_s: float | None = None
-    #: Whether the drive jerk limits bind (``options.timing: jerk_limited``, the default with jerk limits).
+    #: Whether the drive jerk limits bind (the timing stage's ``binds_jerk``, :mod:`planner.timing.stages`).
     jerk_limited: bool = True
     #: The certified geometric path, leg by leg: when given, every sample must lie on it
     #: (:data:`PATH_DEVIATION_TOL`). The planner passes it; a caller's profile (CLI ``check``) has none.
@@ -167,30 +168,6 @@ def requirements_for(
         T_base_payload_commanded=T_base_payload_commanded,
         sample_period_s=sc.options.sample_period_s,
         deflection_check=sc.payload is not None and sc.robot.desc.stiffness is not None,
-        jerk_limited=timing_of(sc) == "jerk_limited",
+        jerk_limited=stages.select(sc.options.timing, sc.robot).binds_jerk,
         collision=sc.gate_collision,
     )
-
-
-def timing_of(sc: ResolvedScenario) -> str:
-    """The timing stage of a scenario: ``options.timing``, else jerk-limited when the robot has jerk limits.
-
-    Without jerk limits in the robot description the default is acceleration-limited (TOPP-RA alone).
-
-    On the reference suite the jerk-limited law lasts 1.02-1.07 times the acceleration-limited one (median
-    1.045, ``bench.timing``): the planner's corner blends are curvature-continuous (C2), so the jerk
-    limits cost only the acceleration ramps.
-
-    Raises:
-        InvalidInput: ``jerk_limited`` asked for a robot whose description has no jerk limits.
-    """
-    option = sc.options.timing
-    has_jerk = sc.robot.limits.j_max is not None
-    if option == "jerk_limited" and not has_jerk:
-        raise InvalidInput(
-            f"options.timing: robot {sc.robot.name!r} has no jerk limits in its description",
-            field="options.timing",
-        )
-    if option is None:
-        return "jerk_limited" if has_jerk else "acceleration_limited"
-    return str(option)

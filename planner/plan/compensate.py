@@ -1,7 +1,8 @@
 """Deflection compensation of pose-goal targets: each moved onto the command whose sag lands on the goal.
 
-Uses the stiffness model's :func:`~planner.dynamics.stiffness.compensate_goals`; a compensated target (and
-its approach line) must still pass the planner's own state and motion checks, else it is dropped. When every
+Uses :func:`~planner.dynamics.compensation.compensate_goals` under the plan's load case (payload,
+grasp); a compensated target (and its approach line) must still pass the planner's own state and motion
+checks, else it is dropped. When every
 candidate is dropped the refusal (``compensation_failed``) carries the evidence of each rejected one (the
 limit and its excess, the drive and its force ratio, or the closest bodies and their distance against the
 required one) and names the one closest to passing, as the goal stage's refusals do.
@@ -15,17 +16,12 @@ import numpy as np
 
 from planner.core.exceptions import DeflectionNotCompensated
 from planner.core.types import Array
-from planner.dynamics.stiffness import Compensation, compensate_goals, stiffness_model
+from planner.dynamics.compensation import Compensation, compensate_goals
+from planner.dynamics.stiffness import LoadCase, stiffness_model
 from planner.gate.requirements import compensates_deflection
 from planner.plan.context import PlanContext
-from planner.plan.goals import (
-    GoalCandidate,
-    collision_evidence,
-    describe,
-    dominant,
-    force_evidence,
-    limit_evidence,
-)
+from planner.plan.evidence import collision_evidence, describe, dominant, force_evidence, limit_evidence
+from planner.plan.goals import GoalCandidate
 from planner.plan.motion import MIN_MARGIN_M, certify_motion, path_clear, spare_clearance
 
 #: Rejected candidates explained in a refusal (each explanation costs a few exact distance queries).
@@ -65,8 +61,7 @@ def compensate_targets(
             targets,
             lines,
             sc.T_base_payload_goal,
-            ctx.payload,
-            T_tool_payload,
+            LoadCase(ctx.payload, T_tool_payload),
             accept,
         )
     except DeflectionNotCompensated as exc:

@@ -18,11 +18,6 @@ from planner.plan.ompl_adapter import plan_joint_path
 from planner.plan.shortcut import segment_times
 from planner.plan.transit import find_transit
 
-#: Motion checks of the first, reproducible planner attempt.
-QUICK_MOTION_CHECKS = 1500
-#: Motion-check budget of the full attempt (the time limit applies as well; when it stops the planner
-#: first, the result depends on the machine's speed).
-FULL_MOTION_CHECKS = 40_000
 #: A connection onto or off a transit ride is first planned with the rail within this of its ends [m].
 CONNECT_RAIL_WINDOW_M = 0.3
 #: Fractions of the transit ride at which a straight connection may join or leave it (see
@@ -65,6 +60,7 @@ def ompl_attempt(
     budget = ctx.remaining()
     if budget <= 0:
         return None
+    ctx.motion_checks_granted += max_checks
     lo, hi = joint_box(ctx.world)
     if rail_window_m is not None:  # a local problem: the rail kept near its two ends
         d1s = [float(q_start[chain.D1]), *(float(q[chain.D1]) for q in targets)]
@@ -117,15 +113,21 @@ def connect(ctx: PlanContext, q_a: Array, targets: list[Array]) -> tuple[Array, 
     # local problem (the rail near the connection's ends: a posture change at the end of a rail move
     # needs no rail detour), then two straight motions through a configuration off the rail position
     # (a few checks), then in the whole joint box.
+    preset = ctx.preset
     local = ompl_attempt(
-        ctx, q_a, targets, max_checks=QUICK_MOTION_CHECKS, simplify=False, rail_window_m=CONNECT_RAIL_WINDOW_M
+        ctx,
+        q_a,
+        targets,
+        max_checks=preset.quick_motion_checks,
+        simplify=False,
+        rail_window_m=CONNECT_RAIL_WINDOW_M,
     )
     if local is not None:
         return local
     via = detour(ctx, q_a, targets[0])
     if via is not None:
         return via, 0
-    return ompl_attempt(ctx, q_a, targets, max_checks=FULL_MOTION_CHECKS, simplify=False)
+    return ompl_attempt(ctx, q_a, targets, max_checks=preset.full_motion_checks, simplify=False)
 
 
 def detour(ctx: PlanContext, q_a: Array, q_b: Array) -> Array | None:

@@ -1,14 +1,18 @@
 """What every planning stage shares: one plan's context, its clearances, its search preset and its clock.
 
 A stage is a function of the context (and of what the previous stage returned); it records what it did in
-``context.report`` and reads its settings from the context, never from loose floats. The context is built
-once per plan by :meth:`PlanContext.build`.
+``context.report`` and reads its settings from the context, never from loose floats: the clearances
+(:class:`Clearances`), the search's steps and work budgets (:class:`SearchPreset`), the time limit. The
+context is built once per plan by :meth:`PlanContext.build`; the pipeline runs each stage inside
+:meth:`PlanContext.stage`, the stopwatch that announces it to the progress callback and records its run
+time in ``report["stages_s"]``.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -17,16 +21,13 @@ import numpy as np
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
 from planner.core.types import Array, IntArray
+from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
-from planner.gate.requirements import timing_of
 from planner.kinematics import chain
-from planner.plan.goals import StaticForceCheck
 from planner.plan.motion import motion_clear
-from planner.timing import reference
-from planner.timing.jerk import JerkLimitedStage
-from planner.timing.stage import TimingFactory, TimingStage
-from planner.timing.toppra import ToppraStage
+from planner.timing import acc_reference, stages
+from planner.timing.stage import TimingFactory
 
 if TYPE_CHECKING:
     from planner.robots.cabin8 import Cabin8
@@ -45,19 +46,12 @@ TIME_RESERVE = 0.15
 
 
 def timing_factory(sc: ResolvedScenario) -> TimingFactory:
-    """The scenario's timing stage (``options.timing``, :func:`~planner.gate.requirements.timing_of`).
+    """The scenario's timing stage (:func:`planner.timing.stages.select`) at its controller period.
 
-    ``jerk_limited``: :class:`~planner.timing.jerk.JerkLimitedStage` checked at the scenario's controller
-    period; ``acceleration_limited``: :class:`~planner.timing.toppra.ToppraStage`.
+    Raises:
+        InvalidInput: a stage the robot cannot run (jerk-limited without jerk limits).
     """
-    if timing_of(sc) == "acceleration_limited":
-        return ToppraStage
-    period = float(sc.options.sample_period_s)
-
-    def jerk_stage(robot: Any, payload: Any, safety: tuple[float, float, float]) -> TimingStage:
-        return JerkLimitedStage(robot, payload, safety, sample_period_s=period)
-
-    return jerk_stage
+    return stages.select(sc.options.timing, sc.robot).factory(float(sc.options.sample_period_s))
 
 
 @dataclass(frozen=True)
@@ -105,6 +99,10 @@ class SearchPreset:
         blends: Blend corners (else the robot stops at every waypoint).
         quick_attempt: A first OMPL attempt with the small, reproducible motion-check budget.
         planner_range: OMPL's step length in scaled joint space (None: OMPL's default).
+        quick_motion_checks: Motion-check budget of the quick attempt and of a local connection onto or
+            off a transit ride.
+        full_motion_checks: Motion-check budget of a full attempt (the time limit applies as well; when it
+            stops the planner first, the result depends on the machine's speed).
     """
 
     name: str
@@ -114,6 +112,8 @@ class SearchPreset:
     blends: bool = True
     quick_attempt: bool = True
     planner_range: float | None = 1.0
+    quick_motion_checks: int = 1500
+    full_motion_checks: int = 40_000
 
 
 #: The product: every step (planner range 1.0: measured on the reference bay insertions, it halves the
@@ -133,6 +133,14 @@ BASELINE = SearchPreset(
 
 
 @dataclass
+class Stopwatch:
+    """The run time of one stage (:meth:`PlanContext.stage`), set when the stage ends [s]."""
+
+    name: str
+    seconds: float = 0.0
+
+
+@dataclass
 class PlanContext:
     """One plan's shared state: scenario, robot, world, forces, clearances, preset, clock and report.
 
@@ -149,6 +157,8 @@ class PlanContext:
         progress: Called with (stage name, fraction done) as the stages start.
         t0: The plan's clock origin (``time.perf_counter``), set after the warm-up.
         report: What the stages did (JSON-able), returned with the result.
+        motion_checks_granted: The motion-check budgets of the sampling-planner attempts run so far,
+            summed: the work budget a refusal reports.
     """
 
     sc: ResolvedScenario
@@ -164,6 +174,8 @@ class PlanContext:
     t0: float = 0.0
     report: dict[str, Any] = field(default_factory=lambda: {"stages_s": {}})
     last_tick: float = 0.0
+    motion_checks_granted: int = 0
+    ticking: tuple[str, float, float] | None = None
     #: The leg index (N,) of every sample of the last profile the timing stage sampled (None before).
     leg_of: IntArray | None = None
 
@@ -225,7 +237,7 @@ class PlanContext:
         self.world.check_path(np.stack([q, q_b, q]), c.requested_m, c.motion_margin_m)
         if self.world.cabin is not None:
             self.world.min_distance(q, include_self=False)
-        reference.kernels()
+        acc_reference.kernels()
 
     # ------------------------------------------------------------------ clock
     def elapsed(self) -> float:
@@ -236,13 +248,46 @@ class PlanContext:
         """Time left for search [s], keeping :data:`TIME_RESERVE` of the limit for timing and validation."""
         return self.opts.time_limit_s * (1.0 - TIME_RESERVE) - self.elapsed()
 
+    @contextmanager
+    def stage(self, name: str, at: float | None = None, until: float | None = None) -> Iterator[Stopwatch]:
+        """Run one stage: announce it, time it into ``report["stages_s"][name]`` when it ends normally.
+
+        Args:
+            name: The stage's name (the progress callback's and the report's).
+            at: The fraction of the plan done when it starts, announced to the progress callback (None:
+                not announced, e.g. one try of a repeated stage).
+            until: The fraction done when it ends: the stage's work then reports its progress in between
+                (:meth:`tick`: the elapsed share of the search's time budget).
+
+        Yields:
+            The stage's :class:`Stopwatch` (its ``seconds`` set once the stage ends). A stage that raises
+            (a refusal) is not recorded.
+        """
+        if at is not None:
+            self.progress(name, at)
+        ticking = self.ticking
+        if at is not None and until is not None:
+            self.ticking = (name, at, until)
+        watch = Stopwatch(name)
+        t_start = time.perf_counter()
+        try:
+            yield watch
+        finally:
+            self.ticking = ticking
+        watch.seconds = time.perf_counter() - t_start
+        self.report["stages_s"][name] = round(watch.seconds, 6)
+
     def tick(self) -> None:
-        """Report the search's progress at most twice a second: the elapsed share of its time budget."""
+        """Report a ticking stage's progress at most twice a second: the elapsed share of the time budget.
+
+        Only a stage run with ``until`` ticks (the search, between its start and the smoothing's).
+        """
         now = time.perf_counter()
-        if now - self.last_tick >= 0.5:
+        if self.ticking is not None and now - self.last_tick >= 0.5:
             self.last_tick = now
+            name, at, until = self.ticking
             budget = self.opts.time_limit_s * (1.0 - TIME_RESERVE)
-            self.progress("search", 0.15 + 0.55 * min(1.0, self.elapsed() / budget))
+            self.progress(name, at + (until - at) * min(1.0, self.elapsed() / budget))
 
     def out_of_time(self) -> bool:
         """The deadline of the search's steps: raises the time-limit refusal once the time is up.
@@ -260,9 +305,11 @@ class PlanContext:
         return False
 
     def no_path(self) -> NoPathFound:
-        """The refusal of a search without a path, saying whether the clock or the work budget ended it."""
-        from planner.plan import connect
+        """The refusal of a search without a path, saying whether the clock or the work budget ended it.
 
+        The work budget reported is the one in force: the budgets of the sampling-planner attempts this
+        search ran (:attr:`motion_checks_granted`; the baseline preset's single attempt: 40 000).
+        """
         elapsed = round(self.elapsed(), 3)
         planner = self.opts.planner
         if self.remaining() <= 0:
@@ -275,7 +322,7 @@ class PlanContext:
                 elapsed_s=elapsed,
                 planner=planner,
             )
-        budget = connect.QUICK_MOTION_CHECKS + connect.FULL_MOTION_CHECKS
+        budget = self.motion_checks_granted
         return NoPathWithinBudget(
             f"no collision-free path found within the search's work budget ({budget} motion checks, "
             f"planner {planner}); the same seed ends the same way on any machine: try another options.seed "
@@ -286,10 +333,6 @@ class PlanContext:
             elapsed_s=elapsed,
             planner=planner,
         )
-
-    def stage_done(self, name: str, t_start: float) -> None:
-        """Record a stage's run time (from ``t_start``, a ``time.perf_counter`` reading) in the report."""
-        self.report["stages_s"][name] = round(time.perf_counter() - t_start, 6)
 
     # ----------------------------------------------------------------- checks
     def state_ok(self, q: Array) -> bool:

@@ -1,7 +1,8 @@
 """The planning pipeline: resolved scenario in, validated drive profile out (or a clear refusal).
 
-A short sequence of stage calls over one :class:`~planner.plan.context.PlanContext` (each stage reported
-through the ``progress`` callback and timed in ``report["stages_s"]``):
+A short sequence of stage calls over one :class:`~planner.plan.context.PlanContext`, each inside the
+context's stopwatch (``with ctx.stage(name, fraction):`` reports it through the ``progress`` callback and
+times it in ``report["stages_s"]``):
 
 1. ``check_start`` (:mod:`planner.plan.endpoints`): admissible, clear, holdable.
 2. ``goals`` (:mod:`planner.plan.targets`): the configurations to reach, with their approach lines;
@@ -10,13 +11,13 @@ through the ``progress`` callback and timed in ``report["stages_s"]``):
 4. ``smooth`` (:mod:`planner.plan.smooth`): certified blends; legs split at sharp corners, the insertion line
    its own leg.
 5. ``timing`` / ``sample`` / ``validate`` (:mod:`planner.plan.retime`): the timing stage per leg, sampled at
-   the controller period, through the gate (:mod:`planner.gate`).
+   the controller period, through the gate (:mod:`planner.gate`); each try is timed as ``timing_k`` and
+   ``validate_k`` (a limit the gate finds exceeded is tightened and the legs timed again).
 6. the report (:mod:`planner.plan.report`): lower bounds and the predicted deflection.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -59,34 +60,26 @@ class PlanResult:
 def run_stages(ctx: PlanContext) -> PlanResult:
     """Every stage over ``ctx`` (see the module docstring); the validated result, or the refusal raised."""
     sc = ctx.sc
-    t = time.perf_counter()
-    ctx.progress("check_start", 0.0)
-    check_configuration(ctx, sc.start_q, "start")
-    ctx.stage_done("check_start", t)
+    with ctx.stage("check_start", 0.0):
+        check_configuration(ctx, sc.start_q, "start")
 
-    t = time.perf_counter()
-    ctx.progress("goals", 0.05)
-    targets, lines = goal_targets(ctx)
-    compensations = compensate_targets(ctx, targets, lines)
-    ctx.stage_done("goals", t)
+    with ctx.stage("goals", 0.05):
+        targets, lines = goal_targets(ctx)
+        compensations = compensate_targets(ctx, targets, lines)
 
-    t = time.perf_counter()
-    ctx.progress("search", 0.15)
-    waypoints, k = search(ctx, sc.start_q, targets)
-    ctx.stage_done("search", t)
+    with ctx.stage("search", 0.15, until=0.7):
+        waypoints, k = search(ctx, sc.start_q, targets)
 
-    t = time.perf_counter()
-    ctx.progress("smooth", 0.7)
-    legs = smooth(ctx, waypoints)
-    line = lines[k]
-    if line is not None and line.line is not None and line.line_s is not None:
-        legs.append(_insertion_leg(ctx, line.line, line.line_s))
-        waypoints = np.vstack([waypoints, line.line[1:]])
-    ctx.stage_done("smooth", t)
+    with ctx.stage("smooth", 0.7):
+        legs = smooth(ctx, waypoints)
+        line = lines[k]
+        if line is not None and line.line is not None and line.line_s is not None:
+            legs.append(_insertion_leg(ctx, line.line, line.line_s))
+            waypoints = np.vstack([waypoints, line.line[1:]])
 
     compensation = compensations[k] if compensations else None
     commanded = compensation.T_base_frame_commanded if compensation is not None else None
-    ctx.progress("timing", 0.75)
+    ctx.progress("timing", 0.75)  # each try of timing and gate is its own stage (timing_0, validate_0, ...)
     profile, gate, timed = time_and_validate(ctx, legs, requirements_for(sc, ctx.payload, commanded))
 
     deflection = deflection_report(ctx, profile, compensation)
@@ -111,8 +104,8 @@ class Planner:
     Args:
         scenario: The resolved scenario.
         progress: Called with (stage name, fraction done) as the stages start.
-        timing: Factory of the timing stage, ``(robot, payload, safety) -> TimingStage`` (default:
-            :class:`~planner.timing.toppra.ToppraStage`).
+        timing: Factory of the timing stage, ``(robot, payload, safety) -> TimingStage`` (default: the
+            scenario's stage from :mod:`planner.timing.stages`, jerk-limited when the robot has jerk limits).
         preset: The search preset (:data:`~planner.plan.context.PRODUCT`; the benchmark's baseline is
             :data:`~planner.plan.context.BASELINE`).
     """

@@ -5,11 +5,11 @@ default). Each straight leg ``x(s) = x_a + s (x_b - x_a)``, s in [0, 1], is a on
 :class:`~planner.timing.path.JointPath` in pose coordinates (the platform pose is pprs6's joint vector);
 the robot model maps it to the drive path (:meth:`planner.robots.pprs6.Pprs6.drive_path`: closed-form IK,
 analytic Jacobian, its derivative along the leg by a central difference). Corners are sharp, so the
-platform stops at every waypoint: each leg is timed rest to rest by the shared jerk-limited stage
-(:class:`~planner.timing.jerk.JerkLimitedStage`, an LP over drive velocity, acceleration and jerk limits:
-pprs6 has no force model; TOPP-RA alone for a description without jerk limits) on a uniform grid of 300
-intervals, and the legs are sampled one after the other at the controller
-period by the shared sampler (:func:`~planner.timing.profile.sample_legs`).
+platform stops at every waypoint: each leg is timed rest to rest by the robot's default timing stage
+(:func:`planner.timing.stages.default_stage`: the jerk-limited LP over drive velocity, acceleration and
+jerk limits, pprs6 having no force model; TOPP-RA alone for a description without jerk limits) on a
+uniform grid of 300 intervals, and the legs are sampled one after the other at the controller period by the
+shared sampler (:func:`~planner.timing.profile.sample_legs`).
 
 The gate is pprs6's room of the one gate (:func:`planner.gate.pprs6.validate`, re-exported here): the
 robot-independent drive checks of every profile, then the pose path followed within 1e-6 (m, rad), start
@@ -30,11 +30,9 @@ from planner.gate.drive_checks import GateReport
 from planner.gate.pprs6 import validate
 from planner.kinematics import pprs6 as kin
 from planner.robots.pprs6 import Pprs6
-from planner.timing.jerk import JerkLimitedStage
+from planner.timing import stages
 from planner.timing.path import JointPath, LinePiece
 from planner.timing.profile import DriveProfile, sample_legs
-from planner.timing.stage import TimingStage
-from planner.timing.toppra import ToppraStage
 
 #: The paper's closed path E -> F -> G -> H (Fig. 6 shows only its shape): a saddle-shaped spatial
 #: quadrilateral of 40 mm x 40 mm x 20 mm around the centre of the level workspace, at a yaw of 0.2 rad
@@ -204,7 +202,7 @@ class Pprs6Profile:
         return self.profile.duration_s
 
 
-#: Grid intervals of each leg's TOPP-RA problem (uniform in s).
+#: Grid intervals of each leg's timing problem (uniform in s).
 GRID_POINTS = 300
 
 
@@ -224,11 +222,8 @@ def build_profile(
             f"sample_period_s: must be in [0.0005, 0.1] s, got {period}", field="sample_period_s"
         )
     check_path(robot, path)
-    stage: TimingStage = (
-        JerkLimitedStage(robot, None, sample_period_s=period, min_points=grid_points, max_points=grid_points)
-        if robot.limits.j_max is not None
-        else ToppraStage(robot, None, min_points=grid_points, max_points=grid_points)
-    )
+    entry = stages.default_stage(robot)
+    stage = entry.build(robot, None, sample_period_s=period, grid_points=grid_points)
     timed = [stage.time_path(leg) for leg in leg_paths(path)]
     profile, leg = sample_legs(robot, timed, period, None)
     gate, poses = validate(robot, path, profile, leg, period)

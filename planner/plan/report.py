@@ -7,7 +7,8 @@ from typing import Any
 import numpy as np
 
 from planner.core.types import Array
-from planner.dynamics.stiffness import Compensation, StaticDeflection, stiffness_model
+from planner.dynamics.compensation import Compensation
+from planner.dynamics.stiffness import StaticDeflection, stiffness_model
 from planner.gate.requirements import deflection_sample_indices, stiffness_provenance
 from planner.plan.context import PlanContext
 from planner.plan.goals import GoalCandidate

@@ -1,14 +1,14 @@
 """The timing-and-gate stage: time every leg, sample at the controller period, gate; re-time on a limit.
 
-The timing stage comes from the context's factory (:class:`~planner.timing.stage.TimingStage`, TOPP-RA by
-default); a gate failure of a limit check (velocity, acceleration, force, consistency) re-times with that
-limit tightened to the next of :data:`SAFETY_LEVELS`; any other failure refuses.
+The timing stage comes from the context's factory (:class:`~planner.timing.stage.TimingStage`, the
+scenario's stage from :mod:`planner.timing.stages`: jerk-limited by default when the robot has jerk limits);
+a gate failure of a limit check (velocity, acceleration, force, consistency) re-times with that limit
+tightened to the next of :data:`SAFETY_LEVELS`; any other failure refuses.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import time
 
 from planner.core.exceptions import ValidationFailed
 from planner.gate.checks import GateReport, validate_profile
@@ -45,12 +45,11 @@ def time_and_validate(
             SAFETY_LEVELS[level[2]][2],
         )
         stage = ctx.timing(ctx.robot, ctx.payload, safety)
-        t1 = time.perf_counter()
-        timed = [stage.time_path(leg) for leg in legs]
-        ctx.stage_done(f"timing_{attempt}", t1)
+        with ctx.stage(f"timing_{attempt}") as clock:
+            timed = [stage.time_path(leg) for leg in legs]
         ctx.report["timing"] = {
             "stage": stage.name,
-            "stage_s": round(time.perf_counter() - t1, 6),
+            "stage_s": round(clock.seconds, 6),
             "legs": len(legs),
             "duration_s": round(sum(tl.duration for tl in timed), 6),
         }
@@ -59,9 +58,8 @@ def time_and_validate(
             ctx.robot, timed, ctx.opts.sample_period_s, ctx.payload, ctx.dynamics
         )
         ctx.progress("validate", 0.9)
-        t2 = time.perf_counter()
-        gate = validate_profile(profile, ctx.robot, ctx.world, req, ctx.dynamics)
-        ctx.stage_done(f"validate_{attempt}", t2)
+        with ctx.stage(f"validate_{attempt}"):
+            gate = validate_profile(profile, ctx.robot, ctx.world, req, ctx.dynamics)
         if gate.passed:
             return profile, gate, timed
         last = gate

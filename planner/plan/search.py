@@ -52,7 +52,7 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
         if via is not None:
             return via
     if preset.quick_attempt:
-        res = ompl_attempt(ctx, q_start, targets, max_checks=connect.QUICK_MOTION_CHECKS)
+        res = ompl_attempt(ctx, q_start, targets, max_checks=preset.quick_motion_checks)
         if res is not None:
             return res
     if preset.straight:  # two straight motions through a configuration off the rail position (a few checks)
@@ -60,7 +60,7 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
         if detour is not None:
             ctx.report["search"] = {"method": "detour"}
             return detour, 0
-    res = ompl_attempt(ctx, q_start, targets, max_checks=connect.FULL_MOTION_CHECKS)
+    res = ompl_attempt(ctx, q_start, targets, max_checks=preset.full_motion_checks)
     if res is not None:
         return res
     raise ctx.no_path()

@@ -14,14 +14,8 @@ from planner.core.exceptions import ApproachInfeasible, GoalInCollision, GoalUnr
 from planner.core.types import Array
 from planner.plan.context import PlanContext
 from planner.plan.endpoints import check_configuration
-from planner.plan.goals import (
-    GoalCandidate,
-    approach_lines,
-    describe,
-    dominant,
-    goal_configurations,
-    track_approach,
-)
+from planner.plan.evidence import describe, dominant
+from planner.plan.goals import GoalCandidate, approach_lines, goal_configurations, track_approach
 
 #: Goal candidates tracked back along the approach line when no line of fixed redundancy is clear.
 TRACKED_CANDIDATES = 4

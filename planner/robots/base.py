@@ -12,7 +12,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -139,6 +139,31 @@ def _vector_from_dict(values: dict[str, float], names: tuple[str, ...], field: s
             raise InvalidInput(f"{field}.{n}: expected a finite number, got {v!r}", field=f"{field}.{n}")
         out[i] = float(v)
     return out
+
+
+#: The payload type a force model takes (:class:`planner.dynamics.payload.RigidPayload`, a room above).
+PayloadT = TypeVar("PayloadT", contravariant=True)
+
+
+class DriveDynamics(Protocol[PayloadT]):
+    """Inverse dynamics in drive space, batched over (N, n) arrays, SI units: a robot's force model.
+
+    Generic in the payload type (the dynamics room's :class:`~planner.dynamics.payload.RigidPayload`:
+    :data:`planner.dynamics.models.DriveDynamics` is this protocol bound to it), so that the robot registry
+    can hold force models without importing the room that builds them.
+    """
+
+    def drive_forces_batch(self, q: Array, qd: Array, qdd: Array, payload: PayloadT | None = None) -> Array:
+        """Drive forces / torques (N, n_drives) of the joint motion (q, q', q'')."""
+        ...
+
+    def static_forces_batch(self, q: Array, payload: PayloadT | None = None) -> Array:
+        """Drive forces (N, n_drives) that hold the configurations at rest."""
+        ...
+
+    def joint_rates_batch(self, q: Array, ud: Array, udd: Array) -> tuple[Array, Array]:
+        """Joint velocities and accelerations (N, n) of drive velocities and accelerations at q."""
+        ...
 
 
 class KinematicsTools(Protocol):

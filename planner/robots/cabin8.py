@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from functools import cache, cached_property
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -30,14 +30,13 @@ from numpy.typing import NDArray
 
 from planner.core.description import Hybrid8Description, description_hash, jerk_limits, load_description
 from planner.core.exceptions import InvalidInput, LimitViolation
+from planner.core.timing_names import default_timing
 from planner.core.types import Array
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import CHUNK, FastFunction, dense_function, evaluate_mapped
 from planner.kinematics.native import native
 from planner.robots.base import DriveLimits, RobotModel
-
-if TYPE_CHECKING:
-    from planner.robots.cabin8_geometry import Cabin8CollisionModel
+from planner.robots.cabin8_geometry import Cabin8CollisionModel
 
 #: Indices of the stage coordinates in q (x, y, gamma) and in u (x1, x2, x3).
 STAGE = slice(1, 4)
@@ -323,8 +322,6 @@ class Cabin8(RobotModel):
 
     @cached_property
     def _collision_model(self) -> Cabin8CollisionModel:
-        from planner.robots.cabin8_geometry import Cabin8CollisionModel
-
         return Cabin8CollisionModel(self)
 
     # --------------------------------------------------------------- summary
@@ -370,7 +367,7 @@ class Cabin8(RobotModel):
             "serial_chain_mdh": [link.model_dump() for link in self.desc.serial_chain],
             "masses_kg": self.desc.masses.model_dump(),
             "home_drives": self.drives_dict(self.home_drives),
-            "default_timing": "jerk_limited" if self.limits.j_max is not None else "acceleration_limited",
+            "default_timing": default_timing(self.limits.j_max is not None),
         }
 
     def summary(self) -> dict[str, Any]:

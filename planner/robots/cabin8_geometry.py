@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import casadi as ca
 import numpy as np
@@ -34,9 +35,11 @@ import numpy as np
 from planner.core.types import Array
 from planner.kinematics import chain, parallel
 from planner.kinematics.compiled import FastFunction, dense_function
-from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
 from planner.robots.geometry import PAYLOAD, Admissibility, Shape
 from planner.robots.kernel_codes import CABIN8, CABIN8_KIND_CODES, CABIN8_PARAMS
+
+if TYPE_CHECKING:  # the model imports its geometry, never the other way round at run time
+    from planner.robots.cabin8 import Cabin8, Cabin8Kinematics
 
 #: cabin8's bodies in pose order, the payload last (when carried).
 BODY_NAMES = ("carriage", "link_ab", "link_cd", "link_ef", "platform", "column", "arm", "slide", "payload")

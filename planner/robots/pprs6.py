@@ -27,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from planner.core.description import DriveSpec, jerk_limits, load_description_file
 from planner.core.exceptions import InvalidInput, OutsideWorkspace
+from planner.core.timing_names import default_timing
 from planner.core.types import Array, BoolArray
 from planner.kinematics import pprs6 as kin
 from planner.robots.base import DriveLimits, RobotModel
@@ -351,5 +352,5 @@ class Pprs6(RobotModel):
             "grubler": self.grubler(),
             "home": self.pose_dict(self.home_pose),
             "sample_period_s": self.sample_period_s,
-            "default_timing": "jerk_limited" if lim.j_max is not None else "acceleration_limited",
+            "default_timing": default_timing(lim.j_max is not None),
         }

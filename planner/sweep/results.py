@@ -23,7 +23,7 @@ import logging
 import os
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from planner.sweep.expand import SweepPlan
 
@@ -68,6 +68,18 @@ COLUMN_NAMES = tuple(name for name, _ in COLUMNS)
 
 #: Columns that depend on the machine (times, files), not on the plan: left out when comparing runs.
 MACHINE_COLUMNS = frozenset({"planning_time_s", "wall_time_s", "attempts", "scenario_file", "profile_file"})
+
+
+class TaskKey(Protocol):
+    """What the journal and the executors need of a plan: a name (files, logs) and its content hash."""
+
+    @property
+    def name(self) -> str:
+        """A readable name of the plan (its profile file's name)."""
+
+    @property
+    def sha256(self) -> str:
+        """The plan's content hash (one row, one running job per hash)."""
 
 
 def plan_columns(plan: SweepPlan) -> dict[str, Any]:
@@ -127,8 +139,6 @@ def outcome_from_document(
     ``min_clearance_bound_m``), the gate's peak effort
     ratio and ``report.planning_time_s`` of a profile, ``details`` (the evidence) of a refusal.
     """
-    from planner.sweep.task import MAX_EVIDENCE_CHARS
-
     out: dict[str, Any] = {"status": status, "reason": reason, "message": message, "document": document}
     doc = json.loads(document) if document else None
     if not isinstance(doc, dict):
@@ -144,11 +154,18 @@ def outcome_from_document(
             planning_time_s=report.get("planning_time_s"),
         )
     elif doc.get("details") is not None:
-        evidence = json.dumps(doc["details"], separators=(",", ":"))
-        out["evidence"] = (
-            evidence if len(evidence) <= MAX_EVIDENCE_CHARS else evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
-        )
+        out["evidence"] = evidence_text(doc["details"])
     return out
+
+
+#: Longest refusal evidence kept in the table [characters of JSON]; the whole document is in the profile.
+MAX_EVIDENCE_CHARS = 4000
+
+
+def evidence_text(details: Any) -> str:
+    """A refusal's evidence as the table keeps it: compact JSON, cut to :data:`MAX_EVIDENCE_CHARS`."""
+    evidence = json.dumps(details, separators=(",", ":"))
+    return evidence if len(evidence) <= MAX_EVIDENCE_CHARS else evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
 
 
 def atomic_write(path: Path, text: str | bytes) -> None:
@@ -198,7 +215,7 @@ class Journal:
         """A row of this scenario hash is recorded."""
         return sha256 in self.rows
 
-    def profile_path(self, plan: SweepPlan) -> Path:
+    def profile_path(self, plan: TaskKey) -> Path:
         """Where the plan's profile (or refusal document) goes: ``profiles/NAME.json``."""
         return self.out_dir / "profiles" / f"{plan.name}.json"
 
@@ -209,7 +226,7 @@ class Journal:
             json.dumps(plan.scenario.model_dump(mode="json"), indent=1) + "\n",
         )
 
-    def record(self, plan: SweepPlan, row: dict[str, Any], document: str | None) -> bool:
+    def record(self, plan: TaskKey, row: dict[str, Any], document: str | None) -> bool:
         """Write the profile (or refusal) file, then append the row; False if the plan has a row already.
 
         ``document`` is ``None`` when there is none or the plan's process wrote it to
@@ -280,10 +297,13 @@ __all__ = [
     "CSV_FILE",
     "JOURNAL",
     "MACHINE_COLUMNS",
+    "MAX_EVIDENCE_CHARS",
     "PARQUET_FILE",
     "Journal",
+    "TaskKey",
     "atomic_write",
     "csv_text",
+    "evidence_text",
     "make_row",
     "outcome_from_document",
     "parquet_bytes",

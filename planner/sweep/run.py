@@ -1,8 +1,9 @@
 """Running a sweep: the executors (embedded process pool, Ray) and the driver that records the rows.
 
-Both executors run :func:`planner.sweep.task.plan_outcome`, one plan per task, with a hard wall-clock
-limit per plan (``time_limit_s + limits.grace_s``, or ``limits.wall_time_limit_s`` when smaller) counted
-from the moment the plan starts:
+Both executors run :func:`planner.sweep.task.run_task` (a sweep's plan by default; a task may name another
+runner, e.g. a campaign's cycle: :func:`~planner.sweep.task.task_runner`), one plan per task, with a hard
+wall-clock limit per plan (``time_limit_s + limits.grace_s``, or ``limits.wall_time_limit_s`` when
+smaller) counted from the moment the plan starts:
 
 * :class:`EmbeddedExecutor` (default): plans run in warm worker processes on this machine (one per slot),
   forked from a forkserver that imported and warmed up the planner once. A worker past its plan's limit
@@ -35,13 +36,13 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Generic, Protocol, TypeVar
 
 from planner.core.exceptions import InvalidInput
 from planner.sweep.expand import SweepPlan
-from planner.sweep.results import Journal, make_row, write_tables
+from planner.sweep.results import Journal, TaskKey, make_row, write_tables
 from planner.sweep.spec import Limits
-from planner.sweep.task import plan_outcome
+from planner.sweep.task import run_task
 
 _LOG = logging.getLogger(__name__)
 
@@ -68,11 +69,15 @@ def hard_limit_s(plan: SweepPlan, limits: Limits) -> float:
     return limit
 
 
-@dataclass
-class Job:
-    """One submission of one plan."""
+#: The plan behind a job: a sweep's :class:`~planner.sweep.expand.SweepPlan`, a campaign's cycle, ...
+PlanT = TypeVar("PlanT", bound=TaskKey)
 
-    plan: SweepPlan
+
+@dataclass
+class Job(Generic[PlanT]):
+    """One submission of one plan (anything with a ``name`` and a ``sha256``: :class:`TaskKey`)."""
+
+    plan: PlanT
     task: dict[str, Any]
     hard_limit_s: float
     attempt: int = 1
@@ -87,7 +92,7 @@ def _failed(reason: str, message: str) -> dict[str, Any]:
     return {"status": "failed", "reason": reason, "message": message, "document": None}
 
 
-def killed_outcome(job: Job) -> dict[str, Any]:
+def killed_outcome(job: Job[Any]) -> dict[str, Any]:
     """Outcome of a plan killed at its hard limit."""
     return _failed(
         "time_limit_exceeded",
@@ -105,10 +110,10 @@ class Executor(Protocol):
     workers: int
     max_in_flight: int
 
-    def submit(self, job: Job) -> None:
+    def submit(self, job: Job[Any]) -> None:
         """Start the job (sets ``job.handle``; ``job.started_at`` when known)."""
 
-    def poll(self, jobs: Sequence[Job], timeout_s: float) -> list[tuple[Job, dict[str, Any]]]:
+    def poll(self, jobs: Sequence[Job[Any]], timeout_s: float) -> list[tuple[Job[Any], dict[str, Any]]]:
         """Wait up to ``timeout_s`` for outcomes; the finished jobs (killed ones included)."""
 
     def close(self) -> None:
@@ -125,7 +130,7 @@ def _serve_plans(conn: Connection, plans: int) -> None:
             return
         if task is None:
             return
-        conn.send(plan_outcome(task))
+        conn.send(run_task(task))
         done += 1
     conn.close()
 
@@ -242,7 +247,7 @@ class EmbeddedExecutor:
         self._want.set()
         return proc if proc is not None else self._fork()
 
-    def submit(self, job: Job) -> None:
+    def submit(self, job: Job[Any]) -> None:
         """Hand the plan to an idle worker (forked now if none waits)."""
         proc = self._take()
         try:
@@ -267,14 +272,14 @@ class EmbeddedExecutor:
         proc.process.join(timeout=5.0)
         proc.conn.close()
 
-    def _release(self, job: Job) -> _Proc | None:
+    def _release(self, job: Job[Any]) -> _Proc | None:
         self.started.pop(job.plan.sha256, None)
         with self._lock:
             proc = self._running.pop(job.handle, None)
         self._want.set()
         return proc
 
-    def poll(self, jobs: Sequence[Job], timeout_s: float) -> list[tuple[Job, dict[str, Any]]]:
+    def poll(self, jobs: Sequence[Job[Any]], timeout_s: float) -> list[tuple[Job[Any], dict[str, Any]]]:
         """Outcomes received within ``timeout_s``; workers dead without one; plans past their limit."""
         by_handle = {j.handle: j for j in jobs}
         procs = [self._running[h] for h in by_handle]
@@ -396,7 +401,7 @@ def _ray_plan(task: dict[str, Any], meshes: dict[str, Any] | None, warm: dict[st
         warm_up(warm, meshes)
         _WORKER_WARM = True
     yield {"started": os.getpid()}
-    yield plan_outcome(task, meshes)
+    yield run_task(task, meshes)
 
 
 def _ray_warm(task: dict[str, Any] | None, meshes: dict[str, Any] | None) -> float:
@@ -456,12 +461,12 @@ class RayExecutor:
             warm = ray.remote(num_cpus=1, max_retries=0)(_ray_warm)
             ray.get([warm.remote(warm_task, self._meshes) for _ in range(self.workers)])
 
-    def submit(self, job: Job) -> None:
+    def submit(self, job: Job[Any]) -> None:
         """Submit the plan task (its start is known once it reports it)."""
         job.handle = self._plan.remote(job.task, self._meshes, self._warm_task)
         job.started_at = None
 
-    def _next(self, job: Job) -> tuple[str, Any]:
+    def _next(self, job: Job[Any]) -> tuple[str, Any]:
         """('started', pid) | ('outcome', dict) | ('crashed', message) of a ready generator."""
         ray = self._ray
         try:
@@ -479,7 +484,7 @@ class RayExecutor:
             return "started", item["started"]
         return "outcome", item
 
-    def poll(self, jobs: Sequence[Job], timeout_s: float) -> list[tuple[Job, dict[str, Any]]]:
+    def poll(self, jobs: Sequence[Job[Any]], timeout_s: float) -> list[tuple[Job[Any], dict[str, Any]]]:
         """Wait for the next task events; kill started tasks past their hard limit."""
         ray = self._ray
         by_ref = {j.handle: j for j in jobs}
@@ -585,6 +590,88 @@ def warm_task(plans: Sequence[SweepPlan], base_dir: Path | None = None) -> dict[
     return task
 
 
+class InlineExecutor:
+    """Plans in this process, one at a time, when polled (no isolation, no hard limit).
+
+    For tests and small in-process runs (a campaign's tests count the cabin's cache builds across its
+    cycles, which only an in-process run can see). A plan is never killed: ``hard_limit_s`` is not
+    enforced, so use the process executors wherever a plan may hang.
+    """
+
+    writes_profiles = True
+    workers = 1
+    max_in_flight = 1
+
+    def __init__(self, meshes: dict[str, Any] | None = None) -> None:
+        self._meshes = meshes
+        #: Tasks this executor ran, in order (tests read it).
+        self.ran: list[dict[str, Any]] = []
+
+    def submit(self, job: Job[Any]) -> None:
+        """Queue the job (it runs at the next :meth:`poll`)."""
+        job.handle = job
+        job.started_at = time.monotonic()
+        job.pid = os.getpid()
+
+    def poll(self, jobs: Sequence[Job[Any]], timeout_s: float) -> list[tuple[Job[Any], dict[str, Any]]]:
+        """Run the first submitted job now; its outcome."""
+        if not jobs:
+            return []
+        job = jobs[0]
+        job.started_at = time.monotonic()
+        self.ran.append(job.task)
+        return [(job, run_task(job.task, self._meshes))]
+
+    def close(self) -> None:
+        """Nothing to stop."""
+
+
+#: Called with each finished job, its outcome and its wall time [s]; it may append jobs to ``pending``.
+Finished = Callable[[Job[PlanT], dict[str, Any], float], None]
+
+
+def drive(
+    pending: deque[Job[PlanT]],
+    executor: Executor,
+    finished: Finished[PlanT],
+    *,
+    running_changed: Callable[[int], None] | None = None,
+    poll_s: float = 0.2,
+) -> int:
+    """Run jobs on an executor until none is pending or running; every outcome goes to ``finished``.
+
+    The one loop of every driver (a sweep's rows, a campaign's cycles): at most ``executor.max_in_flight``
+    jobs are submitted at a time; a job whose process died without an outcome (:data:`CRASHED`) is
+    submitted again, up to :data:`MAX_ATTEMPTS` times, before its crash is its outcome. ``finished`` may
+    append new jobs to ``pending`` (a search deciding what to plan next from what it learned) or clear it
+    (a campaign stopping at its first failure; jobs already running still finish and are reported).
+
+    Returns:
+        How many jobs were submitted again after a crash.
+    """
+    running: list[Job[PlanT]] = []
+    retried = 0
+    changed = running_changed or (lambda n: None)
+    while pending or running:
+        while pending and len(running) < executor.max_in_flight:
+            job = pending.popleft()
+            job.submitted_at = time.monotonic()
+            executor.submit(job)
+            running.append(job)
+        changed(len(running))
+        for job, outcome in executor.poll(running, poll_s):
+            running.remove(job)
+            if outcome.get("reason") == CRASHED and job.attempt < MAX_ATTEMPTS:
+                _LOG.warning("plan %s: %s; submitted again", job.plan.name, outcome.get("message"))
+                retried += 1
+                pending.appendleft(Job(job.plan, job.task, job.hard_limit_s, job.attempt + 1))
+                continue
+            start = job.started_at if job.started_at is not None else job.submitted_at
+            finished(job, outcome, time.monotonic() - start)
+        changed(len(running))
+    return retried
+
+
 def run_sweep(
     plans: Sequence[SweepPlan],
     out_dir: Path,
@@ -611,7 +698,7 @@ def run_sweep(
     """
     journal = Journal(out_dir)
     counts = Counts(total=len(plans))
-    pending: deque[Job] = deque()
+    pending: deque[Job[SweepPlan]] = deque()
     for plan in plans:
         journal.write_scenario(plan)
         if journal.done(plan.sha256):
@@ -622,35 +709,24 @@ def run_sweep(
                 task["profile_path"] = str(journal.profile_path(plan))
             pending.append(Job(plan, task, hard_limit_s(plan, limits)))
     report = progress or (lambda c: None)
-    running: list[Job] = []
     report(counts)
+
+    def finished(job: Job[SweepPlan], outcome: dict[str, Any], wall_time_s: float) -> None:
+        row = make_row(job.plan, outcome, wall_time_s, job.attempt)
+        if journal.record(job.plan, row, outcome.get("document")):
+            if row["status"] == "succeeded":
+                counts.succeeded += 1
+            else:
+                counts.failed += 1
+            reason = row["reason"] or "succeeded"
+            counts.reasons[reason] = counts.reasons.get(reason, 0) + 1
+
+    def running_changed(n: int) -> None:
+        counts.running = n
+        report(counts)
+
     try:
-        while pending or running:
-            while pending and len(running) < executor.max_in_flight:
-                job = pending.popleft()
-                job.submitted_at = time.monotonic()
-                executor.submit(job)
-                running.append(job)
-            counts.running = len(running)
-            report(counts)
-            for job, outcome in executor.poll(running, poll_s):
-                running.remove(job)
-                if outcome.get("reason") == CRASHED and job.attempt < MAX_ATTEMPTS:
-                    _LOG.warning("plan %s: %s; submitted again", job.plan.name, outcome.get("message"))
-                    counts.retried += 1
-                    pending.appendleft(Job(job.plan, job.task, job.hard_limit_s, job.attempt + 1))
-                    continue
-                start = job.started_at if job.started_at is not None else job.submitted_at
-                row = make_row(job.plan, outcome, time.monotonic() - start, job.attempt)
-                if journal.record(job.plan, row, outcome.get("document")):
-                    if row["status"] == "succeeded":
-                        counts.succeeded += 1
-                    else:
-                        counts.failed += 1
-                    reason = row["reason"] or "succeeded"
-                    counts.reasons[reason] = counts.reasons.get(reason, 0) + 1
-            counts.running = len(running)
-            report(counts)
+        counts.retried += drive(pending, executor, finished, running_changed=running_changed, poll_s=poll_s)
     finally:
         write_tables(out_dir, journal.table(plans))
     return counts
@@ -664,8 +740,12 @@ __all__ = [
     "Counts",
     "EmbeddedExecutor",
     "Executor",
+    "Finished",
+    "InlineExecutor",
     "Job",
     "RayExecutor",
+    "TaskKey",
+    "drive",
     "hard_limit_s",
     "init_local_ray",
     "killed_outcome",

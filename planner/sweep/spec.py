@@ -25,7 +25,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from planner.core.exceptions import InvalidInput
-from planner.core.schemas import Pose, Quaternion
+from planner.core.schemas import Limits, Pose, Quaternion
 from planner.scenario.files import MAX_SCENARIO_BYTES, read_document
 from planner.scenario.schema import ConfigurationSpec, Number, PositiveNumber, describe_error
 
@@ -171,26 +171,6 @@ class PlanPoint(BaseModel):
         if self.bay is not None and self.goal_pose is not None:
             raise ValueError("give bay or goal_pose, not both")
         return self
-
-
-class Limits(BaseModel):
-    """Wall-clock limits of each plan process (the planner's own budget is ``options.time_limit_s``)."""
-
-    model_config = _CONFIG
-
-    grace_s: Number = Field(
-        15.0,
-        ge=0.0,
-        le=600.0,
-        description="Wall-clock grace beyond a plan's time_limit_s before it is killed.",
-    )
-    wall_time_limit_s: Number | None = Field(
-        None,
-        gt=0.0,
-        le=3600.0,
-        description="If set, every plan is killed after this many seconds of wall clock, whatever its "
-        "time_limit_s + grace_s.",
-    )
 
 
 class SweepSpec(BaseModel):

@@ -8,22 +8,23 @@ and puts it into the object store, so cluster nodes need no shared file system).
 
 from __future__ import annotations
 
+import importlib
 import json
 import logging
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from planner.core.exceptions import PlannerError
+from planner.sweep.results import atomic_write, evidence_text
 
 _LOG = logging.getLogger(__name__)
 
-#: Longest refusal evidence kept in the table [characters of JSON]; the whole document is in the profile.
-MAX_EVIDENCE_CHARS = 4000
 
-
-def _resolver(meshes: dict[str, Any] | None) -> Any:
+def mesh_resolver(meshes: dict[str, Any] | None) -> Any:
+    """A mesh resolver over name -> file path or bytes (Ray's object store), or None without meshes."""
     if not meshes:
         return None
 
@@ -80,17 +81,14 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
     try:
         spec = scenario_from_dict(task["scenario"], source="sweep plan")
         base_dir = Path(task["base_dir"]) if task.get("base_dir") else None
-        sc = resolve_scenario(spec, base_dir=base_dir, mesh_resolver=_resolver(meshes))
+        sc = resolve_scenario(spec, base_dir=base_dir, mesh_resolver=mesh_resolver(meshes))
         planner = Planner(sc)
         t_plan = time.perf_counter()
         result = planner.plan()
     except PlannerError as exc:
         doc = refusal_document(exc, sc, name=task["scenario"].get("name"))
-        evidence = json.dumps(doc.get("details", {}), separators=(",", ":"))
-        if len(evidence) > MAX_EVIDENCE_CHARS:
-            evidence = evidence[: MAX_EVIDENCE_CHARS - 1] + "…"
-        out.update(reason=exc.reason, message=exc.message, evidence=evidence)
-        _deliver(out, task, json.dumps(doc))
+        out.update(reason=exc.reason, message=exc.message, evidence=evidence_text(doc.get("details", {})))
+        deliver(out, task, json.dumps(doc))
         out["task_time_s"] = time.perf_counter() - t0
         return out
     except Exception as exc:  # a bug: recorded as the plan's outcome, the sweep goes on
@@ -110,19 +108,17 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         peak_force_ratio=float(result.gate.peak_ratios["effort"]),
         planning_time_s=float(report.get("planning_time_s", time.perf_counter() - t_plan)),
     )
-    _deliver(out, task, json.dumps(doc))
+    deliver(out, task, json.dumps(doc))
     out["task_time_s"] = time.perf_counter() - t0
     return out
 
 
-def _deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
+def deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
     """Write the document to the task's ``profile_path`` if it has one, else put it into the outcome."""
     path = task.get("profile_path")
     if not path:
         out["document"] = document
         return
-    from planner.sweep.results import atomic_write
-
     try:
         atomic_write(Path(path), document + "\n")
     except OSError as exc:  # the driver writes it then (and reports a lasting error itself)
@@ -130,6 +126,57 @@ def _deliver(out: dict[str, Any], task: dict[str, Any], document: str) -> None:
         out["document"] = document
         return
     out["profile_written"] = True
+
+
+#: A task's runner: ``(task, meshes) -> outcome`` (plain data, as :func:`plan_outcome` returns).
+Runner = Callable[[dict[str, Any], dict[str, Any] | None], dict[str, Any]]
+
+#: The task key naming another runner than :func:`plan_outcome`, as ``"package.module:function"``.
+RUNNER_KEY = "runner"
+#: Modules a task may name its runner in (a task is data: it never names arbitrary code).
+RUNNER_PACKAGES = ("planner.",)
+
+
+def task_runner(task: dict[str, Any]) -> Runner:
+    """The function that runs ``task``: :func:`plan_outcome`, or the one ``task["runner"]`` names.
+
+    The executors run any kind of independent plan the same way (a sweep's plans, a campaign's cycles):
+    the task names its runner as ``"planner.some.module:function"``, imported in the plan process. The
+    executors themselves import no layer above this one; the layer that makes the tasks names the runner.
+
+    Raises:
+        InvalidInput: the runner is not a ``module:function`` within the planner package.
+    """
+    name = task.get(RUNNER_KEY)
+    if name is None:
+        return plan_outcome
+    from planner.core.exceptions import InvalidInput
+
+    module, _, function = str(name).partition(":")
+    if not function or not module.startswith(RUNNER_PACKAGES):
+        raise InvalidInput(
+            f"task.runner: expected 'planner.<module>:<function>', got {name!r}", field="task.runner"
+        )
+    runner: Runner = getattr(importlib.import_module(module), function)
+    return runner
+
+
+def run_task(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Run one task with its runner (:func:`task_runner`); the outcome, never an exception.
+
+    A runner that cannot be found is an ``internal_error`` outcome (the driver records it like any other).
+    """
+    try:
+        runner = task_runner(task)
+    except (PlannerError, ImportError, AttributeError) as exc:
+        return {
+            "status": "failed",
+            "reason": "internal_error",
+            "message": f"internal error: task runner {task.get(RUNNER_KEY)!r}: {exc}",
+            "document": None,
+            "pid": os.getpid(),
+        }
+    return runner(task, meshes)
 
 
 def warm_up(task: dict[str, Any] | None, meshes: dict[str, Any] | None = None) -> float:
@@ -143,13 +190,22 @@ def warm_up(task: dict[str, Any] | None, meshes: dict[str, Any] | None = None) -
 
     if task is not None:
         try:
-            plan_outcome(task, meshes)
+            run_task(task, meshes)
         except Exception:  # a failed warm-up only makes the first plans slower
             _LOG.exception("sweep warm-up failed")
     return time.perf_counter() - t0
 
 
-__all__ = ["MAX_EVIDENCE_CHARS", "plan_outcome", "warm_up"]
+__all__ = [
+    "RUNNER_KEY",
+    "Runner",
+    "deliver",
+    "mesh_resolver",
+    "plan_outcome",
+    "run_task",
+    "task_runner",
+    "warm_up",
+]
 
 
 def _float_or_none(value: float | None) -> float | None:

@@ -43,19 +43,14 @@ from planner.core.exceptions import (
     ValidationFailed,
 )
 from planner.core.types import Array, IntArray
+from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.gate.checks import GateReport
 from planner.gate.cycle import CycleLeg, CycleRequirements, validate_cycle
-from planner.gate.requirements import compensates_deflection, requirements_for, timing_of
+from planner.gate.requirements import compensates_deflection, requirements_for
 from planner.plan.context import PRODUCT, PlanContext, Progress, SearchPreset
-from planner.plan.goals import (
-    StaticForceCheck,
-    approach_lines,
-    collision_evidence,
-    describe,
-    dominant,
-    force_evidence,
-)
+from planner.plan.evidence import collision_evidence, describe, dominant, force_evidence
+from planner.plan.goals import approach_lines
 from planner.plan.motion import MIN_MARGIN_M, certify_motion
 from planner.plan.pipeline import PlanResult, plan_scenario
 from planner.plan.retime import time_and_validate
@@ -72,6 +67,7 @@ from planner.task.legs import (
     payload_inertia,
 )
 from planner.task.resolve import ResolvedCycle
+from planner.timing import stages
 from planner.timing.path import JointPath, LinePiece, segment_time_length
 from planner.timing.profile import DriveProfile
 from planner.timing.stage import TimingFactory
@@ -594,7 +590,7 @@ def cycle_requirements(cyc: ResolvedCycle, legs: tuple[LegTiming, ...]) -> Cycle
         park_u=cyc.park_u,
         clearance_m=float(cyc.spec.options.clearance_m),
         sample_period_s=float(cyc.spec.options.sample_period_s),
-        jerk_limited=timing_of(cyc.base) == "jerk_limited",
+        jerk_limited=stages.select(cyc.base.options.timing, cyc.base.robot).binds_jerk,
         legs=tuple(out),
         T_tool_unit=cyc.T_tool_unit,
         T_base_unit_dock=cyc.T_base_unit_dock,

@@ -13,6 +13,7 @@ unit's (the gripper's mass belongs to the robot description's tool).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -157,6 +158,8 @@ def resolve_cycle(
             field="robot",
         )
 
+    deviation: dict[str, float] = {}  # where -> the mesh's surface deviation [m] (STEP tessellation)
+
     def geometry(g: Geometry, where: str) -> tuple[tuple[float, float, float], Array, Any]:
         """(box size [m], T_frame_box, mesh or None) of a box or a mesh's oriented bounding box."""
         size = g.box_m()
@@ -165,6 +168,7 @@ def resolve_cycle(
         assert g.mesh is not None
         source, _ = _mesh_source(g.mesh, f"{where}.mesh", base_dir, mesh_resolver, allow_reference=False)
         mesh = _load(source, g.mesh, f"{where}.mesh", units=g.units, pose=None, limits=mesh_limits)
+        deviation[where] = float(mesh.surface_deviation_m)
         obb = PayloadGeometry.from_mesh_vertices(mesh.vertices)
         return obb.size, obb.T_payload_box, mesh
 
@@ -243,6 +247,7 @@ def resolve_cycle(
                 f"dock: the dock (unit or fixture) overlaps {other.name} (installed[{j}])", field="dock"
             )
 
+    base = _with_surface_deviation(base, deviation)
     return ResolvedCycle(
         spec=spec,
         base=base,
@@ -320,3 +325,21 @@ def _containing(unit: PayloadGeometry, gripper: PayloadGeometry) -> PayloadGeome
         inertia_payload=unit.inertia_payload,
         source=f"{unit.source} with the gripper",
     )
+
+
+def _with_surface_deviation(base: ResolvedScenario, deviation: dict[str, float]) -> ResolvedScenario:
+    """``base`` with its certified clearance raised to cover the unit's and the obstacles' mesh files.
+
+    A tessellated (STEP) surface may lie inside the exact one by up to its ``surface_deviation_m``, as
+    :func:`~planner.scenario.resolve.resolve_scenario` adds for the cabin and payload files. Any two surfaces
+    compared here are the unit's (held, or installed) and one environment surface (the cabin, an installed
+    unit or the fixture), so the clearance gains the unit's deviation plus the largest environment one (the
+    cabin's is already in ``base``). ``deviation`` maps the cycle field of each mesh to its deviation [m].
+    """
+    unit_m = deviation.get("unit", 0.0)
+    environment_m = max((d for where, d in deviation.items() if where != "unit"), default=0.0)
+    extra = unit_m + max(0.0, environment_m - base.surface_deviation_m)
+    if extra <= 0.0:
+        return base
+    options = base.options.model_copy(update={"clearance_m": float(base.options.clearance_m) + extra})
+    return dataclasses.replace(base, options=options, surface_deviation_m=base.surface_deviation_m + extra)

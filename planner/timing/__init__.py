@@ -1,1 +1,1 @@
-"""Geometric paths, time-parameterisation (TOPP-RA) and sampled drive profiles."""
+"""Geometric paths, time-parameterisation (the jerk-limited LP, TOPP-RA) and sampled drive profiles."""

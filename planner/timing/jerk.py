@@ -28,7 +28,7 @@ Rows that cannot bind (their largest value over the bounds the other rows imply 
 are dropped before the solve: per grid point one or two drives bind, and HiGHS's time grows with the rows.
 
 **Reference speed.** The time-optimal acceleration-limited law on the same grid
-(:func:`planner.timing.reference.acceleration_limited`, the forward-backward pass) averaged in time over
+(:func:`planner.timing.acc_reference.acceleration_limited`, the forward-backward pass) averaged in time over
 one acceleration ramp a_max / j_max (a box filter: on a straight line that cruises this is the
 time-optimal jerk-limited law, Biagiotti & Melchiorri, *Trajectory Planning for Automatic Machines and
 Robots*, 2008, sec. 4.2.3). Where the jerk binds elsewhere (blends, moves too short to cruise) the LP
@@ -68,12 +68,13 @@ except ImportError:  # pragma: no cover
     _core = None
 
 from planner.core.exceptions import RetimingFailed
+from planner.core.timing_names import JERK_LIMITED
 from planner.core.types import Array
 from planner.dynamics.models import drive_dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.robots.base import RobotModel
+from planner.timing.acc_reference import acceleration_limited
 from planner.timing.path import JointPath, LinePiece
-from planner.timing.reference import acceleration_limited
 from planner.timing.toppra import ToppraStage, ToppraTimedPath
 
 log = logging.getLogger(__name__)
@@ -259,7 +260,7 @@ class JerkLimitedStage:
     grid_step: float = 0.15
     min_points: int = 24
     max_points: int = 3000
-    name: str = "jerk_limited"
+    name: str = JERK_LIMITED
 
     def __post_init__(self) -> None:
         if self.robot.limits.j_max is None:

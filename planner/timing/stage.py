@@ -2,8 +2,10 @@
 
 The geometric path (the joint path after smoothing: exactly the path the collision layer certified) is kept;
 a stage only chooses the time law s(t). Adding a stage is one module implementing :class:`TimingStage`
-plus a scenario option; the sampler (:func:`planner.timing.profile.sample_legs`) and the gate take any
-:class:`TimedPath`. The TOPP-RA adapter is :class:`planner.timing.toppra.ToppraStage`.
+plus one entry in the registry :mod:`planner.timing.stages` (and its name in
+:data:`planner.core.timing_names.TimingName`); the sampler (:func:`planner.timing.profile.sample_legs`) and
+the gate take any :class:`TimedPath`. The stages are :class:`planner.timing.jerk.JerkLimitedStage` (the
+default with jerk limits) and the TOPP-RA adapter :class:`planner.timing.toppra.ToppraStage`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,9 @@
 """Time-parameterisation of a joint path under every drive's velocity, acceleration and force limits.
 
-The stage protocol is :class:`planner.timing.stage.TimingStage`; :class:`ToppraStage`, the default, runs
-TOPP-RA (Pham & Pham 2018, reachability analysis) on the drive path u(s) with
+The stage protocol is :class:`planner.timing.stage.TimingStage`; :class:`ToppraStage` (the
+``acceleration_limited`` stage of :mod:`planner.timing.stages`, the default only for a robot without jerk
+limits; it also gives the jerk-limited stage its grid's static-force check) runs TOPP-RA (Pham & Pham
+2018, reachability analysis) on the drive path u(s) with
 
 - drive velocity limits |u'(s) sd| <= v_max,
 - drive acceleration limits |u'(s) sdd + u''(s) sd^2| <= a_max,

@@ -109,7 +109,7 @@ def ik_document(
     }
 
 
-__all__ = ["fk_document", "ik_document", "pose_document", "tool_pose_robot"]
+__all__ = ["fk", "fk_document", "ik", "ik_document", "pose_document", "tool_pose_robot"]
 
 
 def fk(

@@ -20,7 +20,7 @@ import pytest
 import yaml
 from sqlalchemy import select
 
-from api.compact import pack_document, unpack_document, unpack_text
+from api.compact import pack_document, pack_value, unpack_document, unpack_text
 from api.db import Database, Job, now_s
 from api.jobs import purge_expired
 from api.settings import Settings
@@ -342,10 +342,13 @@ def test_compact_documents_round_trip_exactly() -> None:
         "empty": [],
     }
     text = json.dumps(doc)
-    blob = pack_document(text)
-    assert unpack_text(blob) == text
-    back = unpack_document(blob)
-    assert back["ints"] == doc["ints"] and type(back["ints"][0]) is int and back["mixed"][-1] == 2
+    for blob in (pack_document(text), pack_value(doc)):
+        back = unpack_document(blob)
+        assert json.dumps(back) == text  # every float bit for bit, ints as ints, NaN as NaN
+        assert back["ints"] == doc["ints"] and type(back["ints"][0]) is int and back["mixed"][-1] == 2
+        served = json.loads(unpack_text(blob))  # compact JSON: the same values, NaN written as null
+        assert served == {**json.loads(text), "nan": [None] * 20}
+        assert all(a == b for a, b in zip(served["t"], doc["t"], strict=True))
 
 
 def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tmp_path: Path) -> None:
@@ -368,12 +371,15 @@ def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tm
             got = table[:, 1 + 8 * k : 9 + 8 * k]
             np.testing.assert_allclose(got, np.array(result[name]), rtol=1e-8, atol=1e-12)
         np.testing.assert_allclose(table[:, 0], result["t"], rtol=1e-8, atol=1e-12)
-        # Stored: the packed document and the plot. Served before: the JSON text, the CSV and the plot.
+        # Stored: the packed document and the plot (made on its first request, then kept). Served: the
+        # JSON text, the CSV (made from the document) and the plot.
         ctx = svc.client.app.state.ctx  # type: ignore[attr-defined]
+        plot = ctx.jobs.stored_file(doc["id"], "plot.png")
+        assert plot == png.content and ctx.jobs.stored_file(doc["id"], "profile.csv") is None
         with ctx.db.session() as s:
             row = s.get(Job, doc["id"])
-            stored = len(row.result_packed) + len(row.plot_png)
-            assert row.result_json is None and row.profile_csv is None
+            stored = len(row.result_packed) + len(plot)
+            assert row.result_json is None and row.profile_csv is None and row.plot_png is None
         as_text = len(json.dumps(result).encode()) + len(csv.content) + len(png.content)
         assert as_text / stored >= 5.0, (as_text, stored)
         # DELETE of a finished plan deletes it.

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.reference import ReferenceWorld
+from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.kinematics.parallel import stage_points
 from planner.meshio import LoadedMesh, load_mesh

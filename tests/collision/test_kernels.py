@@ -15,7 +15,7 @@ import pytest
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.kernels import bounds, state, walk
 from planner.collision.kernels.packed import unpack
-from planner.collision.reference import ReferenceWorld
+from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
 from planner.meshio import load_mesh

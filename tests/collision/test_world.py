@@ -13,7 +13,7 @@ import trimesh
 
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.clearance_grid import ClearanceGrid, surface_samples
-from planner.collision.reference import ReferenceWorld
+from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
 from planner.meshio import LoadedMesh, load_mesh

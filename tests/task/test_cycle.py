@@ -11,7 +11,7 @@ import trimesh
 
 from planner.collision.obstacles import Obstacle
 from planner.dynamics.lagrange import Cabin8Dynamics
-from planner.dynamics.stiffness import stiffness_model
+from planner.dynamics.stiffness import LoadCase, stiffness_model
 from planner.robots.geometry import PAYLOAD
 from planner.task.cycle import CycleResult
 from planner.task.legs import LEG_NAMES, leg, leg_world
@@ -77,8 +77,8 @@ def test_the_jump_at_each_load_change_is_the_stiffness_models_deflection_change(
         e = next(x for x in planned.events if x.kind == event)
         lt = next(x for x in planned.legs if x.name == e.leg)
         q = planned.profile.joints[lt.sample_start - 1]
-        x = model.deflection_batch(np.stack([q, q]), None, cycle.T_tool_unit)
-        x_loaded = model.deflection_batch(q[None], cycle.unit_payload, cycle.T_tool_unit)[0]
+        x = model.deflections(np.stack([q, q]), LoadCase(None, cycle.T_tool_unit))
+        x_loaded = model.deflections(q[None], LoadCase(cycle.unit_payload, cycle.T_tool_unit))[0]
         x_empty = x[0]
         expected = float(np.linalg.norm(x_loaded[:3] - x_empty[:3]))
         assert e.springback_m == pytest.approx(expected, abs=1e-6)

@@ -121,3 +121,19 @@ def test_cli_exit_codes(tmp_path: Path, planned: CycleResult, cycle: ResolvedCyc
     profile.write_text(json.dumps(doc), encoding="utf-8")
     res = runner.invoke(app, ["check", str(EXAMPLE), str(profile)])
     assert res.exit_code == 3 and "dwell" in res.stderr
+
+
+def test_tessellated_unit_and_fixture_meshes_raise_the_certified_clearance() -> None:
+    """A STEP unit or fixture may lie outside its triangles by its deviation: the clearance covers it."""
+    from planner.task.resolve import _with_surface_deviation
+
+    base = _resolve(example_dict()).base
+    requested = float(base.options.clearance_m)
+    assert _with_surface_deviation(base, {}) is base
+    assert _with_surface_deviation(base, {"installed[0]": 0.0}) is base
+    raised = _with_surface_deviation(base, {"unit": 1e-4, "dock.fixture": 3e-4, "installed[1]": 2e-4})
+    # the unit's own deviation plus the largest environment one (the cabin's, 0 here, is already in base)
+    assert raised.options.clearance_m == pytest.approx(requested + 4e-4, abs=1e-15)
+    assert raised.surface_deviation_m == pytest.approx(4e-4, abs=1e-15)
+    assert raised.requested_clearance_m == pytest.approx(requested)
+    assert raised.clearance_report()["certified_m"] == pytest.approx(requested + 4e-4)

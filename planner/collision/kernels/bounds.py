@@ -9,7 +9,7 @@
   and for capsule-capsule / capsule-box pairs the exact distance (:mod:`.distances`).
 * :func:`state_bounds`: all of them at one state in one pass; :func:`cabin_bound` / :func:`pair_bound`:
   one entry on demand, with the same arithmetic in the same order (so the same numbers) -- the motion walk
-  reads few bounds at most of its states. The numpy route of :mod:`planner.collision.reference` computes
+  reads few bounds at most of its states. The numpy route of :mod:`planner.collision.oracle` computes
   the same bounds vectorised (the tests check they agree).
 * :func:`certain_cabin_contact`: a contact proven by the grid's upper bound, without FCL.
 

@@ -5,7 +5,7 @@ The kernels (:mod:`.state`, :mod:`.walk`, :mod:`.bounds`, compiled with the robo
 install by :mod:`planner.core.aot` (``make`` runs ``python -m planner.collision.kernels.build``; a plan
 that finds no build makes it before its clock starts). A plan served by the build never imports numba;
 without a build (no cache folder, ``CABINPLAN_KERNELS=jit``, no C compiler) the same functions run under
-numba's JIT. Both give the same numbers, bit for bit (``tests/collision/test_aot.py``).
+numba's JIT. Both give the same numbers, bit for bit (``tests/core/test_aot.py``).
 
 The build's entries do not check their arguments, so they are reached only through :class:`Kernels`: every
 array argument is checked for the dtype, number of dimensions, C order (and, for outputs, writability)
@@ -16,6 +16,7 @@ of the entry's signature, every scalar converted; a world's constant arrays are 
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,14 @@ from planner.core.types import Array, BoolArray, IntArray
 _HERE = Path(__file__).resolve().parent
 _ROBOTS = _HERE.parent.parent / "robots"
 
+
+def _jit_module() -> ModuleType:
+    """The ``@njit`` kernels (:mod:`.jit`; importing it imports numba)."""
+    from planner.collision.kernels import jit
+
+    return jit
+
+
 #: Inputs of a world's constant data: packed buffers (floats, ints) and the flat clearance grid.
 _DATA = ("f8[1]", "i8[1]")
 _GRID = "f8[1]"
@@ -36,7 +45,7 @@ _GRID = "f8[1]"
 #: The collision kernels' extension: compiled from every module of this folder and the robots' kernels.
 EXTENSION = aot.Extension(
     name="cabinplan_collision_kernels",
-    kernels_module="planner.collision.kernels.jit",
+    kernels_module=_jit_module,
     builder_module="planner.collision.kernels.build",
     sources=(
         *sorted(_HERE.glob("*.py")),

@@ -1,0 +1,1 @@
+"""Campaigns run: their cycles on the sweep executors, resumable, with the install order found or given."""

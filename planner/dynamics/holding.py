@@ -1,0 +1,45 @@
+"""The static-hold check: can the drives hold the robot and its payload at rest at a configuration?
+
+Every state the planner passes through must be holdable within a fraction of the drive force limits
+(:class:`StaticForceCheck`); the static drive forces come from the robot's inverse dynamics at rest
+(:meth:`planner.dynamics.lagrange.Cabin8Dynamics.static_forces_batch`: gravity on the links, the tool and
+the payload), the margin left for the dynamic forces that the timing stage keeps within the limits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.core.types import Array
+from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.dynamics.payload import RigidPayload
+
+
+@dataclass(frozen=True)
+class StaticForceCheck:
+    """Static drive forces (holding the payload at rest) within ``fraction`` of the force limits.
+
+    A state the drives cannot hold is useless to plan through; the margin (1 - fraction) is left for the
+    dynamic forces, which the timing stage keeps within the limits along the path.
+    """
+
+    dynamics: Cabin8Dynamics
+    payload: RigidPayload | None
+    fraction: float = 0.95
+
+    def ratios(self, qs: Array) -> Array:
+        """Largest |static force| / limit of each configuration (N,) for (N, 8) joints."""
+        tau = self.dynamics.static_forces_batch(qs, self.payload)
+        return np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max, axis=1)
+
+    def ok(self, q: Array) -> bool:
+        """True when the drives can hold the payload at q."""
+        return bool(self.ratios(q)[0] <= self.fraction)
+
+    def segment_ok(self, q_a: Array, q_b: Array, step: float = 0.02) -> bool:
+        """Checked at every ``step`` (m or rad, largest joint change) along the straight segment."""
+        n = int(max(1, np.ceil(float(np.max(np.abs(q_b - q_a))) / step)))
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        return bool(np.all(self.ratios(q_a + t * (q_b - q_a)) <= self.fraction))

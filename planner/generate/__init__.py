@@ -1,0 +1,1 @@
+"""Seeded generators of cabins, scenarios, cycles and campaigns."""

@@ -1,0 +1,58 @@
+"""A generated campaign in CI: valid, reproducible, its blocking pair true by geometry and by the planner."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.collision.obstacles import Obstacle
+from planner.core.schemas import Pose
+from planner.generate.cycles import CycleGeneratorOptions, GeneratedCampaign, generate_campaign
+from planner.task.campaign import check_campaign, cycle_document
+from planner.task.campaign_schema import Campaign, campaign_from_dict
+from planner.task.resolve import resolve_cycle
+from planner.task.schema import cycle_from_dict
+
+OPTIONS = CycleGeneratorOptions(units=(3, 3), end_bay_probability=0.0, pair_probability=1.0)
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory: pytest.TempPathFactory) -> tuple[GeneratedCampaign, Campaign, object]:
+    case = generate_campaign(0, 0, OPTIONS)
+    folder = tmp_path_factory.mktemp("generated")
+    (folder / case.mesh_name).write_bytes(case.mesh_bytes)
+    return case, campaign_from_dict(case.campaign), folder
+
+
+def test_the_campaign_is_valid_and_reproducible(generated: tuple) -> None:
+    case, camp, folder = generated
+    assert 3 <= len(camp.ids) <= 3 and camp.order == "given"
+    check_campaign(camp, folder)  # no overlapping units, each unit's own cycle input valid
+    again = generate_campaign(0, 0, OPTIONS)
+    assert again.mesh_bytes == case.mesh_bytes and again.campaign == case.campaign
+
+
+def _box(camp: Campaign, unit_id: str, shift_m: float = 0.0) -> Obstacle:
+    u = camp.unit(unit_id)
+    T = Pose.model_validate(u.bay.pose).matrix()
+    T[:3, 3] -= shift_m * np.array(u.bay.approach.direction)
+    assert u.unit.box is not None
+    return Obstacle.box(f"unit {unit_id}", tuple(u.unit.box), T)
+
+
+def test_the_blocking_pair_is_true_by_geometry(generated: tuple) -> None:
+    """The front unit overlaps the deep unit's pre-insertion pose and keeps 30-50 mm from its bay's face."""
+    case, camp, _ = generated
+    assert case.meta["precedence"], "the options ask for a blocking pair"
+    for deep, front in case.meta["precedence"]:
+        pre = _box(camp, deep, camp.unit(deep).bay.approach.distance)
+        assert pre.distance_to(_box(camp, front)) <= 0.0
+        assert _box(camp, deep).distance_to(_box(camp, front)) > 0.03 + camp.options.clearance_m
+
+
+def test_the_witnesses_hold_in_the_cycle_each_unit_plans(generated: tuple) -> None:
+    """Every unit's cycle in the empty cabin resolves: dock clear of its fixture, bay free, lines sound."""
+    _, camp, folder = generated
+    for u in camp.ids:
+        cyc = resolve_cycle(cycle_from_dict(cycle_document(camp, u, ())), base_dir=folder)
+        assert cyc.spec.unit.id == u and not cyc.installed

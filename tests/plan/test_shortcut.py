@@ -1,0 +1,101 @@
+"""Corner cutting: posture changes move into the rail move, every new segment certified, time saved."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from planner.collision.world import CollisionWorld
+from planner.dynamics.holding import StaticForceCheck
+from planner.kinematics import chain
+from planner.plan.motion import certify_motion, motion_clear
+from planner.plan.shortcut import MIN_GAIN_S, cut_corners, segment_times
+from planner.robots.cabin8 import Cabin8
+from planner.scenario.resolve import ResolvedScenario, load_scenario
+from tests.plan.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
+
+
+@pytest.fixture(scope="module")
+def scenario() -> ResolvedScenario:
+    return load_scenario(SCENARIOS / "aisle-transfer.yaml")
+
+
+Motion = Callable[[np.ndarray, np.ndarray], bool]
+
+
+def polyline_time(robot: Cabin8, waypoints: np.ndarray) -> float:
+    """Estimated time of a polyline: its segments' times summed (the cutter's own estimate)."""
+    return float(
+        sum(segment_times(robot, a, a, b)[0] for a, b in zip(waypoints[:-1], waypoints[1:], strict=True))
+    )
+
+
+def _checker(
+    world: CollisionWorld, forces: StaticForceCheck, calls: list[tuple[np.ndarray, np.ndarray]]
+) -> Motion:
+    def ok(q_a: np.ndarray, q_b: np.ndarray) -> bool:
+        calls.append((q_a.copy(), q_b.copy()))
+        return motion_clear(world, q_a, q_b, CLEARANCE_M, MOTION_MARGIN_M) and forces.segment_ok(q_a, q_b)
+
+    return ok
+
+
+def _standstill_then_rail(scenario: ResolvedScenario) -> np.ndarray:
+    """Start -> (wrist and column turned, same d1) -> (same posture, 1.2 m along the rail)."""
+    q0 = np.array(scenario.start_q)
+    q1 = q0.copy()
+    q1[chain.THETA6] += 0.8
+    q1[chain.THETA3] += 0.3
+    q2 = q1.copy()
+    q2[chain.D1] += 1.2
+    return np.stack([q0, q1, q2])
+
+
+def test_a_standstill_posture_change_moves_into_the_rail_move(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck
+) -> None:
+    path = _standstill_then_rail(scenario)
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        assert motion_clear(world, a, b, CLEARANCE_M, MOTION_MARGIN_M)
+    calls: list[tuple[np.ndarray, np.ndarray]] = []
+    cut, stats = cut_corners(scenario.robot, path, _checker(world, forces, calls))
+    assert stats.cuts >= 1 and stats.checks == len(calls)
+    np.testing.assert_array_equal(cut[0], path[0])
+    np.testing.assert_array_equal(cut[-1], path[-1])
+    before, after = polyline_time(scenario.robot, path), polyline_time(scenario.robot, cut)
+    assert after <= before - MIN_GAIN_S
+    # The posture change now overlaps the rail move: the whole thing takes about the rail's time alone.
+    rail_alone = float(segment_times(scenario.robot, path[1], path[1], path[2])[0])
+    assert after <= 1.05 * rail_alone
+    # Every segment of the result is certified (independently of what the cutter was told).
+    for a, b in zip(cut[:-1], cut[1:], strict=True):
+        assert certify_motion(world, a, b, CLEARANCE_M, MOTION_MARGIN_M).valid
+
+
+def test_corner_cutting_is_deterministic_and_keeps_a_path_with_nothing_to_gain(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck
+) -> None:
+    path = _standstill_then_rail(scenario)
+    a, _ = cut_corners(scenario.robot, path, _checker(world, forces, []))
+    b, _ = cut_corners(scenario.robot, path, _checker(world, forces, []))
+    np.testing.assert_array_equal(a, b)
+    straight = np.stack([path[0], 0.5 * (path[0] + path[2]), path[2]])  # collinear: no corner to cut
+    calls: list[tuple[np.ndarray, np.ndarray]] = []
+    same, stats = cut_corners(scenario.robot, straight, _checker(world, forces, calls))
+    np.testing.assert_array_equal(same, straight)
+    assert stats.cuts == 0 and not calls
+
+
+def test_a_cut_that_is_not_certified_is_not_taken(scenario: ResolvedScenario) -> None:
+    path = _standstill_then_rail(scenario)
+    calls: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def refuse(q_a: np.ndarray, q_b: np.ndarray) -> bool:
+        calls.append((q_a, q_b))
+        return False
+
+    same, stats = cut_corners(scenario.robot, path, refuse)
+    np.testing.assert_array_equal(same, path)
+    assert stats.cuts == 0 and stats.checks == len(calls) > 0
