@@ -18,7 +18,6 @@ RUN python -m pip install --no-cache-dir -r requirements.lock
 COPY pyproject.toml README.md ./
 COPY planner ./planner
 COPY api ./api
-COPY meshes ./meshes
 RUN python -m pip install --no-cache-dir --no-deps . \
     && useradd --create-home --uid 10001 --shell /usr/sbin/nologin cabinplan \
     && mkdir -p /data \

@@ -1,6 +1,6 @@
 """Generalisation benchmark: the default planner on generated cabins nobody tuned it for (issue 13).
 
-1. Generate ``--count`` scenarios of ``--seed`` (:mod:`planner.tools.generate`, deterministic) into
+1. Generate ``--count`` scenarios of ``--seed`` (:mod:`planner.generate`, deterministic) into
    ``--dir`` (ordinary scenario files).
 2. **Default** mode: every generated scenario, and every scenario of the repo's suite (``tests/scenarios``,
    checked against ``expected.yaml``), planned with default options by
@@ -67,7 +67,7 @@ TARGETS = "targets: >= 99% of the solvable by the default; median <= 0.3 s, p95 
 
 
 def _generate(seed: int, index: int, out_dir: str, clearance_m: float) -> dict[str, Any]:
-    from planner.tools.generate import GeneratorOptions, generate_case, write_case
+    from planner.generate import GeneratorOptions, generate_case, write_case
 
     t0 = time.perf_counter()
     case = generate_case(seed, index, GeneratorOptions(clearance_m=clearance_m))

@@ -1,4 +1,4 @@
-"""Write generated cabins and scenarios (``planner.tools.generate``) into a folder.
+"""Write generated cabins and scenarios (``planner.generate``) into a folder.
 
 Run: ``python -m bench.generate --out DIR [--count N] [--seed S] [--start I]`` (the same as
 ``cabinplan generate``). Every scenario is an ordinary scenario file (YAML + its mesh file) that
@@ -12,7 +12,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from planner.tools.generate import GeneratorOptions, generate_case, write_case, write_manifest
+from planner.generate import GeneratorOptions, generate_case, write_case, write_manifest
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -539,7 +539,7 @@ def generate(
     ] = 6.0,
 ) -> None:
     """Generate seeded, reproducible cabins and scenarios (YAML + mesh files) that `plan` runs as they are."""
-    from planner.tools.generate import GeneratorOptions, generate_case, write_case, write_manifest
+    from planner.generate import GeneratorOptions, generate_case, write_case, write_manifest
 
     options = GeneratorOptions(clearance_m=clearance, rail_length_m=rail_length)
     cases = []

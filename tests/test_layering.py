@@ -18,6 +18,7 @@ FLOORS = (
     "robots",
     "dynamics",
     "meshio",
+    "meshes",
     "collision",
     "redundancy",
     "timing",
@@ -26,6 +27,7 @@ FLOORS = (
     "plan",
     "documents",
     "tools",
+    "generate",
     "sweep",
     "cli",
 )

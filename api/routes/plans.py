@@ -37,7 +37,7 @@ from api.openapi import scenario_request_body
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
-from meshes import reference_cabin_path, reference_cabins
+from planner.meshes import reference_cabin_path, reference_cabins
 from planner.robots import load_robot
 from planner.robots.cabin8 import Cabin8
 from planner.scenario import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
