@@ -167,7 +167,7 @@ def _record(d: Draw, family: Family, ends: _Ends, rail_max: float) -> None:
         brackets=len(layout.brackets),
     )
     if family.stringers is not None:
-        d.meta["stringers"] = len(layout.stringers)
+        d.meta["stringers"] = len({s.angle_rad for s in layout.stringers})  # pieces of one count once
     d.meta.update(
         rail_length_m=rail_max,
         start_to_goal_rail_m=float(np.round(abs(ends.goal_d1 - ends.q_start[chain.D1]), 3)),
