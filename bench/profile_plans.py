@@ -14,15 +14,23 @@ import argparse
 import cProfile
 import os
 import pstats
+import time
 from pathlib import Path
 from typing import Any
 
 
 def _plan(path: Path) -> dict[str, Any]:
+    """The plan's report, or the refusal's reason and the run time (a refusal is profiled too)."""
+    from planner.core.exceptions import PlannerError
     from planner.plan.pipeline import plan_scenario
     from planner.scenario import load_scenario
 
-    return dict(plan_scenario(load_scenario(path)).report)
+    sc = load_scenario(path)
+    t0 = time.perf_counter()
+    try:
+        return dict(plan_scenario(sc).report)
+    except PlannerError as exc:
+        return {"refused": exc.reason, "planning_time_s": time.perf_counter() - t0}
 
 
 def _rows(stats: pstats.Stats, match: str, top: int) -> list[tuple[float, float, int, str]]:
@@ -58,7 +66,8 @@ def main(argv: list[str] | None = None) -> None:
         stats = pstats.Stats(prof)
         total = stats if total is None else (total.add(prof) or total)
         stages = ", ".join(f"{k} {v:.3f}" for k, v in report.get("stages_s", {}).items())
-        print(f"\n{path.name}: planning_time_s {report['planning_time_s']:.3f} (under cProfile); {stages}")
+        what = f"refused {report['refused']} after" if "refused" in report else "planning_time_s"
+        print(f"\n{path.name}: {what} {report['planning_time_s']:.3f} s (under cProfile); {stages}")
         _print(_rows(stats, args.match, args.top))
     if total is not None and len(args.scenarios) > 1:
         print(f"\nall {len(args.scenarios)} scenarios:")
