@@ -5,8 +5,9 @@
 :mod:`.draw` composes them in the order the case's generator is consumed.
 
 Case ``index`` of ``seed`` is drawn from its own generator (``default_rng([seed, index])``, with the
-family's tag as a third word for the families other than ``mixed``), redrawn until a draw passes the
-checks, so it is the same whatever the count, and the same seed gives the same bytes.
+family's tag as a third word for the families other than ``mixed``, whose goal kind is drawn once from
+``default_rng([seed, index, tag, 1])``), redrawn until a draw passes the checks, so it is the same
+whatever the count, and the same seed gives the same bytes.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.generate.cases.common import Redraw
-from planner.generate.cases.draw import draw_case
+from planner.generate.cases.draw import draw_case, goal_kind
 from planner.generate.families import FAMILIES
 from planner.generate.options import GeneratedCase, GeneratorOptions
 
@@ -28,10 +29,17 @@ def generate_case(seed: int, index: int, options: GeneratorOptions | None = None
     opts = options or GeneratorOptions()
     family = FAMILIES[opts.family]
     rng = np.random.default_rng([seed, index] if family.tag is None else [seed, index, family.tag])
+    # A family's case keeps its goal kind through its redraws, so the kinds come in the family's weights
+    # (the mixed family draws one at each attempt: kinds that redraw more often come less often).
+    kind = (
+        None
+        if family.tag is None
+        else goal_kind(np.random.default_rng([seed, index, family.tag, 1]), opts, family)
+    )
     reasons: dict[str, int] = {}
     for _ in range(opts.max_attempts):
         try:
-            case = draw_case(seed, index, rng, opts, family)
+            case = draw_case(seed, index, rng, opts, family, kind)
         except Redraw as exc:
             reasons[str(exc)] = reasons.get(str(exc), 0) + 1
             continue

@@ -68,7 +68,8 @@ class _Checks:
         return lambda spec: (self.world(layout.with_bulkhead(spec)), self.forces)
 
 
-def _goal_kind(rng: np.random.Generator, opts: GeneratorOptions, family: Family) -> str:
+def goal_kind(rng: np.random.Generator, opts: GeneratorOptions, family: Family) -> str:
+    """A goal kind drawn with the family's weights (renormalised over ``opts.goal_kinds`` if given)."""
     kinds = family.goal_kinds if opts.goal_kinds is None else opts.goal_kinds
     weights = np.array([family.goal_weights[family.goal_kinds.index(k)] for k in kinds])
     return kinds[int(rng.choice(len(kinds), p=weights / weights.sum()))]
@@ -234,10 +235,19 @@ def case_name(seed: int, index: int, family: Family) -> str:
 
 
 def draw_case(
-    seed: int, index: int, rng: np.random.Generator, opts: GeneratorOptions, family: Family
+    seed: int,
+    index: int,
+    rng: np.random.Generator,
+    opts: GeneratorOptions,
+    family: Family,
+    kind: str | None = None,
 ) -> GeneratedCase:
-    """One attempt at case ``index``; raises :class:`Redraw` when the draw does not make a valid case."""
-    kind = _goal_kind(rng, opts, family)
+    """One attempt at case ``index``; raises :class:`Redraw` when the draw does not make a valid case.
+
+    ``kind``: the case's goal kind, drawn once for all its attempts (the families); ``None``: drawn at
+    each attempt from ``rng`` (the mixed family: its kinds are then weighted by how often each succeeds).
+    """
+    kind = goal_kind(rng, opts, family) if kind is None else kind
     assert kind in GOAL_KINDS
     size, payload, meta = draw_payload(rng, family.mass_range_kg)
     meta = ({} if family.tag is None else {"family": family.name}) | meta
@@ -264,4 +274,4 @@ def draw_case(
     )
 
 
-__all__ = ["case_name", "draw_case"]
+__all__ = ["case_name", "draw_case", "goal_kind"]
