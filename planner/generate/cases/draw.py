@@ -23,7 +23,7 @@ from planner.generate.cases.bay import place_bay
 from planner.generate.cases.clutter import draw_brackets, draw_ducts, draw_rings, draw_stringers
 from planner.generate.cases.common import Draw, Goal, Redraw, draw_payload, draw_section
 from planner.generate.cases.endpoints import configuration, start_range
-from planner.generate.cases.hatch import hatch
+from planner.generate.cases.hatch import HatchWorld, hatch
 from planner.generate.cases.shelf import place_shelf
 from planner.generate.families import Family
 from planner.generate.files import loaded_cabin, mesh_bytes, pose_doc
@@ -61,10 +61,12 @@ class _Checks:
         self.forces = StaticForceCheck(Cabin8Dynamics.of(d.robot), d.payload.rigid_payload())
 
     def world(self, layout: CabinLayout) -> CollisionWorld:
+        """The generator's collision world of ``layout``."""
         # A coarse bound grid: the verdicts are exact either way (FCL decides what the bounds do not).
         return CollisionWorld(self.d.robot, loaded_cabin(layout), self.d.payload, grid_step_m=GRID_STEP_M)
 
-    def hatch_world(self, layout: CabinLayout) -> Any:
+    def hatch_world(self, layout: CabinLayout) -> HatchWorld:
+        """The world and hold check of ``layout`` with a candidate bulkhead (the hatch's sizing loop)."""
         return lambda spec: (self.world(layout.with_bulkhead(spec)), self.forces)
 
 
