@@ -35,6 +35,7 @@ from api.openapi import install_openapi
 from api.ratelimit import TenantRateLimiter
 from api.routes import (
     cabins,
+    exports,
     health,
     keys,
     kinematics,
@@ -279,7 +280,7 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         body_timeout_s=settings.body_timeout_s,
     )
     templates: dict[int, str] = {}  # route object -> full path template, for the access log
-    for module in (health, robots, cabins, plans, sweeps, scene, kinematics, pprs6, stiffness, keys):
+    for module in (health, robots, cabins, plans, exports, sweeps, scene, kinematics, pprs6, stiffness, keys):
         router: Any = module.router
         app.include_router(router, prefix=API_PREFIX)
         templates.update({id(r): API_PREFIX + r.path for r in router.routes})

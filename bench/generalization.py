@@ -52,6 +52,7 @@ import numpy as np
 import yaml
 from pebble import ProcessPool
 
+from bench import ompl_log
 from bench.plan_worker import plan_file
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -329,6 +330,9 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-exhaustive", action="store_true")
     parser.add_argument("--no-suite", action="store_true")
     parser.add_argument("--clearance-m", type=float, default=0.01)
+    parser.add_argument(
+        "--ompl-log", type=Path, default=None, help="also write OMPL benchmark logs (one per case) here"
+    )
     return parser.parse_args(argv)
 
 
@@ -505,6 +509,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  default refusals (this): {table['all']['this']['refusals']}")
     _print_refusals(cases, solvable, this, exhaustive)
     suite = _suite_figures(suite_names, expected, default) if suite_names else {}
+    if args.ompl_log is not None:
+        from planner.core.provenance import package_version
+
+        limits = {c["name"]: _time_limit(Path(c["scenario"])) for c in cases}
+        experiments = ompl_log.generalization_experiments(
+            cases, this, exhaustive, seed=args.seed, time_limits_s=limits, version=package_version()
+        )
+        written = ompl_log.write_generalization_logs(args.ompl_log, experiments)
+        print(f"OMPL benchmark logs: {len(written)} -> {args.ompl_log}")
     print(f"total wall time {time.perf_counter() - t_start:.0f} s")
     if args.out is not None:
         doc = {

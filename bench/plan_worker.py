@@ -15,6 +15,7 @@ files in the same run.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
@@ -68,6 +69,10 @@ def plan_file(path: str, options: dict[str, Any] | None = None) -> dict[str, Any
         duration_s=float(res.profile.duration_s),
         min_clearance_m=float(res.gate.min_clearance_m),
         gate_passed=bool(res.gate.passed),
+        # as bench.ompl_log.path_length (this file runs in other checkouts too): Euclidean drive steps
+        path_length=float(
+            sum(math.dist(a, b) for a, b in zip(res.profile.position, res.profile.position[1:], strict=False))
+        ),
         **_report_fields(res.report),
     )
     doc = json.loads(json.dumps(result_document(sc, res)))

@@ -33,6 +33,16 @@ _PUBLIC: dict[str, str] = {
     "PlanResult": "planner.plan.pipeline",
     "Clearances": "planner.plan.context",
     "SearchPreset": "planner.plan.context",
+    # assembly cycles
+    "Cycle": "planner.task.schema",
+    "ResolvedCycle": "planner.task.resolve",
+    "CycleResult": "planner.task.cycle",
+    "load_cycle": "planner.task.resolve",
+    "resolve_cycle": "planner.task.resolve",
+    "cycle_from_dict": "planner.task.schema",
+    "plan_cycle": "planner.task.cycle",
+    "check_cycle": "planner.task.check",
+    "cycle_document": "planner.documents.cycle",
     # gate
     "check_profile": "planner.gate.check_profile",
     "validate_profile": "planner.gate.checks",
@@ -60,6 +70,7 @@ if TYPE_CHECKING:
     from planner.collision.world import CollisionWorld
     from planner.core.exceptions import InvalidInput, PlannerError, PlanRefused, ValidationFailed
     from planner.core.schemas import Pose
+    from planner.documents.cycle import cycle_document
     from planner.documents.output import refusal_document, result_document
     from planner.gate.check_profile import check_profile
     from planner.gate.checks import GateReport, validate_profile
@@ -70,6 +81,10 @@ if TYPE_CHECKING:
     from planner.robots.registry import available_robots, load_robot
     from planner.scenario.resolve import ResolvedScenario, load_scenario, resolve_scenario
     from planner.scenario.schema import Scenario, scenario_from_dict
+    from planner.task.check import check_cycle
+    from planner.task.cycle import CycleResult, plan_cycle
+    from planner.task.resolve import ResolvedCycle, load_cycle, resolve_cycle
+    from planner.task.schema import Cycle, cycle_from_dict
     from planner.timing.profile import DriveProfile
     from planner.tools import kinematics_tools
 
@@ -92,6 +107,8 @@ def __dir__() -> list[str]:
 __all__ = [
     "Clearances",
     "CollisionWorld",
+    "Cycle",
+    "CycleResult",
     "DriveProfile",
     "GateReport",
     "GateRequirements",
@@ -101,19 +118,26 @@ __all__ = [
     "Planner",
     "PlannerError",
     "Pose",
+    "ResolvedCycle",
     "ResolvedScenario",
     "Scenario",
     "SearchPreset",
     "ValidationFailed",
     "__version__",
     "available_robots",
+    "check_cycle",
     "check_profile",
+    "cycle_document",
+    "cycle_from_dict",
     "kinematics_tools",
+    "load_cycle",
     "load_mesh",
     "load_robot",
     "load_scenario",
+    "plan_cycle",
     "plan_scenario",
     "refusal_document",
+    "resolve_cycle",
     "resolve_scenario",
     "result_document",
     "scenario_from_dict",

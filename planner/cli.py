@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
 
 import typer
 from pydantic import ValidationError
@@ -28,6 +28,9 @@ from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8
 from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
+
+if TYPE_CHECKING:
+    from planner.gate.drive_checks import GateReport
 
 app = typer.Typer(
     add_completion=False,
@@ -296,9 +299,69 @@ def plan(
         _write(plot, plan_png(sc, result, planner.world), "--plot")
     typer.echo(
         f"cabinplan: {sc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, "
-        f"{len(result.profile.t)} samples, min clearance {1e3 * result.gate.min_clearance_m:.1f} mm "
-        f"-> {output}",
+        f"{len(result.profile.t)} samples, {clearance_phrase(result.gate)} -> {output}",
         err=True,
+    )
+
+
+@app.command()
+@handle_errors
+def cycle(
+    cycle_file: Annotated[
+        Path, typer.Argument(metavar="FILE", help="cycle file (.yaml, .yml or .json)", dir_okay=False)
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="cycle profile / refusal JSON")],
+    csv: Annotated[Path | None, typer.Option("--csv", help="also write the profile as CSV")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="also plot the profile (PNG)")] = None,
+) -> None:
+    """Plan an assembly cycle.
+
+    one certified drive profile with its legs and events (exit 0), or a refusal with its reason and the leg
+    that refused (exit 3).
+
+    The JSON written to --output is the cycle profile on success and the refusal document otherwise.
+    """
+    from planner.core.exceptions import PlanRefused
+    from planner.documents.cycle import cycle_document, cycle_png, cycle_refusal_document
+    from planner.documents.output import document_bytes
+    from planner.task.cycle import plan_cycle
+    from planner.task.resolve import load_cycle
+
+    cyc = load_cycle(cycle_file)
+    try:
+        with _Progress(sys.stderr.isatty()) as progress:
+            result = plan_cycle(cyc, progress)
+    except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
+    except InvalidInput:
+        raise
+    except PlannerError as exc:
+        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
+        _fail(f"{exc.reason}: {exc.message}", 1)
+    _write(output, document_bytes(cycle_document(cyc, result, arrays=True)) + b"\n", "--output")
+    if csv is not None:
+        _write(csv, result.profile.to_csv(), "--csv")
+    if plot is not None:
+        _write(plot, cycle_png(cyc, result), "--plot")
+    springs = ", ".join(f"{e.kind} {1e3 * e.springback_m:.2f} mm" for e in result.events)
+    typer.echo(
+        f"cabinplan: {cyc.spec.name}: succeeded, {result.profile.duration_s:.3f} s, {len(result.profile.t)} "
+        f"samples, {len(result.legs)} legs, {clearance_phrase(result.gate)}, "
+        f"spring-back {springs} -> {output}",
+        err=True,
+    )
+
+
+def clearance_phrase(gate: GateReport) -> str:
+    """The report's clearance in words: the exact minimum over every sample, where, and the bound between."""
+    at = gate.min_clearance_at
+    if at is None or gate.min_clearance_bound_m is None:
+        return f"min clearance {1e3 * gate.min_clearance_m:.1f} mm"
+    a, b = at["bodies"]
+    return (
+        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b} at {at['t_s']:.2f} s; "
+        f">= {1e3 * gate.min_clearance_bound_m:.1f} mm between samples)"
     )
 
 
@@ -422,6 +485,62 @@ def sweep(
 
 @app.command()
 @handle_errors
+def export(
+    plan_document: Annotated[
+        Path,
+        typer.Argument(
+            help="a succeeded plan or cycle document (JSON, as written by `plan`)", dir_okay=False
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="goal file, or the bag folder for mcap")],
+    fmt: Annotated[
+        str,
+        typer.Option("--format", help="ros2-json | ros2-yaml (FollowJointTrajectory goal) | mcap (rosbag2)"),
+    ] = "ros2-yaml",
+    spacing_s: Annotated[
+        float | None,
+        typer.Option(
+            "--spacing-s", help="thin the trajectory points to this spacing [s] (default: every sample)"
+        ),
+    ] = None,
+    scenario: Annotated[
+        Path | None,
+        typer.Option("--scenario", help="mcap: the plan's scenario, for the exact clearance along the plan"),
+    ] = None,
+) -> None:
+    """Export a plan for a controller or a tool: a FollowJointTrajectory goal (JSON/YAML) or a rosbag2 MCAP.
+
+    Thinning keeps every sample within 1e-5 (m or rad) and the drive limits under the controller's quintic
+    interpolation, adding points where it must. Exit 2 for a document that is not a succeeded plan.
+    """
+    from planner.documents import exports
+
+    if fmt not in exports.FORMATS:
+        _fail(f"--format: must be one of {', '.join(exports.FORMATS)}, got {fmt!r}", EXIT_INVALID)
+    try:
+        doc = json.loads(plan_document.read_text(encoding="utf-8"))
+    except OSError as exc:
+        _fail(f"plan: cannot read {plan_document} ({exc.strerror})", EXIT_INVALID)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        _fail(f"plan: {plan_document} is not a JSON document ({exc})", EXIT_INVALID)
+    if not isinstance(doc, dict):
+        _fail(f"plan: {plan_document} is not a plan document (a JSON object)", EXIT_INVALID)
+    if fmt == "mcap":
+        if output.exists():
+            _fail(f"--output: {output} exists; a rosbag2 bag is a new folder", EXIT_INVALID)
+        exports.profile_of(doc)  # refuse a bad document before anything is computed or written
+        clearance = exports.clearance_series(_load(scenario), doc) if scenario is not None else None
+        exports.write_rosbag(doc, output, spacing_s=spacing_s, clearance=clearance)
+        size = sum(p.stat().st_size for p in output.iterdir())
+    else:
+        data, _ = exports.export_bytes(doc, fmt, spacing_s=spacing_s)
+        _write(output, data, "--output")
+        size = len(data)
+    typer.echo(f"cabinplan: export {fmt}: {size} bytes -> {output}")
+
+
+@app.command()
+@handle_errors
 def check(
     scenario: ScenarioArg,
     profile: Annotated[
@@ -430,11 +549,12 @@ def check(
 ) -> None:
     """Run the validation gate on a drive profile for a scenario; the report goes to stdout.
 
+    A cycle profile (``kind: cycle``) is checked against its cycle file instead.
+
     Exit 0 when every check passes, 3 when any fails.
     """
     from planner.gate.check_profile import check_profile
 
-    sc = _load(scenario)
     try:
         data = json.loads(profile.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -443,7 +563,13 @@ def check(
         _fail(f"profile: not valid JSON ({exc.msg} at line {exc.lineno})", EXIT_INVALID)
     except UnicodeDecodeError:
         _fail(f"profile: {profile} is not UTF-8 text (expected the JSON written by plan)", EXIT_INVALID)
-    report = check_profile(sc, data)
+    if isinstance(data, dict) and data.get("kind") == "cycle":
+        from planner.task.check import check_cycle
+        from planner.task.resolve import load_cycle
+
+        report = check_cycle(load_cycle(scenario), data)
+    else:
+        report = check_profile(_load(scenario), data)
     _emit(report.to_dict())
     if not report.passed:
         _fail(f"validation_failed: {report.summary()}", EXIT_INFEASIBLE)

@@ -25,6 +25,7 @@ FLOORS = (
     "scenario",
     "gate",
     "plan",
+    "task",
     "documents",
     "tools",
     "generate",

@@ -179,3 +179,30 @@ def test_tight_blends_pass_the_gate_at_the_first_timing() -> None:
     res = planner.plan()
     assert res.gate.passed
     assert "retimed" not in planner.report, planner.report.get("retimed")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", FEASIBLE)
+def test_min_clearance_is_the_minimum_over_every_sample(name: str) -> None:
+    """The report's clearance against exact FCL distances at every sample (and midpoints near the worst)."""
+    sc, res = _plan(name)
+    q = sc.robot.joints_from_drives(res.profile.position)
+    world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
+    exact = world.clearance_profile(q)  # every body to the cabin and every checked pair, every sample
+    gate = res.gate
+    at = gate.min_clearance_at
+    assert at is not None and gate.min_clearance_bound_m is not None
+    k, tol = at["sample"], at["tolerance_m"]
+    assert tol >= 1e-4  # the search's tolerance, or what its query budget reached (flat distances)
+    # The reported figure is the exact distance at the reported sample ...
+    assert gate.min_clearance_m == pytest.approx(exact[k], abs=tol + 1e-9)
+    assert world.min_distance(q[k]).distance_m <= gate.min_clearance_m + 1e-9
+    assert at["t_s"] == res.profile.t[k]
+    assert at["bodies"][1] == "cabin" or at["bodies"][1] in world.names
+    # ... no sample is closer by more than the tolerance, and the bound is below every sample ...
+    assert gate.min_clearance_m <= float(exact.min()) + tol + 1e-9
+    assert gate.min_clearance_bound_m <= float(exact.min()) + 1e-9
+    # ... and below the exact distance between samples (midpoints of the pieces around the worst sample).
+    lo, hi = max(0, k - 40), min(len(q) - 1, k + 40)
+    mid = 0.5 * (q[lo:hi] + q[lo + 1 : hi + 1])
+    assert float(world.clearance_profile(mid).min()) >= gate.min_clearance_bound_m - 1e-9

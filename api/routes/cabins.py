@@ -41,21 +41,26 @@ def reference_document(name: str) -> dict[str, Any]:
 @router.post(
     "/cabins",
     status_code=201,
-    summary="Upload a cabin mesh (STL, OBJ, PLY, GLB/glTF)",
+    summary="Upload a cabin mesh (STL, OBJ, PLY, GLB/glTF) or CAD file (STEP)",
     responses={200: {"description": "The same bytes are already stored"}, **problem_responses(409)},
 )
 def upload_cabin(
     ctx: Ctx,
     principal: CurrentPrincipal,
     response: Response,
-    file: Annotated[UploadFile, File(description="The mesh file; its extension selects the format.")],
-    units: Annotated[Literal["m", "mm"], Form(description="Length unit of the file's coordinates.")] = "m",
+    file: Annotated[UploadFile, File(description="The mesh or STEP file; its extension selects the format.")],
+    units: Annotated[
+        Literal["m", "mm"],
+        Form(description="Length unit of the file's coordinates (a STEP file's own units are used)."),
+    ] = "m",
     name: Annotated[str | None, Form(pattern=_NAME, description="Display name (default: file name).")] = None,
 ) -> dict[str, Any]:
     """Validate and store a mesh by content hash: 201 when new, 200 when the same bytes are stored.
 
     Bad meshes give 422 with the loader's reason (``details.check``: ``face_count``, ``non_finite``,
-    ``scale``, ...); bodies above ``CABINPLAN_MAX_UPLOAD_BYTES`` give 413.
+    ``scale``, ...; for STEP also ``truncated``, ``self_reference``, ``step_timeout``, ``step_memory``);
+    bodies above ``CABINPLAN_MAX_UPLOAD_BYTES`` give 413. A STEP file is read and tessellated (default
+    tolerance 0.1 mm) by OpenCASCADE in a worker process with time and memory limits, never in the server.
     """
     filename = file.filename or ""
     data = file.file.read(ctx.settings.max_upload_bytes + 1)

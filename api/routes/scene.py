@@ -123,7 +123,10 @@ def _scene_document(ctx: AppContext, row: Job) -> dict[str, Any]:
     }
     if row.status == "succeeded":
         prof = DriveProfile.from_dict(result, sc.robot)
-        return {**base, **plan_scene(sc, prof.joints, prof.t)}
+        at = ((result.get("report") or {}).get("gate") or {}).get("min_clearance_at") or {}
+        closest = at.get("sample")
+        extra = (closest,) if isinstance(closest, int) and not isinstance(closest, bool) else ()
+        return {**base, **plan_scene(sc, prof.joints, prof.t, extra_samples=extra)}
     reason = str(result.get("reason") or row.reason or row.status)
     details = result.get("details") or {}
     doc = refusal_scene(sc, reason, details if isinstance(details, dict) else {})

@@ -371,9 +371,14 @@ function figures(job, scene) {
     row('single-drive lower bound', `${fmt(rep.single_drive_lower_bound_s)} s`),
     row('duration / lower bound', fmt(rep.duration_ratio, 2)),
     row('staged lower bound ratio', fmt(rep.staged_duration_ratio, 2)),
-    row('min clearance (report)', mm(r.min_clearance_m)),
+    row('min clearance (every sample, exact)', mm(r.min_clearance_m)),
+    row('min clearance (between samples, certified ≥)', mm(gate.min_clearance_bound_m)),
+    row('closest', gate.min_clearance_at
+      ? `${gate.min_clearance_at.bodies.join(' – ')} at ${fmt(gate.min_clearance_at.t_s, 2)} s` : '–', ''),
     row('min clearance (these frames)', mm(scene.min_clearance_m)),
     row('requested clearance', mm(scene.clearance_m)),
+    ...(scene.certified_clearance_m > scene.clearance_m
+      ? [row('certified (+ STEP tessellation)', mm(scene.certified_clearance_m))] : []),
     row('planning time', `${fmt(rep.planning_time_s, 2)} s`),
     row('gate', gate.passed ? `passed (${(gate.checks || []).length} checks)` : 'FAILED', ''),
     row('peak velocity / limit', `${fmt(100 * (peaks.velocity || 0), 1)} %`),

@@ -38,12 +38,14 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
+from planner.collision.along import AlongPath
 from planner.collision.bodies import BodySet, PayloadGeometry, robot_bodies, segment_reach_bounds
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
 from planner.collision.kernels import buffers, codes
 from planner.collision.kernels.entries import DEFAULT as KERNELS
 from planner.collision.kernels.entries import Kernels
 from planner.collision.motion import CertifiedMotion
+from planner.collision.obstacles import Obstacle, ObstacleSet, obstacle_contact
 from planner.collision.probes import Probes, cabin_bvh
 from planner.collision.reports import (
     VALID,
@@ -100,9 +102,13 @@ class CollisionWorld(Generic[RobotT]):
         payload: The carried payload (``None``: none).
         grid_step_m: Node spacing of the clearance lower-bound grid [m].
         self_clearance: Distance [m] non-adjacent bodies keep from each other.
+        obstacles: Fixed bodies added to the cabin (installed units, fixtures: :mod:`.obstacles`), each
+            compared by clearance like the cabin; reports name them.
+        allowed: ``(body name, obstacle name)`` pairs this world leaves out of its checks and distances
+            (a gripper closing on the unit it grasps, along that straight motion only).
 
     Geometry that depends only on the cabin (FCL BVH, clearance grid) is cached per mesh content and pose,
-    so several worlds on one cabin share it.
+    so several worlds on one cabin share it; obstacles never touch those caches.
     """
 
     #: Motion walks: probe for more than the bounds prove only where they prove nothing (states cost
@@ -116,6 +122,8 @@ class CollisionWorld(Generic[RobotT]):
         payload: PayloadGeometry | None = None,
         grid_step_m: float = 0.03,
         self_clearance: float = DEFAULT_SELF_CLEARANCE_M,
+        obstacles: tuple[Obstacle, ...] = (),
+        allowed: frozenset[tuple[str, str]] = frozenset(),
     ) -> None:
         _check_clearance(self_clearance)
         self.self_clearance = float(self_clearance)
@@ -144,6 +152,12 @@ class CollisionWorld(Generic[RobotT]):
         self._motion = CertifiedMotion(self.model, self.bodies, self._kernel, self._probes, self.kernels)
         #: Fine-cover sphere radii (S,), grouped by body (the spheres of :meth:`cover_centres`).
         self._fine_r = self._kernel.fine.radii
+        #: The obstacles added to the cabin, with the pairs this world allows (None: no obstacles).
+        self.obstacles: ObstacleSet | None = (
+            ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed)) if obstacles else None
+        )
+        if allowed and not obstacles:
+            raise InvalidInput("allowed: pairs given without obstacles", field="allowed")
 
     def _carriage_table_of(self, key: tuple[str, bytes, bytes]) -> tuple[float, float, Array]:
         """The rail body's clearance table along the rail, built once per cabin, body shape and rail.
@@ -211,6 +225,18 @@ class CollisionWorld(Generic[RobotT]):
         """
         _check_clearance(clearance)
         q = _joints(q, self.model.n_joints)
+        rep = self._check_state_cabin(q, clearance, all_contacts)
+        if self.obstacles is None or not (rep.valid or all_contacts):
+            return rep
+        if any(c.kind == "limit" for c in rep.contacts) and not np.all(np.isfinite(q)):
+            return rep
+        more = self.obstacles.state_contacts(self.flat_poses(q), self.names, clearance, all_contacts)
+        if not more:
+            return rep
+        return StateReport(False, (*rep.contacts, *more))
+
+    def _check_state_cabin(self, q: Array, clearance: float, all_contacts: bool) -> StateReport:
+        """:meth:`check_state` without the obstacles: limits, the cabin and self-collision."""
         screened = self._screen(q, clearance)
         if isinstance(screened, StateReport):
             return screened
@@ -225,6 +251,10 @@ class CollisionWorld(Generic[RobotT]):
                     if not all_contacts:  # the first contact found (cabin before self) is the report
                         return StateReport(False, tuple(contacts))
         return StateReport(not contacts, tuple(contacts))
+
+    def flat_poses(self, q: Array) -> Array:
+        """Body poses (B, 13) at one configuration (8,): rotation column-major, centre, capsule length."""
+        return self._evaluate(q)[0][0]
 
     def _screen(self, q: Array, clearance: float) -> StateReport | BodyState:
         """The compiled part of :meth:`check_state`: a final report, or the state for the FCL probes."""
@@ -248,7 +278,9 @@ class CollisionWorld(Generic[RobotT]):
         d = self._kernel
         code, flat, cabin, pairs = self.kernels.packed_check(q, d, clearance, own, d.upper_slack)
         if code != codes.UNDECIDED:
-            return code == codes.CLEAR  # a certain contact is as invalid as an FCL-found one
+            if code != codes.CLEAR:
+                return False  # a certain contact is as invalid as an FCL-found one
+            return self.obstacles is None or self.obstacles.clear(self.flat_poses(q), clearance)
         st = BodyState(flat, cabin, pairs, True)
         for b, lb in enumerate(cabin.tolist()):
             if lb <= clearance and self._probes.cabin_hit(st, b, clearance):
@@ -256,7 +288,7 @@ class CollisionWorld(Generic[RobotT]):
         for k, lb in enumerate(pairs.tolist()):
             if lb <= own and self._probes.pair_hit(st, k, own):
                 return False
-        return True
+        return self.obstacles is None or self.obstacles.clear(self.flat_poses(q), clearance)
 
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
         """Poses and certified bounds at one configuration (8,), contiguous float64: one kernel call.
@@ -306,8 +338,46 @@ class CollisionWorld(Generic[RobotT]):
     def _walk(
         self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
     ) -> MotionReport:
-        """The motion walk of :meth:`check_motion` on validated arguments."""
-        return self._motion.check(q_a, q_b, clearance, motion_margin, own, ratio, self.probe_when_proven)
+        """The motion walk of :meth:`check_motion` on validated arguments (the obstacles' walk after it)."""
+        rep = self._motion.check(q_a, q_b, clearance, motion_margin, own, ratio, self.probe_when_proven)
+        if not rep.valid or self.obstacles is None:
+            return rep
+        return self._obstacle_walk(q_a, q_b, clearance, motion_margin, rep)
+
+    def _obstacle_walk(
+        self, q_a: Array, q_b: Array, clearance: float, margin: float, rep: MotionReport
+    ) -> MotionReport:
+        """Certify the segment against the obstacles (see :mod:`.obstacles`).
+
+        each pair advanced by its proven spare clearance over the body's displacement bound D_b = rho_b .
+        |q_b - q_a|.
+        """
+        obs = self.obstacles
+        assert obs is not None
+        dq = q_b - q_a
+        D = self.bodies.rho @ np.abs(dq)  # (B,) displacement bound of any point of each body
+        queries0 = obs.queries
+        states = rep.states_checked + 1
+        lb_mid = obs.lower_bounds(self.flat_poses(q_a + 0.5 * dq), clearance + 0.5 * D[:, None])
+        # Pairs the midpoint's bound proves clear over the whole segment need nothing more.
+        todo = np.argwhere(lb_mid - 0.5 * D[:, None] <= clearance)
+        for b, o in todo.tolist():
+            t = 0.0
+            while True:
+                q = q_a + t * dq
+                flat = self.flat_poses(q)
+                states += 1
+                d = obs.distance(flat, b, o)[0]  # exact: the longest certified step
+                if d < clearance + margin:
+                    contact = obstacle_contact(self.names[b], obs.names[o], clearance + margin)
+                    queries = rep.fcl_queries + obs.queries - queries0
+                    return MotionReport(False, states, queries, t, (contact,))
+                if D[b] <= 0.0:
+                    break
+                t += (d - clearance) / float(D[b])
+                if t >= 1.0:
+                    break
+        return MotionReport(True, states, rep.fcl_queries + obs.queries - queries0)
 
     def check_path(
         self,
@@ -362,6 +432,32 @@ class CollisionWorld(Generic[RobotT]):
                 cap = max(1, (j - i) // 2)  # the run again in halves
         return PathReport(True, checks, n - 1, None, ())
 
+    def along(self, qs: Array) -> AlongPath:
+        """The batched pass over a sampled path (N, n), N >= 2: bounds at every sample in one kernel call.
+
+        The result certifies the polyline (:meth:`AlongPath.certify`, as strict as :meth:`check_path`) and
+        finds its smallest distance (:meth:`AlongPath.clearance`); see :mod:`planner.collision.along`.
+        """
+        qs = np.ascontiguousarray(np.asarray(qs, dtype=float))
+        if qs.ndim != 2 or qs.shape[0] < 2 or qs.shape[1] != self.model.n_joints:
+            raise InvalidInput(
+                f"qs: (N >= 2, {self.model.n_joints}) joint samples expected, got shape {qs.shape}",
+                field="qs",
+            )
+        if not np.all(np.isfinite(qs)):
+            raise InvalidInput("qs: joint samples must be finite", field="qs")
+        poses, c = np.empty((len(qs), self._n_bodies, 13)), np.empty((len(qs), len(self._kernel.c_lo)))
+        self.kernels.packed_poses(qs, self._kernel, poses, c)
+        floor = min(_largest_ratio(c[:, list(self.model.ratio_rows)]) + 0.02, 0.999)
+        threshold = self.self_clearance + 0.06  # exact capsule-pair distances below (as the motion walk)
+
+        def walk(k: int, clearance: float, own: float, margin: float) -> MotionReport:
+            return self._walk(qs[k], qs[k + 1], clearance, margin, own, floor)
+
+        has_cabin = self._probes.cabin_obj is not None
+        kernels = (self.kernels, self._kernel, threshold)
+        return AlongPath(qs, poses, c, has_cabin, self.model, self.bodies, self._probes, kernels, walk)
+
     # ------------------------------------------------------------- distances
     def min_distance(self, q: Array, include_self: bool = True, include_cabin: bool = True) -> Distance:
         """Smallest distance from any body to the cabin (and between non-adjacent bodies), with witnesses.
@@ -386,7 +482,50 @@ class CollisionWorld(Generic[RobotT]):
                 best = Distance(
                     d, (self.names[a], "cabin" if other < 0 else self.names[other]), p_body, p_other
                 )
+        if include_cabin and self.obstacles is not None:
+            found = self.obstacle_distance(st.flat, bound=best.distance_m)
+            if found.distance_m < best.distance_m:
+                best = found
         return best
+
+    def obstacle_distance(
+        self, flat: Array, obstacle: str | None = None, body: str | None = None, bound: float = np.inf
+    ) -> Distance:
+        """Smallest exact distance of a body to an obstacle at the body poses ``flat`` (B, 13).
+
+        ``obstacle`` / ``body``: only that obstacle / body (an allowed pair too: its distance is what a
+        report of the allowed pair shows). Pairs this world allows are left out otherwise. Branch and bound
+        on the sphere lower bounds, as :meth:`min_distance`; pairs certainly farther than ``bound`` [m] are
+        not measured (+inf when none is nearer, or without a pair to measure).
+        """
+        obs = self.obstacles
+        best = Distance(np.inf, ("", ""), np.full(3, np.nan), np.full(3, np.nan))
+        if obs is None:
+            return best
+        lb = obs.lower_bounds(flat, bound)
+        if obstacle is not None or body is not None:
+            keep = np.ones_like(obs.active)
+            if obstacle is not None:
+                keep[:, [i for i, n in enumerate(obs.names) if n != obstacle]] = False
+            if body is not None:
+                keep[[i for i, n in enumerate(self.names) if n != body], :] = False
+            allowed_lb = np.where(obs.active, lb, 0.0)  # allowed pairs: no bound, measure them
+            lb = np.where(keep, allowed_lb, np.inf)
+        for k in np.argsort(lb, axis=None).tolist():
+            b, o = divmod(k, lb.shape[1])
+            if not np.isfinite(lb[b, o]) or lb[b, o] >= min(best.distance_m, bound):
+                break
+            d, p_body, p_obstacle = obs.distance(flat, b, o)
+            if d < best.distance_m:
+                best = Distance(d, (self.names[b], obs.names[o]), p_body, p_obstacle)
+        return best
+
+    def is_environment(self, name: str) -> bool:
+        """True when ``name`` (a :class:`Distance`'s second body) is the cabin or an obstacle.
+
+        Their distances are held to the clearance, a robot pair's to the self-clearance.
+        """
+        return name == "cabin" or (self.obstacles is not None and name in self.obstacles.names)
 
     def clearance_profile(self, qs: Array, include_self: bool = True) -> Array:
         """Minimum distance [m] at each configuration of a path, shape (N,)."""

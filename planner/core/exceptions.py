@@ -181,3 +181,18 @@ class CalibrationIllPosed(InvalidInput):
     """
 
     reason = "calibration_ill_posed"
+
+
+class UnitNotHoldable(PlanRefused):
+    """An assembly cycle's unit cannot be held at its dock: ``details`` name the drive and its force ratio."""
+
+    reason = "unit_not_holdable"
+
+
+class ReleaseInCollision(PlanRefused):
+    """At a cycle's release the tool's spring-back (the load change) brings a body within the clearance.
+
+    ``details`` name the bodies and their distance.
+    """
+
+    reason = "release_in_collision"

@@ -23,20 +23,41 @@ from planner.core.exceptions import PlannerError
 from planner.core.provenance import code_version
 
 if TYPE_CHECKING:
+    from planner.meshio.types import LoadedMesh
     from planner.plan.pipeline import PlanResult
     from planner.scenario.resolve import ResolvedScenario
     from planner.timing.profile import DriveProfile
 
 
 def provenance(sc: ResolvedScenario) -> dict[str, Any]:
-    """Hashes of the scenario, robot description, cabin mesh and code that a plan depends on."""
+    """Hashes of the scenario, robot description, cabin mesh and code that a plan depends on.
+
+    ``cabin_mesh_sha256`` is the SHA-256 of the file's bytes as given (a STEP cabin's: the CAD file, not
+    its tessellation); ``cabin_mesh`` adds its format, the units it declared and, for STEP, the
+    tessellation tolerance; ``payload_mesh`` the same for a mesh payload (``None`` for a box).
+    """
     return {
         "scenario_sha256": sc.scenario_sha256,
         "robot_description_sha256": sc.robot.description_sha256,
         "cabin_mesh_sha256": sc.cabin.sha256 if sc.cabin is not None else None,
         "cabin_source": sc.cabin_source,
+        "cabin_mesh": _mesh_provenance(sc.cabin),
+        "payload_mesh": _mesh_provenance(sc.payload_mesh),
         "stiffness": _stiffness(sc),
         "code": code_version(),
+    }
+
+
+def _mesh_provenance(mesh: LoadedMesh | None) -> dict[str, Any] | None:
+    if mesh is None:
+        return None
+    return {
+        "sha256": mesh.sha256,
+        "file": mesh.name,
+        "format": mesh.report.format,
+        "units": mesh.units,
+        "tessellation_tolerance_m": mesh.report.tessellation_tolerance_m,
+        "surface_deviation_m": mesh.surface_deviation_m,
     }
 
 
@@ -103,7 +124,7 @@ def result_document(sc: ResolvedScenario, result: PlanResult, *, arrays: bool = 
     }
     tail = {
         "min_clearance_m": result.gate.min_clearance_m,
-        "report": {**result.report, "gate": result.gate.to_dict()},
+        "report": {**result.report, "clearance": sc.clearance_report(), "gate": result.gate.to_dict()},
         "provenance": provenance(sc),
     }
     samples = result.profile.to_dict(arrays=True) if arrays else _samples(result.profile)

@@ -7,9 +7,10 @@ shows comes from the same model the planner and the validation gate use.
   (carriage, stage links, platform, column, arm, slide, payload) posed at a set of *frames* -- samples of
   the drive profile -- with the closest pair of bodies (or body and cabin) and its distance at each frame
   (exact FCL distances, :meth:`~planner.collision.world.CollisionWorld.min_distance`); the start and goal
-  payload poses, the approach line, and the drive limits. The frames always include the samples the gate
-  measures the report's ``min_clearance_m`` on (:func:`planner.gate.checks.clearance_probe_indices`), so the
-  curve's minimum over those samples *is* the report's figure.
+  payload poses, the approach line, and the drive limits. The frames include the sample where the report's
+  ``min_clearance_m`` (the exact minimum over every sample) lies when the caller names it
+  (``extra_samples``), so the curve reaches the report's figure there, and never goes below it by more
+  than the gate's tolerance elsewhere.
 * :func:`refusal_scene` (cabin8): the configuration a refusal is about -- the start for ``start_*``
   reasons, the goal configuration for a joint goal, else the planner's IK solution of the goal pose -- with
   every contact the state check finds there (the offending pairs) and the closest pair.
@@ -44,12 +45,15 @@ Array = NDArray[np.float64]
 MAX_FRAMES = 400
 
 
-def frame_indices(n_samples: int, max_frames: int = MAX_FRAMES) -> NDArray[np.int64]:
-    """Sample indices of the frames: evenly strided, plus the gate's clearance probes and the last sample.
+def frame_indices(
+    n_samples: int, max_frames: int = MAX_FRAMES, extra_samples: tuple[int, ...] = ()
+) -> NDArray[np.int64]:
+    """Sample indices of the frames: evenly strided, the thinned probes, the extra samples and the last one.
 
     Args:
         n_samples: Samples of the profile (>= 1).
         max_frames: Target number of strided frames (the probes, at most 41, come on top).
+        extra_samples: Samples shown in any case (the report's closest sample); those out of range ignored.
 
     Returns:
         Sorted unique indices, shape (F,), first 0 and last ``n_samples - 1``.
@@ -58,7 +62,8 @@ def frame_indices(n_samples: int, max_frames: int = MAX_FRAMES) -> NDArray[np.in
 
     stride = max(1, int(np.ceil(n_samples / max_frames)))
     probes = clearance_probe_indices(n_samples)
-    idx = np.concatenate([np.arange(0, n_samples, stride), probes, [n_samples - 1]])
+    extra = [k for k in extra_samples if 0 <= k < n_samples]
+    idx = np.concatenate([np.arange(0, n_samples, stride), probes, extra, [n_samples - 1]])
     return np.unique(idx.astype(np.int64))
 
 
@@ -139,14 +144,23 @@ def _context(sc: ResolvedScenario, world: CollisionWorld) -> dict[str, Any]:
         "bodies": _bodies(world),
         "has_cabin": sc.cabin is not None,
         "payload_body": "payload" if "payload" in world.names else None,
-        "clearance_m": float(sc.options.clearance_m),
+        # What the scenario asked for; the gate certified it plus the STEP tessellation's deviation
+        # (``certified_clearance_m``, equal without a STEP mesh) against the loaded triangles.
+        "clearance_m": float(sc.requested_clearance_m),
+        "certified_clearance_m": float(sc.options.clearance_m),
         "start": _pose(T_start),
         "goal": None if T_goal is None else _pose(T_goal),
         "approach": approach,
     }
 
 
-def plan_scene(sc: ResolvedScenario, joints: Array, t: Array, max_frames: int = MAX_FRAMES) -> dict[str, Any]:
+def plan_scene(
+    sc: ResolvedScenario,
+    joints: Array,
+    t: Array,
+    max_frames: int = MAX_FRAMES,
+    extra_samples: tuple[int, ...] = (),
+) -> dict[str, Any]:
     """The scene of a validated cabin8 plan.
 
     Args:
@@ -154,6 +168,7 @@ def plan_scene(sc: ResolvedScenario, joints: Array, t: Array, max_frames: int = 
         joints: Joint positions of every sample, (N, 8) [m, rad] (the profile's, recomputed from drives).
         t: Sample times (N,) [s].
         max_frames: See :func:`frame_indices`.
+        extra_samples: Samples shown in any case (the report's ``min_clearance_at.sample``).
 
     Returns:
         ``{"kind": "plan", bodies, limits, start, goal, approach, "frames": {"sample", "t_s", "R", "p_m",
@@ -165,7 +180,7 @@ def plan_scene(sc: ResolvedScenario, joints: Array, t: Array, max_frames: int = 
     if q.ndim != 2 or q.shape[1] != 8 or t.shape != (q.shape[0],) or q.shape[0] < 1:
         raise ValueError(f"joints (N, 8) and t (N,) expected, got {q.shape} and {t.shape}")
     world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
-    idx = frame_indices(q.shape[0], max_frames)
+    idx = frame_indices(q.shape[0], max_frames, extra_samples)
     qf = np.ascontiguousarray(q[idx])
     doc = _context(sc, world)
     frames = {"sample": idx.tolist(), "t_s": t[idx].tolist(), **_posed(world, qf)}

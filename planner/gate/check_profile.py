@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
 from planner.gate.checks import GateReport, validate_profile
 from planner.gate.requirements import requirements_for
@@ -31,5 +30,5 @@ def check_profile(sc: ResolvedScenario, document: dict[str, Any]) -> GateReport:
         )
     profile = DriveProfile.from_dict(document, sc.robot)
     payload = sc.payload.rigid_payload() if sc.payload is not None else None
-    world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
+    world = sc.world()
     return validate_profile(profile, sc.robot, world, requirements_for(sc, payload))

@@ -28,15 +28,28 @@ re-derives and checks:
                     the goal orientation (0.1 deg), from the pre-insertion pose to the goal;
 ``collision``       the polyline through the samples is certified to keep the requested clearance from the
                     cabin (and the self-clearance between bodies): between consecutive samples, not only
-                    at them (:meth:`CollisionWorld.check_path`).
+                    at them (:meth:`CollisionWorld.along`, :meth:`CollisionWorld.check_path` for the sag).
 
-A failed check never stops the others: the report lists every failure with its worst value and where.
+After the drive checks (:mod:`planner.gate.drive_checks`), the checks are :data:`CABIN8_CHECKS`, an ordered
+list of functions of (profile, context) -> Check. A failed check never stops the others: the report lists
+every failure with its worst value and where.
+
+The report's ``min_clearance_m`` is the smallest exact FCL distance of any body (payload included) to the
+cabin, or between two checked bodies, over *every* sample of the rigid robot (found by branch and bound on
+certified bounds, to within :data:`~planner.collision.along.CLEARANCE_TOL_M`; the value itself is the exact
+distance at ``min_clearance_at``), and ``min_clearance_bound_m`` a certified lower bound of it along the
+whole joint-space polyline, between samples included (:mod:`planner.collision.along`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
 import numpy as np
 
+from planner.collision.along import AlongReport, ClearanceAlong
+from planner.collision.reports import PathReport
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
@@ -68,6 +81,196 @@ from planner.robots.cabin8 import Cabin8
 from planner.timing.profile import DriveProfile
 
 
+@dataclass
+class GateContext:
+    """What cabin8's checks share for one profile: the inputs, and what one check derives for the next.
+
+    ``q`` (N, 8) are the joints of every sample (None when the parallel stage does not assemble somewhere:
+    ``workspace`` then fails and the checks that need joints fail as not evaluated); ``T_pay`` (N, 4, 4)
+    the payload frames; ``T_line_goal`` the goal of the insertion line (the commanded pose with deflection
+    compensation); ``clearance`` the smallest distance along the path (set by ``collision``).
+    """
+
+    robot: Cabin8
+    world: CollisionWorld
+    req: GateRequirements
+    dynamics: DriveDynamics | None
+    n: int
+    q: Array | None = None
+    workspace_error: OutsideWorkspace | None = None
+    T_pay: Array | None = None
+    T_line_goal: Array | None = None
+    clearance: ClearanceAlong | None = None
+    peaks: dict[str, float] = field(default_factory=dict)
+
+
+#: A check of the gate: a function of the profile and the shared context, giving its outcome (None: the
+#: check does not apply to this scenario).
+CheckFn = Callable[[DriveProfile, GateContext], Check | None]
+
+NOT_ASSEMBLED = "not evaluated: the parallel stage does not assemble"
+
+
+def workspace_check(profile: DriveProfile, ctx: GateContext) -> Check:
+    """``workspace``: every sample assembles on the working branch with every margin (limits, gaps)."""
+    if ctx.q is None:
+        exc = ctx.workspace_error
+        assert exc is not None
+        return Check("workspace", False, exc.message, None, exc.details.get("index"))
+    admissibility = ctx.world.model.admissibility  # the robot's constraints, as the world checks them
+    bad = ~admissibility.admissible_batch(ctx.q)
+    if bad.any():
+        i = int(np.argmax(bad))
+        names = ", ".join(v["name"] for v in admissibility.violations(ctx.q[i]))
+        return Check("workspace", False, f"sample {i} violates {names}", None, i)
+    return Check("workspace", True, "stage on its working branch with every margin at every sample")
+
+
+def on_path_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
+    """``on_path``: every sample lies on the certified geometric path (when the planner gives it)."""
+    if ctx.q is None or ctx.req.path_legs is None:
+        return None
+    dev = path_deviation(ctx.q, ctx.req.path_legs)
+    k = int(np.argmax(dev))
+    return Check(
+        "on_path",
+        float(dev[k]) <= PATH_DEVIATION_TOL,
+        f"samples off the certified path by at most {dev[k]:.3g} (joint space, sample {k})",
+        float(dev[k]),
+        k,
+    )
+
+
+def effort_check(profile: DriveProfile, ctx: GateContext) -> Check:
+    """``effort``: forces recomputed from the inverse dynamics match the reported ones, within limits."""
+    if ctx.q is None:
+        return Check("effort", False, NOT_ASSEMBLED)
+    robot, lim = ctx.robot, ctx.robot.limits
+    dyn = ctx.dynamics or drive_dynamics(robot)
+    assert dyn is not None, "this gate needs the robot's force model"
+    # q_dot = G^-1 u_dot, q_ddot = G^-1 (u_ddot - G_dot q_dot), exact (CasADi AD of the drive map).
+    qd, qdd = dyn.joint_rates_batch(ctx.q, profile.velocity, profile.acceleration)
+    tau = dyn.drive_forces_batch(ctx.q, qd, qdd, ctx.req.payload)
+    chk, ctx.peaks["effort"] = ratio_check("effort", tau, lim.effort_max, robot, "N or N m", ctx.n)
+    if profile.effort is None:
+        return Check("effort", False, "the profile carries no forces", chk.worst, chk.sample)
+    mismatch = float(np.max(np.abs(tau - profile.effort) / lim.effort_max[None, :]))
+    return Check(
+        "effort",
+        chk.passed and mismatch <= LIMIT_TOLERANCE,
+        chk.detail + f"; reported vs recomputed differ by {100 * mismatch:.2f}% of the limit",
+        chk.worst,
+        chk.sample,
+    )
+
+
+def goal_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
+    """``goal``: the final pose is the goal (compensated: the commanded pose, and its sag the request)."""
+    req, n = ctx.req, ctx.n
+    if ctx.q is None:
+        return Check("goal", False, NOT_ASSEMBLED)
+    ctx.T_pay = ctx.robot.fk_batch(ctx.q) @ req.T_tool_payload
+    T_pay = ctx.T_pay
+    ctx.T_line_goal = req.T_base_payload_goal
+    if req.T_base_payload_goal is not None and req.compensate_deflection:
+        chk, ctx.T_line_goal = _compensated_goal_check(ctx.q[-1], T_pay[-1], ctx.robot, req, n)
+        return chk
+    if req.T_base_payload_goal is not None:
+        Tg = req.T_base_payload_goal
+        dp = float(np.linalg.norm(T_pay[-1][:3, 3] - Tg[:3, 3]))
+        da = float(np.linalg.norm(rotation_log(Tg[:3, :3].T @ T_pay[-1][:3, :3])))
+        return Check(
+            "goal",
+            dp <= GOAL_POSITION_TOL_M and da <= GOAL_ANGLE_TOL_RAD,
+            f"final payload pose off by {1e3 * dp:.3f} mm, {np.rad2deg(da):.4f} deg",
+            dp,
+            n - 1,
+        )
+    if req.goal_u is not None:
+        e = float(np.max(np.abs(profile.position[-1] - req.goal_u)))
+        return Check("goal", e <= 1e-6, f"final drives off by {e:.3g}", e, n - 1)
+    return None
+
+
+def approach_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
+    """``approach``: on the insertion line, with the goal orientation, from the pre-insertion pose on."""
+    req = ctx.req
+    if req.approach_direction is None or req.T_base_payload_goal is None:
+        return None
+    if ctx.T_pay is None:
+        return Check("approach", False, NOT_ASSEMBLED)
+    return _approach_check(ctx.T_pay, req, ctx.T_line_goal)
+
+
+def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
+    """``collision``: the polyline through the samples keeps the clearance, rigid and sagging.
+
+    The rigid robot's polyline is certified in one batched pass (:meth:`CollisionWorld.along`; pieces the
+    bounds cannot cover are walked by the certified motion check), which also gives the report's
+    smallest distance (exact over every sample, certified between them); with a payload and stiffness
+    data, the robot sagging under its predicted static deflection by :meth:`CollisionWorld.check_path`.
+    """
+    if ctx.q is None:
+        return Check("collision", False, NOT_ASSEMBLED)
+    req, world, robot = ctx.req, ctx.world, ctx.robot
+    along = world.along(ctx.q)
+    rep = along.certify(req.clearance_m, world.self_clearance, req.motion_margin_m)
+    if world.cabin is not None:
+        ctx.clearance = along.clearance()
+    failed: AlongReport | PathReport = rep
+    if rep.valid and world.obstacles is not None:
+        # The batched bounds cover the cabin and the robot's pairs only: the obstacles (installed units,
+        # fixtures) are certified by the motion walk over every piece of the polyline.
+        failed = world.check_path(
+            ctx.q, req.clearance_m, req.motion_margin_m, max_run=GATE_MAX_RUN, max_extra_m=GATE_MAX_EXTRA_M
+        )
+    if not failed.valid:
+        what = "; ".join(c.detail for c in failed.contacts) or "not certified"
+        return Check(
+            "collision",
+            False,
+            f"between samples {failed.first_bad} and later: {what}",
+            None,
+            failed.first_bad,
+        )
+    done = (
+        f"certified clearance >= {req.clearance_m} m along the whole polyline ({rep.exact_queries} exact "
+        f"distances, {rep.walked} pieces walked)"
+    )
+    if not (req.deflection_check and robot.desc.stiffness is not None):
+        return Check("collision", True, done)
+    q_def, sag = deflected_joints(robot, ctx.q, req.payload, req.T_tool_payload)
+    rep_def = world.check_path(
+        q_def, req.clearance_m, req.motion_margin_m, max_run=GATE_MAX_RUN, max_extra_m=GATE_MAX_EXTRA_M
+    )
+    if rep_def.valid:
+        return Check(
+            "collision",
+            True,
+            f"{done}, and sagging (up to {1e3 * sag:.2f} mm) over {rep_def.motion_checks} runs",
+        )
+    what = "; ".join(c.detail for c in rep_def.contacts) or "not certified"
+    return Check(
+        "collision",
+        False,
+        f"with the predicted sag (up to {1e3 * sag:.2f} mm), between samples {rep_def.first_bad} and "
+        f"later: {what}",
+        None,
+        rep_def.first_bad,
+    )
+
+
+#: cabin8's checks after the drive checks, in order (each a function of the profile and the context).
+CABIN8_CHECKS: tuple[CheckFn, ...] = (
+    workspace_check,
+    on_path_check,
+    effort_check,
+    goal_check,
+    approach_check,
+    collision_check,
+)
+
+
 def validate_profile(
     profile: DriveProfile,
     robot: Cabin8,
@@ -75,150 +278,44 @@ def validate_profile(
     req: GateRequirements,
     dynamics: DriveDynamics | None = None,
 ) -> GateReport:
-    """Run every check of the gate on a sampled profile (see the module docstring)."""
+    """Run every check of the gate on a sampled profile (see the module docstring).
+
+    The robot-independent drive checks (:func:`~planner.gate.drive_checks.drive_checks`), then
+    :data:`CABIN8_CHECKS` in order. The report's ``min_clearance_m`` is the exact smallest distance over
+    every sample (to within :data:`~planner.collision.along.CLEARANCE_TOL_M`), ``min_clearance_bound_m``
+    the certified lower bound along the polyline between samples, ``min_clearance_at`` where and between
+    which bodies (infinite, None without a cabin).
+    """
     checks, peaks = drive_checks(profile, robot, req.start_u, req.sample_period_s, req.jerk_limited)
     n = len(profile.t)
     if not checks[0].passed:  # not finite: nothing else can be evaluated
         return GateReport(tuple(checks), n, float("nan"), {})
-    lim = robot.limits
-    u, ud, udd, eff = profile.position, profile.velocity, profile.acceleration, profile.effort
-    # Workspace and margins at every sample. A sample that does not assemble leaves no joint trajectory:
-    # the checks that need one fail as not evaluated, the drive-space checks still run.
-    q: Array | None = None
+    ctx = GateContext(robot, world, req, dynamics, n, peaks=peaks)
     try:
-        q = robot.joints_from_drives(u)
+        ctx.q = robot.joints_from_drives(profile.position)
     except OutsideWorkspace as exc:
-        checks.append(Check("workspace", False, exc.message, None, exc.details.get("index")))
-    if q is not None:
-        admissibility = world.model.admissibility  # the robot's constraints, as the world checks them
-        bad = ~admissibility.admissible_batch(q)
-        if bad.any():
-            i = int(np.argmax(bad))
-            names = ", ".join(v["name"] for v in admissibility.violations(q[i]))
-            checks.append(Check("workspace", False, f"sample {i} violates {names}", None, i))
-        else:
-            checks.append(
-                Check("workspace", True, "stage on its working branch with every margin at every sample")
-            )
-    if q is not None and req.path_legs is not None:
-        dev = path_deviation(q, req.path_legs)
-        k = int(np.argmax(dev))
-        checks.append(
-            Check(
-                "on_path",
-                float(dev[k]) <= PATH_DEVIATION_TOL,
-                f"samples off the certified path by at most {dev[k]:.3g} (joint space, sample {k})",
-                float(dev[k]),
-                k,
-            )
-        )
-    if q is None:
-        missing = ["effort", "goal", "collision"]
-        if req.approach_direction is not None and req.T_base_payload_goal is not None:
-            missing.insert(2, "approach")
-        for name in missing:
-            checks.append(Check(name, False, "not evaluated: the parallel stage does not assemble"))
-        return GateReport(tuple(checks), n, float("nan"), peaks)
-    # Efforts: recomputed independently from the joint motion implied by the drive motion.
-    dyn = dynamics or drive_dynamics(robot)
-    assert dyn is not None, "this gate needs the robot's force model"
-    # q_dot = G^-1 u_dot, q_ddot = G^-1 (u_ddot - G_dot q_dot), exact (CasADi AD of the drive map).
-    qd, qdd = dyn.joint_rates_batch(q, ud, udd)
-    tau = dyn.drive_forces_batch(q, qd, qdd, req.payload)
-    chk, peaks["effort"] = ratio_check("effort", tau, lim.effort_max, robot, "N or N m", n)
-    if eff is None:
-        checks.append(Check("effort", False, "the profile carries no forces", chk.worst, chk.sample))
-    else:
-        mismatch = float(np.max(np.abs(tau - eff) / lim.effort_max[None, :]))
-        checks.append(
-            Check(
-                "effort",
-                chk.passed and mismatch <= LIMIT_TOLERANCE,
-                chk.detail + f"; reported vs recomputed differ by {100 * mismatch:.2f}% of the limit",
-                chk.worst,
-                chk.sample,
-            )
-        )
-    # Goal.
-    T_tool = robot.fk_batch(q)
-    T_pay = T_tool @ req.T_tool_payload
-    T_line_goal = req.T_base_payload_goal
-    if req.T_base_payload_goal is not None and req.compensate_deflection:
-        chk, T_line_goal = _compensated_goal_check(q[-1], T_pay[-1], robot, req, n)
-        checks.append(chk)
-    elif req.T_base_payload_goal is not None:
-        Tg = req.T_base_payload_goal
-        dp = float(np.linalg.norm(T_pay[-1][:3, 3] - Tg[:3, 3]))
-        da = float(np.linalg.norm(rotation_log(Tg[:3, :3].T @ T_pay[-1][:3, :3])))
-        checks.append(
-            Check(
-                "goal",
-                dp <= GOAL_POSITION_TOL_M and da <= GOAL_ANGLE_TOL_RAD,
-                f"final payload pose off by {1e3 * dp:.3f} mm, {np.rad2deg(da):.4f} deg",
-                dp,
-                n - 1,
-            )
-        )
-    if req.goal_u is not None:
-        e = float(np.max(np.abs(u[-1] - req.goal_u)))
-        checks.append(Check("goal", e <= 1e-6, f"final drives off by {e:.3g}", e, n - 1))
-    # Approach line.
-    if req.approach_direction is not None and req.T_base_payload_goal is not None:
-        checks.append(_approach_check(T_pay, req, T_line_goal))
-    # Collision: certified between consecutive samples, for the rigid robot and (with a payload and
-    # stiffness data) for the robot sagging under its predicted static deflection.
-    rep = world.check_path(
-        q, req.clearance_m, req.motion_margin_m, max_run=GATE_MAX_RUN, max_extra_m=GATE_MAX_EXTRA_M
-    )
-    if rep.valid and req.deflection_check and robot.desc.stiffness is not None:
-        q_def, sag = deflected_joints(robot, q, req.payload, req.T_tool_payload)
-        rep_def = world.check_path(
-            q_def, req.clearance_m, req.motion_margin_m, max_run=GATE_MAX_RUN, max_extra_m=GATE_MAX_EXTRA_M
-        )
-        if rep_def.valid:
-            checks.append(
-                Check(
-                    "collision",
-                    True,
-                    f"certified clearance >= {req.clearance_m} m over {rep.motion_checks} runs, rigid and "
-                    f"sagging (up to {1e3 * sag:.2f} mm) alike",
-                )
-            )
-        else:
-            what = "; ".join(c.detail for c in rep_def.contacts) or "not certified"
-            checks.append(
-                Check(
-                    "collision",
-                    False,
-                    f"with the predicted sag (up to {1e3 * sag:.2f} mm), between samples {rep_def.first_bad} "
-                    f"and later: {what}",
-                    None,
-                    rep_def.first_bad,
-                )
-            )
-    elif rep.valid:
-        checks.append(
-            Check(
-                "collision", True, f"certified clearance >= {req.clearance_m} m over {rep.motion_checks} runs"
-            )
-        )
-    else:
-        what = "; ".join(c.detail for c in rep.contacts) or "not certified"
-        checks.append(
-            Check(
-                "collision", False, f"between samples {rep.first_bad} and later: {what}", None, rep.first_bad
-            )
-        )
-    probe = clearance_probe_indices(n)
-    min_c = float(np.min(world.clearance_profile(q[probe]))) if world.cabin is not None else float("inf")
-    return GateReport(tuple(checks), n, min_c, peaks)
+        ctx.workspace_error = exc
+    for check in CABIN8_CHECKS:
+        result = check(profile, ctx)
+        if result is not None:
+            checks.append(result)
+    c = ctx.clearance
+    if c is None:
+        return GateReport(tuple(checks), n, float("inf") if ctx.q is not None else float("nan"), peaks)
+    where = {
+        "t_s": float(profile.t[c.sample]),
+        "sample": c.sample,
+        "bodies": list(c.bodies),
+        "tolerance_m": c.tolerance_m,
+    }
+    return GateReport(tuple(checks), n, c.distance_m, peaks, c.bound_m, where)
 
 
 def clearance_probe_indices(n: int) -> IntArray:
-    """Samples (sorted, unique) on which the report's ``min_clearance_m`` is measured.
+    """Every ``n // 40``-th sample and the last one (sorted, unique): a thinned set of samples.
 
-    Every ``n // 40``-th sample and the last one: exact FCL distances are milliseconds each, and the
-    certified collision check, not this figure, is what guarantees the clearance between them.
+    The report's ``min_clearance_m`` was measured on these before it became the minimum over every sample;
+    the operator viewer still includes them among its frames.
     """
     return np.unique(np.concatenate([np.arange(0, n, max(1, n // 40)), [n - 1]])).astype(np.int64)
 

@@ -47,8 +47,14 @@ class GateReport:
 
     checks: tuple[Check, ...]
     samples: int
+    #: The smallest exact distance over every sample [m] (any body to the cabin, or two checked bodies).
     min_clearance_m: float
     peak_ratios: dict[str, float]
+    #: Certified lower bound [m] of that distance along the polyline through the samples, between them.
+    min_clearance_bound_m: float | None = None
+    #: Where ``min_clearance_m`` is: ``{"t_s", "sample", "bodies": [a, b], "tolerance_m"}`` (b "cabin" for
+    #: the cabin; no sample's exact distance is below ``min_clearance_m`` by more than ``tolerance_m``).
+    min_clearance_at: dict[str, Any] | None = None
 
     @property
     def passed(self) -> bool:
@@ -66,6 +72,8 @@ class GateReport:
             "passed": bool(self.passed),
             "samples": self.samples,
             "min_clearance_m": self.min_clearance_m,
+            "min_clearance_bound_m": self.min_clearance_bound_m,
+            "min_clearance_at": self.min_clearance_at,
             "peak_ratios": self.peak_ratios,
             "checks": [c.to_dict() for c in self.checks],
         }

@@ -64,6 +64,9 @@ def validate_and_build(
     *,
     n_parts: int,
     n_ignored: int,
+    file_units: str | None = None,
+    tessellation_tolerance_m: float | None = None,
+    surface_deviation_m: float = 0.0,
 ) -> LoadedMesh:
     """Steps 5-6 of the pipeline of :func:`~planner.meshio.load_mesh` on metre-scaled, mesh-frame arrays."""
     n_read = len(faces)
@@ -87,7 +90,7 @@ def validate_and_build(
     if len(used):
         corners = vertices[used.reshape(-1)]
         extent = corners.max(axis=0) - corners.min(axis=0)
-        _check_scale(label, units, float(extent.max()), limits)
+        _check_scale(label, units, float(extent.max()), limits, hint=kind != "step")
         tri = vertices[used]
         with np.errstate(all="ignore"):
             area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
@@ -150,6 +153,9 @@ def validate_and_build(
         bounds_min_m=_triple(base_vertices.min(axis=0)),
         bounds_max_m=_triple(base_vertices.max(axis=0)),
         surface_area_m2=float(kept_area.sum()),
+        file_units=file_units,
+        tessellation_tolerance_m=tessellation_tolerance_m,
+        surface_deviation_m=surface_deviation_m,
         **counts,
     )
     _LOG.info(
@@ -170,16 +176,21 @@ def validate_and_build(
     )
 
 
-def _check_scale(label: str, units: str, extent_m: float, limits: MeshLimits) -> None:
-    """Refuse meshes whose size is implausible for the declared units, with a hint at the likely fix."""
+def _check_scale(label: str, units: str, extent_m: float, limits: MeshLimits, *, hint: bool = True) -> None:
+    """Refuse meshes whose size is implausible for the declared units, with a hint at the likely fix.
+
+    No hint for a file that declares its own units (STEP): they are not the caller's to change.
+    """
     if limits.min_extent_m <= extent_m <= limits.max_extent_m:
         return
     too_big = extent_m > limits.max_extent_m
-    hint = ""
-    if too_big and units == "m" and limits.min_extent_m <= extent_m * 1e-3 <= limits.max_extent_m:
-        hint = " -- did you mean mm?"
+    why = ""
+    if not hint:
+        why = f" (the file's own units are {units})"
+    elif too_big and units == "m" and limits.min_extent_m <= extent_m * 1e-3 <= limits.max_extent_m:
+        why = " -- did you mean mm?"
     elif not too_big and units == "mm" and limits.min_extent_m <= extent_m * 1e3 <= limits.max_extent_m:
-        hint = " -- did you mean m?"
+        why = " -- did you mean m?"
     bound = (
         f"above the maximum {limits.max_extent_m} m"
         if too_big
@@ -188,7 +199,7 @@ def _check_scale(label: str, units: str, extent_m: float, limits: MeshLimits) ->
     fail(
         label,
         "scale",
-        f"largest extent {extent_m:.6g} m (declared units {units!r}) is {bound}{hint}",
+        f"largest extent {extent_m:.6g} m (declared units {units!r}) is {bound}{why}",
         extent_m=extent_m,
         units=units,
         min_extent_m=limits.min_extent_m,

@@ -15,7 +15,7 @@ import struct
 from pathlib import Path
 from typing import Any, NoReturn
 
-from planner.meshio.types import SUPPORTED_EXTENSIONS, MeshLimits, MeshSource, error, fail
+from planner.meshio.types import STEP_EXTENSIONS, SUPPORTED_EXTENSIONS, MeshLimits, MeshSource, error, fail
 
 _STL_HEADER_BYTES = 84
 _STL_RECORD_BYTES = 50
@@ -82,6 +82,8 @@ def read_bytes(label: str, source: MeshSource, limits: MeshLimits) -> bytes:
 def _looks_like(data: bytes) -> str:
     """Best guess of what a blob is, for 'content does not match the extension' messages."""
     head = data[:512].lstrip()
+    if head.lstrip(b"\xef\xbb\xbf").startswith(b"ISO-10303-21;"):
+        return "STEP"
     if data[:4] == _GLB_MAGIC:
         return "GLB"
     if head[:3] == b"ply" and head[3:4] in (b"\n", b"\r"):
@@ -124,10 +126,15 @@ def sniff(label: str, fmt: str, data: bytes, limits: MeshLimits) -> str:
     """Check that the content is the format the extension claims; check header counts. Returns the kind."""
     if fmt == "stl":
         return _sniff_stl(label, data, limits)
+    if fmt in STEP_EXTENSIONS:
+        # The worker checks the rest (terminator, entities, references) before OpenCASCADE reads it.
+        if _looks_like(data) != "STEP":
+            _mismatch(label, fmt, data, "a STEP file starts with 'ISO-10303-21;'")
+        return "step"
     if fmt == "obj":
         if b"\x00" in data:
             _mismatch(label, fmt, data, "OBJ is a text format")
-        if _looks_like(data) in ("GLB", "PLY", "glTF JSON", "ASCII STL"):
+        if _looks_like(data) in ("GLB", "PLY", "glTF JSON", "ASCII STL", "STEP"):
             _mismatch(label, fmt, data, "not OBJ text")
         n_face_lines = data.count(b"\nf ") + int(data.startswith(b"f "))
         if n_face_lines > limits.max_faces:
@@ -180,7 +187,7 @@ def _sniff_stl(label: str, data: bytes, limits: MeshLimits) -> str:
             )
         return "stl-ascii"
     found = _looks_like(data)
-    if found in ("GLB", "PLY", "glTF JSON", "text") or len(data) < _STL_HEADER_BYTES:
+    if found in ("GLB", "PLY", "glTF JSON", "STEP", "text") or len(data) < _STL_HEADER_BYTES:
         _mismatch(label, "stl", data, "neither an ASCII STL ('solid' text) nor a binary STL")
     (declared,) = struct.unpack_from("<I", data, 80)
     if declared > limits.max_faces:

@@ -26,7 +26,19 @@ Units = Literal["m", "mm"]
 UNIT_SCALE_M: Mapping[str, float] = {"m": 1.0, "mm": 1e-3}
 
 #: File extensions (lower case, no dot) that :func:`~planner.meshio.load_mesh` accepts.
-SUPPORTED_EXTENSIONS: tuple[str, ...] = ("stl", "obj", "ply", "glb", "gltf")
+SUPPORTED_EXTENSIONS: tuple[str, ...] = ("stl", "obj", "ply", "glb", "gltf", "step", "stp")
+#: The extensions of STEP (ISO 10303-21) files: exact B-rep geometry, tessellated on load
+#: (:mod:`planner.meshio.step`).
+STEP_EXTENSIONS: tuple[str, ...] = ("step", "stp")
+
+#: Default chordal tolerance of a STEP tessellation [m]: the tessellated surface lies within this distance
+#: of the exact one (OpenCASCADE's linear deflection). 0.1 mm: a hundredth of the default 10 mm clearance,
+#: and a 1 m radius cylinder still tessellates to about 450 triangles around.
+DEFAULT_TESSELLATION_TOLERANCE_M = 1e-4
+#: Bounds of the tessellation tolerance [m]: below 1 um a curved CAD part tessellates to millions of
+#: triangles; above 10 mm the tessellation no longer resembles the part.
+MIN_TESSELLATION_TOLERANCE_M = 1e-6
+MAX_TESSELLATION_TOLERANCE_M = 1e-2
 
 #: A path, or the file's raw bytes.
 MeshSource = str | os.PathLike[str] | bytes | bytearray | memoryview
@@ -45,6 +57,8 @@ class MeshLimits:
         min_face_area_m2: Faces whose area is at most this [m^2] count as zero-area (degenerate).
         max_extent_m: Largest accepted extent [m] of the mesh's axis-aligned box after unit conversion.
         min_extent_m: Smallest accepted extent [m] (the largest side of the box must reach it).
+        step_timeout_s: Wall-clock limit [s] of a STEP file's read and tessellation (in a worker process).
+        step_memory_bytes: Address-space limit [bytes] of that worker process.
     """
 
     max_bytes: int = 200_000_000
@@ -54,9 +68,11 @@ class MeshLimits:
     min_face_area_m2: float = 1e-12
     max_extent_m: float = 200.0
     min_extent_m: float = 1e-3
+    step_timeout_s: float = 60.0
+    step_memory_bytes: int = 4 * 1024**3
 
     def __post_init__(self) -> None:
-        for name in ("max_bytes", "max_faces", "max_vertices"):
+        for name in ("max_bytes", "max_faces", "max_vertices", "step_memory_bytes"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise InvalidInput(f"MeshLimits.{name} must be a positive integer, got {value!r}", field=name)
@@ -75,6 +91,11 @@ class MeshLimits:
                 "MeshLimits needs 0 < min_extent_m < max_extent_m < inf, got "
                 f"{self.min_extent_m} and {self.max_extent_m}",
                 field="min_extent_m",
+            )
+        if not (math.isfinite(self.step_timeout_s) and self.step_timeout_s > 0.0):
+            raise InvalidInput(
+                f"MeshLimits.step_timeout_s must be finite and > 0, got {self.step_timeout_s}",
+                field="step_timeout_s",
             )
 
 
@@ -101,6 +122,13 @@ class MeshReport:
         bounds_min_m: Lower corner of the axis-aligned box in the base frame (after the pose) [m], (3,).
         bounds_max_m: Upper corner of that box [m], (3,).
         surface_area_m2: Total area of the kept faces [m^2].
+        file_units: Length units the file itself declares (STEP: every unit its contexts declare, e.g.
+            ``"mm"`` or ``"inch"``); ``None`` for formats without declared units.
+        tessellation_tolerance_m: STEP: the chordal tolerance the exact surfaces were tessellated with
+            [m]; ``None`` for triangle formats.
+        surface_deviation_m: Bound of the distance between the loaded triangles and the surface the file
+            describes [m]: the tessellation tolerance plus the float32 rounding of the tessellated
+            vertices for STEP; 0.0 for triangle formats (their triangles *are* the surface).
     """
 
     source: str
@@ -121,6 +149,9 @@ class MeshReport:
     bounds_min_m: tuple[float, float, float]
     bounds_max_m: tuple[float, float, float]
     surface_area_m2: float
+    file_units: str | None = None
+    tessellation_tolerance_m: float | None = None
+    surface_deviation_m: float = 0.0
 
     @property
     def n_dropped_degenerate(self) -> int:
@@ -153,7 +184,8 @@ class LoadedMesh:
     Attributes:
         name: Source file name.
         sha256: SHA-256 (hex) of the file's bytes, for provenance.
-        units: Units the file was declared in (the arrays are always in metres).
+        units: Units the file was declared in (the arrays are always in metres); for STEP the units the
+            file itself declares.
         vertices: Vertex positions in the base frame [m], shape (V, 3), float64, read-only.
         faces: Vertex indices of each triangle, shape (F, 3), int64, read-only; F >= 1.
         T_base_mesh: The pose applied on load (mesh frame in the base frame), shape (4, 4), read-only.
@@ -179,6 +211,11 @@ class LoadedMesh:
     def bounds_m(self) -> Array:
         """Axis-aligned box in the base frame, shape (2, 3): rows are the lower and upper corner [m]."""
         return np.array([self.report.bounds_min_m, self.report.bounds_max_m])
+
+    @property
+    def surface_deviation_m(self) -> float:
+        """How far the loaded triangles may lie from the surface the file describes [m] (0 for meshes)."""
+        return self.report.surface_deviation_m
 
     def to_trimesh(self) -> trimesh.Trimesh:
         """A fresh :class:`trimesh.Trimesh` copy (no processing, so faces keep their order)."""

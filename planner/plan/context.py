@@ -16,7 +16,7 @@ import numpy as np
 
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
-from planner.core.types import Array
+from planner.core.types import Array, IntArray
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.gate.requirements import timing_of
@@ -164,6 +164,8 @@ class PlanContext:
     t0: float = 0.0
     report: dict[str, Any] = field(default_factory=lambda: {"stages_s": {}})
     last_tick: float = 0.0
+    #: The leg index (N,) of every sample of the last profile the timing stage sampled (None before).
+    leg_of: IntArray | None = None
 
     @classmethod
     def build(
@@ -179,7 +181,7 @@ class PlanContext:
         ctx = cls(
             sc=sc,
             robot=sc.robot,
-            world=CollisionWorld(sc.robot, sc.cabin, sc.payload),
+            world=sc.world(),
             dynamics=dynamics,
             payload=payload,
             forces=StaticForceCheck(dynamics, payload),

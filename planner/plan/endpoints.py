@@ -104,7 +104,8 @@ def check_sagging(ctx: PlanContext, q: Array, what: str) -> None:
     what_fails = rep.contacts[0].detail if rep.contacts else "no certified clearance"
     if rep.contacts and not limits:  # the exact distance of the closest bodies, against the one required
         d = world.min_distance(q_at, include_self=rep.contacts[0].kind == "self")
-        required = (c.requested_m if d.bodies[1] == "cabin" else own) + margin
+        env = world.is_environment(d.bodies[1])
+        required = (c.requested_m if env else own) + margin
         other = "the cabin" if d.bodies[1] == "cabin" else d.bodies[1]
         what_fails = (
             f"{d.bodies[0]} {1e3 * d.distance_m:.1f} mm from {other}, {1e3 * required:.1f} mm required (the "

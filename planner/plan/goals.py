@@ -92,14 +92,14 @@ def collision_evidence(
     cabin_required = float(required_m) + margin_m
     pair_required = world.self_clearance + margin_m
     closest = world.min_distance(q)  # the smallest distance of either kind
-    if closest.bodies[1] == "cabin":
+    if world.is_environment(closest.bodies[1]):
         records = [(closest, cabin_required)]
         # Every pair is at least that far: it can be further short only of a larger requirement.
         if pair_required > cabin_required:
             records.append((world.min_distance(q, include_cabin=False), pair_required))
     else:
         records = [(closest, pair_required)]
-        if world.cabin is not None:
+        if world.cabin is not None or world.obstacles is not None:
             records.append((world.min_distance(q, include_self=False), cabin_required))
     d, required = min(records, key=lambda r: r[0].distance_m - r[1])
     return {

@@ -69,10 +69,10 @@ def spare_clearance(world: CollisionWorld, q: Array, clearance: float) -> float:
     beyond the world's self-clearance, whichever is smaller.
     """
     spare = np.inf
-    if world.cabin is not None:
+    if world.cabin is not None or world.obstacles is not None:
         spare = world.min_distance(q, include_self=False).distance_m - clearance
     pair = world.min_distance(q, include_self=True)
-    if pair.bodies[1] != "cabin":
+    if not world.is_environment(pair.bodies[1]):
         spare = min(spare, pair.distance_m - world.self_clearance)
     return float(spare)
 

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from planner.core.types import Array
+from planner.core.types import Array, IntArray
 from planner.gate.checks import GateReport
 from planner.gate.requirements import requirements_for
 from planner.plan.compensate import compensate_targets
@@ -51,6 +51,9 @@ class PlanResult:
     waypoints: Array = field(repr=False)
     #: Predicted static deflection of the payload frame at every sample (N, 6), or None (no stiffness data).
     deflection: Array | None = field(default=None, repr=False)
+    #: The leg index of every sample (N,): the legs of ``report["leg_durations_s"]``, the insertion line
+    #: (with an approach) the last.
+    leg_of: IntArray | None = field(default=None, repr=False)
 
 
 def run_stages(ctx: PlanContext) -> PlanResult:
@@ -91,7 +94,7 @@ def run_stages(ctx: PlanContext) -> PlanResult:
     duration_report(ctx, profile, line)
     ctx.report["planning_time_s"] = ctx.elapsed()
     ctx.progress("done", 1.0)
-    return PlanResult(profile, gate, ctx.report, waypoints, deflection)
+    return PlanResult(profile, gate, ctx.report, waypoints, deflection, ctx.leg_of)
 
 
 def _insertion_leg(ctx: PlanContext, line: Array, line_s: Array) -> JointPath:

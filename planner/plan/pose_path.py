@@ -11,11 +11,9 @@ pprs6 has no force model; TOPP-RA alone for a description without jerk limits) o
 intervals, and the legs are sampled one after the other at the controller
 period by the shared sampler (:func:`~planner.timing.profile.sample_legs`).
 
-The gate (:func:`validate`) runs the robot-independent drive checks of every profile
-(:func:`~planner.gate.drive_checks.drive_checks`: finite, time, start, end at rest, position, velocity,
-acceleration with the executed dv/dt, jerk, consistency) and pprs6's own: the forward kinematics (Newton, from
-the previous samples' pose) of every sample on its leg of the pose path within 1e-6 (m, rad), start and
-end poses within 1e-9, and the singularity measure (condition number) below the path's bound.
+The gate is pprs6's room of the one gate (:func:`planner.gate.pprs6.validate`, re-exported here): the
+robot-independent drive checks of every profile, then the pose path followed within 1e-6 (m, rad), start
+and end poses within 1e-9, and the singularity measure below the path's bound.
 """
 
 from __future__ import annotations
@@ -28,7 +26,8 @@ import numpy as np
 
 from planner.core.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
 from planner.core.types import Array, IntArray
-from planner.gate.drive_checks import Check, GateReport, drive_checks
+from planner.gate.drive_checks import GateReport
+from planner.gate.pprs6 import validate
 from planner.kinematics import pprs6 as kin
 from planner.robots.pprs6 import Pprs6
 from planner.timing.jerk import JerkLimitedStage
@@ -236,71 +235,3 @@ def build_profile(
     if not gate.passed:
         raise ValidationFailed(f"the drive profile failed the gate: {gate.summary()}", report=gate.to_dict())
     return Pprs6Profile(path, profile, leg, poses, gate)
-
-
-def _segment_distance(x: Array, a: Array, b: Array, weights: Array) -> Array:
-    """Distance of poses x (N, 6) from the segment a-b, in the weighted pose metric."""
-    d = (b - a) * weights
-    rel = (x - a) * weights
-    t = np.clip(rel @ d / float(d @ d), 0.0, 1.0)
-    return np.asarray(np.linalg.norm(rel - t[:, None] * d, axis=1))
-
-
-def validate(
-    robot: Pprs6, path: PosePath, profile: DriveProfile, leg: IntArray, period_s: float
-) -> tuple[GateReport, Array]:
-    """The validation gate of a sampled profile (see the module docstring); returns (report, poses)."""
-    start_u = robot.ik(path.waypoints[0])
-    checks, peaks = drive_checks(profile, robot, start_u, period_s)
-    n = len(profile.t)
-    if not checks[0].passed:
-        return GateReport(tuple(checks), n, float("nan"), peaks), np.zeros((0, 6))
-    # Forward kinematics of every sample, each leg tracked from its start waypoint, sample after sample.
-    poses = _track_fk(robot, path, profile.position)
-    weights = np.array([1.0, 1.0, 1.0, robot.geometry.r, robot.geometry.r, robot.geometry.r])
-    dev = np.zeros(n)
-    for k in range(path.n_legs):
-        m = leg == k
-        dev[m] = _segment_distance(poses[m], path.waypoints[k], path.waypoints[k + 1], weights)
-    worst = float(np.max(dev))
-    checks.append(
-        Check(
-            "pose_path_followed",
-            worst <= POSE_PATH_TOL,
-            f"forward kinematics off the pose path by at most {worst:.3g} (m, weighted rad)",
-            worst,
-            int(np.argmax(dev)),
-        )
-    )
-    ends = max(
-        float(np.max(np.abs(poses[0] - path.waypoints[0]))),
-        float(np.max(np.abs(poses[-1] - path.waypoints[-1]))),
-    )
-    checks.append(Check("start_and_end_poses", ends <= 1e-9, f"end poses off by {ends:.3g}", ends))
-    cond = robot.condition_number(poses)
-    checks.append(
-        Check(
-            "singularity",
-            float(np.max(cond)) <= path.max_condition,
-            f"condition number at most {float(np.max(cond)):.3g} (bound {path.max_condition:.3g})",
-            float(np.max(cond)),
-            int(np.argmax(cond)),
-        )
-    )
-    return GateReport(tuple(checks), n, float("nan"), peaks), poses
-
-
-#: How far the forward kinematics of a sample may lie off its leg of the pose path (m, weighted rad).
-POSE_PATH_TOL = 1e-6
-
-
-def _track_fk(robot: Pprs6, path: PosePath, u: Array) -> Array:
-    """FK of every sample (N, 6 drives), Newton started from the pose of the sample before its batch of 25."""
-    out = np.empty_like(u)
-    stride = 25  # samples solved together from the same start (within a few mm of each other)
-    guess = path.waypoints[0]
-    for i0 in range(0, len(u), stride):
-        block = u[i0 : i0 + stride]
-        out[i0 : i0 + stride] = kin.forward_or_raise(robot.geometry, block, [guess])
-        guess = out[min(i0 + stride, len(u)) - 1]
-    return out

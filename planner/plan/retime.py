@@ -55,7 +55,9 @@ def time_and_validate(
             "duration_s": round(sum(tl.duration for tl in timed), 6),
         }
         ctx.progress("sample", 0.85)
-        profile, _ = sample_legs(ctx.robot, timed, ctx.opts.sample_period_s, ctx.payload, ctx.dynamics)
+        profile, ctx.leg_of = sample_legs(
+            ctx.robot, timed, ctx.opts.sample_period_s, ctx.payload, ctx.dynamics
+        )
         ctx.progress("validate", 0.9)
         t2 = time.perf_counter()
         gate = validate_profile(profile, ctx.robot, ctx.world, req, ctx.dynamics)

@@ -17,6 +17,8 @@ from typing import Any, Literal
 import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
+from planner.collision.obstacles import Obstacle
+from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
 from planner.core.types import Array
 from planner.meshes import reference_cabin_path, reference_cabins
@@ -60,8 +62,17 @@ class ResolvedScenario:
             (4x4; equal to the payload goal without a payload), else ``None``.
         approach_direction: Unit direction (3,) of the final straight motion in the base frame, or ``None``.
         approach_distance_m: Length of that motion [m]; 0.0 without an approach.
-        options: Planning options.
+        options: Planning options: the scenario's, with ``clearance_m`` raised by
+            ``surface_deviation_m`` (what every stage and the gate certify against the loaded triangles).
         scenario_sha256: :func:`scenario_hash` of ``spec``.
+        obstacles: The cabin state: fixed bodies added to the cabin (installed units, fixtures), each
+            compared by clearance like the cabin (:mod:`planner.collision.obstacles`); () for a scenario.
+        allowed_pairs: ``(body, obstacle)`` pairs this plan may bring within the clearance (a cycle's
+            grasp and release lines, :mod:`planner.task`); empty for a scenario.
+        surface_deviation_m: How much closer the exact surfaces of the cabin and payload files may be than
+            their loaded triangles [m]: the sum of both meshes' ``surface_deviation_m`` (a STEP file's
+            tessellation tolerance plus float32 rounding; 0 for triangle files and box payloads).
+        payload_mesh: The payload's loaded mesh (its file hash goes into the provenance), or ``None``.
     """
 
     spec: Scenario
@@ -79,6 +90,43 @@ class ResolvedScenario:
     approach_distance_m: float
     options: PlanOptions
     scenario_sha256: str
+    obstacles: tuple[Obstacle, ...] = ()
+    allowed_pairs: frozenset[tuple[str, str]] = frozenset()
+    surface_deviation_m: float = 0.0
+    payload_mesh: LoadedMesh | None = field(default=None, repr=False)
+
+    def world(self) -> CollisionWorld:
+        """The collision world of this scenario: robot, payload, cabin and its obstacles."""
+        return CollisionWorld(
+            self.robot, self.cabin, self.payload, obstacles=self.obstacles, allowed=self.allowed_pairs
+        )
+
+    @property
+    def requested_clearance_m(self) -> float:
+        """The clearance the scenario asked for [m] (``options.clearance_m`` adds the surface deviation)."""
+        return float(self.spec.options.clearance_m)
+
+    def clearance_report(self) -> dict[str, Any]:
+        """How the certified clearance was chosen: requested, the meshes' surface deviation, certified [m].
+
+        ``{"requested_m", "surface_deviation_m", "certified_m", "note"}``: the gate certifies
+        ``certified_m`` against the loaded triangles, so the exact CAD surfaces keep ``requested_m``.
+        """
+        dev = self.surface_deviation_m
+        if dev > 0.0:
+            note = (
+                f"the tessellated STEP surfaces may lie up to {dev * 1e3:.4g} mm inside the exact ones: "
+                f"added to the requested {self.requested_clearance_m * 1e3:.4g} mm, so the exact surfaces "
+                "keep the requested clearance"
+            )
+        else:
+            note = "the meshes are the surfaces (no tessellation): certified = requested"
+        return {
+            "requested_m": self.requested_clearance_m,
+            "surface_deviation_m": dev,
+            "certified_m": float(self.options.clearance_m),
+            "note": note,
+        }
 
     def __post_init__(self) -> None:
         for name in (
@@ -147,8 +195,17 @@ def resolve_scenario(
             units=spec.cabin.units,
             pose=spec.cabin.pose.matrix(),
             limits=mesh_limits,
+            tolerance_m=spec.cabin.tessellation_tolerance_m,
         )
-    payload = _payload(spec.payload, base_dir, mesh_resolver, mesh_limits) if spec.payload else None
+    payload, payload_mesh = (
+        _payload(spec.payload, base_dir, mesh_resolver, mesh_limits) if spec.payload else (None, None)
+    )
+    # Cabin and payload surfaces may each be closer than their triangles: the distance between them by
+    # up to the sum. The clearance every stage certifies is raised by it (the report says so).
+    deviation = sum(m.surface_deviation_m for m in (cabin, payload_mesh) if m is not None)
+    options = spec.options
+    if deviation > 0.0:
+        options = options.model_copy(update={"clearance_m": float(options.clearance_m) + deviation})
 
     start_u, start_q = _configuration(robot, spec.start.drives, spec.start.joints, "start")
     goal = spec.goal
@@ -186,8 +243,10 @@ def resolve_scenario(
         T_base_tool_goal=T_base_tool,
         approach_direction=direction,
         approach_distance_m=distance_m,
-        options=spec.options,
+        options=options,
         scenario_sha256=scenario_hash(spec),
+        surface_deviation_m=deviation,
+        payload_mesh=payload_mesh,
     )
 
 
@@ -272,10 +331,18 @@ def _load(
     units: Literal["m", "mm"],
     pose: Array | None,
     limits: MeshLimits | None,
+    tolerance_m: float | None = None,
 ) -> LoadedMesh:
     """:func:`load_mesh` with the scenario field named in any :class:`InvalidMesh` message."""
     try:
-        return load_mesh(source, units=units, name=Path(name).name, pose=pose, limits=limits)
+        return load_mesh(
+            source,
+            units=units,
+            name=Path(name).name,
+            pose=pose,
+            limits=limits,
+            tessellation_tolerance_m=tolerance_m,
+        )
     except InvalidMesh as exc:
         if exc.message.startswith(f"{field_name}:"):
             raise
@@ -288,20 +355,29 @@ def _payload(
     base_dir: Path | None,
     resolver: MeshResolver | None,
     limits: MeshLimits | None,
-) -> PayloadGeometry:
-    """Payload geometry of a box or mesh payload, with its inertial data validated."""
+) -> tuple[PayloadGeometry, LoadedMesh | None]:
+    """Payload geometry of a box or mesh payload (and its mesh), with its inertial data validated."""
     kwargs: dict[str, Any] = {
         "T_tool_payload": spec.grasp.matrix(),
         "mass": float(spec.mass),
         "com_payload": np.array(spec.com if spec.com is not None else (0.0, 0.0, 0.0), dtype=float),
         "inertia_payload": np.array(spec.inertia, dtype=float) if spec.inertia is not None else None,
     }
+    mesh: LoadedMesh | None = None
     if spec.box is not None:
         payload = PayloadGeometry(size=spec.box, source="box", **kwargs)
     else:
         assert spec.mesh is not None  # the schema guarantees exactly one of box and mesh
         source, _ = _mesh_source(spec.mesh, "payload.mesh", base_dir, resolver, allow_reference=False)
-        mesh = _load(source, spec.mesh, "payload.mesh", units=spec.units, pose=None, limits=limits)
+        mesh = _load(
+            source,
+            spec.mesh,
+            "payload.mesh",
+            units=spec.units,
+            pose=None,
+            limits=limits,
+            tolerance_m=spec.tessellation_tolerance_m,
+        )
         try:
             payload = PayloadGeometry.from_mesh_vertices(mesh.vertices, source=spec.mesh, **kwargs)
         except InvalidInput as exc:
@@ -316,7 +392,7 @@ def _payload(
         payload.rigid_payload()  # raises InvalidInput naming payload.mass / payload.com / payload.inertia
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise InvalidInput(f"payload.inertia: {exc}", field="payload.inertia") from exc
-    return payload
+    return payload, mesh
 
 
 def _configuration(

@@ -55,6 +55,8 @@ MAX_BOX_SIDE_M = 50.0
 #: Largest seed, the same everywhere a seed is accepted (OMPL's and numpy's RNG take 32-bit seeds).
 MAX_SEED = 2**31 - 1
 BoxSide = Annotated[Number, Field(gt=0.0, le=MAX_BOX_SIDE_M)]
+#: A STEP file's chordal tessellation tolerance [m] (bounds of :mod:`planner.meshio.step`).
+TessellationTolerance = Annotated[Number, Field(ge=1e-6, le=1e-2)]
 Vector3 = tuple[Number, Number, Number]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
 
@@ -78,9 +80,18 @@ class CabinSpec(BaseModel):
         min_length=1,
         max_length=1000,
         description="Reference cabin name (e.g. 'cabin-aisle', with or without '.stl') or a mesh file path "
-        "(STL, OBJ, PLY, GLB, glTF) relative to the scenario file.",
+        "(STL, OBJ, PLY, GLB, glTF, or STEP: .step/.stp) relative to the scenario file.",
     )
-    units: Literal["m", "mm"] = Field("m", description="Length unit of the mesh file's coordinates.")
+    units: Literal["m", "mm"] = Field(
+        "m",
+        description="Length unit of the mesh file's coordinates (a STEP file declares its own units, "
+        "which are used instead).",
+    )
+    tessellation_tolerance_m: TessellationTolerance | None = Field(
+        None,
+        description="STEP only: chordal tolerance of the tessellation in m (default 1e-4). The tessellated "
+        "surface may lie up to this far inside the exact one; the planner adds it to the clearance.",
+    )
     pose: Pose = Field(
         _IDENTITY_POSE, description="T_base_cabin: the mesh frame in the robot base frame (position in m)."
     )
@@ -103,7 +114,15 @@ class PayloadSpec(BaseModel):
         description="Payload mesh file relative to the scenario file, coordinates in the payload frame; "
         "collision checks use its oriented bounding box. Exclusive with box.",
     )
-    units: Literal["m", "mm"] = Field("m", description="Length unit of the mesh file (box sizes are in m).")
+    units: Literal["m", "mm"] = Field(
+        "m",
+        description="Length unit of the mesh file (box sizes are in m; a STEP file's own units are used).",
+    )
+    tessellation_tolerance_m: TessellationTolerance | None = Field(
+        None,
+        description="STEP mesh only: chordal tolerance of the tessellation in m (default 1e-4), added to the "
+        "clearance.",
+    )
     mass: Number = Field(
         0.0, ge=0.0, le=MAX_PAYLOAD_MASS_KG, description="Payload mass in kg (at most 10 000)."
     )
@@ -133,6 +152,8 @@ class PayloadSpec(BaseModel):
             raise ValueError(f"exactly one of box or mesh is required, got {got}")
         if self.box is not None and self.units != "m":
             raise ValueError("units applies to a mesh payload only; box sizes are always in m")
+        if self.box is not None and self.tessellation_tolerance_m is not None:
+            raise ValueError("tessellation_tolerance_m applies to a STEP mesh payload only")
         return self
 
 

@@ -57,6 +57,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("duration_s", "float"),
     ("lower_bound_ratio", "float"),
     ("min_clearance_m", "float"),
+    ("min_clearance_bound_m", "float"),
     ("peak_force_ratio", "float"),
     ("planning_time_s", "float"),
     ("wall_time_s", "float"),
@@ -104,6 +105,7 @@ def make_row(plan: SweepPlan, outcome: dict[str, Any], wall_time_s: float, attem
         "duration_s",
         "lower_bound_ratio",
         "min_clearance_m",
+        "min_clearance_bound_m",
         "peak_force_ratio",
         "planning_time_s",
     ):
@@ -121,7 +123,8 @@ def outcome_from_document(
     """A plan outcome (as :func:`planner.sweep.task.plan_outcome` gives) from a stored result document.
 
     The HTTP service keeps each plan's profile or refusal document (:mod:`planner.documents.output`); the
-    table columns are read from it: ``report.duration_ratio``, ``min_clearance_m``, the gate's peak effort
+    table columns are read from it: ``report.duration_ratio``, ``min_clearance_m`` (and the gate's
+    ``min_clearance_bound_m``), the gate's peak effort
     ratio and ``report.planning_time_s`` of a profile, ``details`` (the evidence) of a refusal.
     """
     from planner.sweep.task import MAX_EVIDENCE_CHARS
@@ -136,6 +139,7 @@ def outcome_from_document(
             duration_s=doc.get("duration_s"),
             lower_bound_ratio=report.get("duration_ratio"),
             min_clearance_m=doc.get("min_clearance_m"),
+            min_clearance_bound_m=(report.get("gate") or {}).get("min_clearance_bound_m"),
             peak_force_ratio=((report.get("gate") or {}).get("peak_ratios") or {}).get("effort"),
             planning_time_s=report.get("planning_time_s"),
         )

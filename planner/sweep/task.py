@@ -48,7 +48,8 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
 
     Returns:
         ``{"status": "succeeded" | "failed", "reason", "message", "evidence" (JSON text of the refusal
-        details), "duration_s", "lower_bound_ratio", "min_clearance_m", "peak_force_ratio",
+        details), "duration_s", "lower_bound_ratio", "min_clearance_m", "min_clearance_bound_m",
+        "peak_force_ratio",
         "planning_time_s" (the planner's own clock), "task_time_s" (resolution + planning, this process),
         "document" (JSON text of the profile or the refusal document; ``None`` once written to
         ``profile_path``), "profile_written" (bool), "pid"}``. Numbers are ``None`` where a refusal has
@@ -67,6 +68,7 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         "duration_s": None,
         "lower_bound_ratio": None,
         "min_clearance_m": None,
+        "min_clearance_bound_m": None,
         "peak_force_ratio": None,
         "planning_time_s": None,
         "task_time_s": None,
@@ -104,6 +106,7 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
         duration_s=float(result.profile.duration_s),
         lower_bound_ratio=float(report["duration_ratio"]),
         min_clearance_m=float(result.gate.min_clearance_m),
+        min_clearance_bound_m=_float_or_none(result.gate.min_clearance_bound_m),
         peak_force_ratio=float(result.gate.peak_ratios["effort"]),
         planning_time_s=float(report.get("planning_time_s", time.perf_counter() - t_plan)),
     )
@@ -147,3 +150,8 @@ def warm_up(task: dict[str, Any] | None, meshes: dict[str, Any] | None = None) -
 
 
 __all__ = ["MAX_EVIDENCE_CHARS", "plan_outcome", "warm_up"]
+
+
+def _float_or_none(value: float | None) -> float | None:
+    """A float for the table, None where the report has none."""
+    return None if value is None else float(value)

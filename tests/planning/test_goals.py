@@ -222,9 +222,13 @@ class _Distances:
 
         nan3 = np.full(3, np.nan)
         self.cabin = object()
+        self.obstacles = None
         self.self_clearance = self_clearance
         self._cabin = Distance(cabin_m, ("payload", "cabin"), nan3, nan3)
         self._pair = Distance(pair_m, ("link_ef", "platform"), nan3, nan3)
+
+    def is_environment(self, name: str) -> bool:
+        return name == "cabin"
 
     def min_distance(self, q: np.ndarray, include_self: bool = True, include_cabin: bool = True):  # noqa: ANN201
         options = ([self._cabin] if include_cabin else []) + ([self._pair] if include_self else [])

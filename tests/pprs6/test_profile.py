@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from planner.core.exceptions import InvalidInput, OutsideWorkspace, ValidationFailed
-from planner.plan.pose_path import PAPER_PATH, build_profile, pose_path_from_spec, validate
+from planner.gate.pprs6 import validate
+from planner.plan.pose_path import PAPER_PATH, build_profile, pose_path_from_spec
 from planner.robots import load_robot
 from planner.robots.pprs6 import Pprs6
 from planner.tools.pprs6 import profile_document, profile_png

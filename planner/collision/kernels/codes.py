@@ -16,3 +16,11 @@ CI_TASK, CI_I, CI_PHASE, CI_N, CI_COUNT, CI_SLOT, CI_LEVELS, CI_CABIN = 0, 1, 2,
 CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_PROBE_PROVEN = range(9)
 CF_LEVEL0 = 9
 CI_SIZE, CF_SIZE = 8, 13
+
+#: ``cover_walk`` state (``ci``): the task and piece it is at, the sample/task of a pending exact distance.
+CW_TASK, CW_POS, CW_K, CW_PENDING, CW_SIZE = 0, 1, 2, 3, 4
+#: ``cover_walk`` returns: every task covered (or its pieces left to the walk), or an exact distance needed.
+COVER_DONE, COVER_EXACT = 0, 1
+#: ``state`` entries, in the order evidence is asked for: nothing evaluated (the bound is only what other
+#: samples imply), the certified bound, an FCL probe on the grown body, the exact FCL distance.
+SPREAD, BOUND, PROBED, EXACT = 0, 1, 2, 3

@@ -18,11 +18,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from planner.collision.kernels import codes
 from planner.collision.kernels.buffers import Cover, KernelData
 from planner.core import aot
-from planner.core.aot import F8, I8, Entry, check_array
-from planner.core.types import Array, IntArray
+from planner.core.aot import B1, F8, I8, Entry, check_array
+from planner.core.types import Array, BoolArray, IntArray
 
 _HERE = Path(__file__).resolve().parent
 _ROBOTS = _HERE.parent.parent / "robots"
@@ -46,6 +48,29 @@ EXTENSION = aot.Extension(
         Entry("packed_check", ("f8[1]", *_DATA, _GRID, "f8", "f8", "f8"), "(i8,f8[2]w,f8[1]w,f8[1]w)"),
         Entry("packed_state", ("f8[1]", *_DATA, _GRID, "f8"), "(f8[2]w,f8[1]w,f8[1]w,b1)"),
         Entry("packed_poses", ("f8[2]", *_DATA, "f8[3]w", "f8[2]w"), "none"),
+        Entry(
+            "bounds_at",
+            ("i8[1]", "f8[3]", "f8[2]", *_DATA, _GRID, "f8", "f8[2]w", "f8[2]w"),
+            "none",
+        ),
+        Entry(
+            "cover_walk",
+            (
+                "i8[1]w",
+                "f8[1]",
+                "i8",
+                "f8[3]",
+                *_DATA,
+                _GRID,
+                "f8",
+                "f8[2]",
+                "f8[2]",
+                "f8[2]w",
+                "i8[2]w",
+                "b1[1]w",
+            ),
+            "i8",
+        ),
         Entry("cover_centres_batch", ("f8[3]", "i8[1]", "f8[2]", "f8[1]"), "f8[3]w"),
         Entry("run_extent", ("f8[2]", "i8", "i8", "f8[1]", "f8"), "(i8,f8)"),
         Entry("first_inadmissible", ("f8[1]", "f8[1]", "i8", *_DATA), "i8"),
@@ -119,6 +144,67 @@ class Kernels:
             d.ibuf,
             check_array(poses, "poses", F8, 3, out=True, shape=(n, d.n_bodies, 13)),
             check_array(c, "c", F8, 2, out=True, shape=(n, d.n_constraints)),
+        )
+
+    def bounds_at(
+        self, idx: IntArray, poses: Array, c: Array, d: KernelData, threshold: float
+    ) -> tuple[Array, Array]:
+        """:func:`.along.bounds_at`: cabin bounds (K, B) and pair bounds (K, P) at samples ``idx`` (K,).
+
+        ``poses`` (N, B, 13) and ``c`` (N, m) are the samples' poses and admissibility values
+        (:meth:`packed_poses`); every index must be a row of them.
+        """
+        d = _data(d)
+        poses = check_array(poses, "poses", F8, 3, shape=(None, d.n_bodies, 13))
+        n = poses.shape[0]
+        c = check_array(c, "c", F8, 2, shape=(n, d.n_constraints))
+        idx = check_array(idx, "idx", I8, 1)
+        if len(idx) and not (0 <= int(idx.min()) and int(idx.max()) < n):
+            raise ValueError(f"bounds_at: sample indices in [0, {n}) expected")
+        cabin = np.empty((len(idx), d.n_bodies))
+        pairs = np.empty((len(idx), len(d.pair_a)))
+        self.module.bounds_at(idx, poses, c, d.fbuf, d.ibuf, d.grid, float(threshold), cabin, pairs)
+        return cabin, pairs
+
+    def cover_walk(
+        self,
+        ci: IntArray,
+        need: Array,
+        n_cabin: int,
+        poses: Array,
+        d: KernelData,
+        threshold: float,
+        cum: Array,
+        reach: Array,
+        lower: Array,
+        state: IntArray,
+        left: BoolArray,
+    ) -> int:
+        """:func:`.along.cover_walk` (resumable; ``lower``, ``state``, ``left`` in place)."""
+        d = _data(d)
+        poses = check_array(poses, "poses", F8, 3, shape=(None, d.n_bodies, 13))
+        n = poses.shape[0]
+        n_t = (d.n_bodies if n_cabin else 0) + len(d.pair_a)
+        if n_cabin not in (0, d.n_bodies) or n < 2:
+            raise ValueError(f"cover_walk: n_cabin 0 or {d.n_bodies} and N >= 2 expected")
+        ci = check_array(ci, "ci", I8, 1, out=True, shape=(codes.CW_SIZE,))
+        task, pos, k = (int(ci[i]) for i in (codes.CW_TASK, codes.CW_POS, codes.CW_K))
+        if not (0 <= task <= n_t and 0 <= pos < n and 0 <= k < n):
+            raise ValueError("cover_walk: inconsistent walk state")
+        return self.module.cover_walk(
+            ci,
+            check_array(need, "need", F8, 1, shape=(n_t,)),
+            int(n_cabin),
+            poses,
+            d.fbuf,
+            d.ibuf,
+            d.grid,
+            float(threshold),
+            check_array(cum, "cum", F8, 2, shape=(n, n_t)),
+            check_array(reach, "reach", F8, 2, shape=(n - 1, n_t)),
+            check_array(lower, "lower", F8, 2, out=True, shape=(n, n_t)),
+            check_array(state, "state", I8, 2, out=True, shape=(n, n_t)),
+            check_array(left, "left", B1, 1, out=True, shape=(n - 1,)),
         )
 
     def cover_centres_batch(self, poses: Array, cover: Cover) -> Array:

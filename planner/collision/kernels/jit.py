@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
 from planner.collision.kernels.state import packed_check, packed_poses, packed_state
 from planner.collision.kernels.walk import (
@@ -17,7 +18,9 @@ from planner.collision.kernels.walk import (
 )
 
 __all__ = [
+    "bounds_at",
     "cover_centres_batch",
+    "cover_walk",
     "end_ratio",
     "first_inadmissible",
     "motion_walk",
