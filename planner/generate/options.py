@@ -52,7 +52,7 @@ class GeneratorOptions:
         time_limit_s: The scenario's planning time limit [s] (the planner's default).
         goal_kinds: Goal kinds to draw from (the family's weights, renormalised); ``None``: the family's.
         formats: Mesh formats, cycled by case index.
-        max_attempts: Redraws per case before giving up.
+        max_attempts: Redraws per case before giving up (``None``: the family's, 60 for ``mixed``).
         rail_length_m: Rail length [m] (the cabin section is 0.5 m longer at each end); shorter rails make
             smaller, faster cases (the tests' sample).
         family: The family of cabins and goals (:data:`planner.generate.families.FAMILIES`); ``mixed`` is
@@ -63,7 +63,7 @@ class GeneratorOptions:
     time_limit_s: float = 30.0
     goal_kinds: tuple[GoalKind, ...] | None = None
     formats: tuple[MeshFormat, ...] = MESH_FORMATS
-    max_attempts: int = 60
+    max_attempts: int | None = None
     rail_length_m: float = 6.0
     family: str = "mixed"
 

@@ -37,7 +37,8 @@ def generate_case(seed: int, index: int, options: GeneratorOptions | None = None
         else goal_kind(np.random.default_rng([seed, index, family.tag, 1]), opts, family)
     )
     reasons: dict[str, int] = {}
-    for _ in range(opts.max_attempts):
+    attempts = family.max_attempts if opts.max_attempts is None else opts.max_attempts
+    for _ in range(attempts):
         try:
             case = draw_case(seed, index, rng, opts, family, kind)
         except Redraw as exc:
@@ -45,7 +46,7 @@ def generate_case(seed: int, index: int, options: GeneratorOptions | None = None
             continue
         case.meta["redraws"] = reasons
         return case
-    raise RuntimeError(f"case {index} of seed {seed}: no valid draw in {opts.max_attempts} ({reasons})")
+    raise RuntimeError(f"case {index} of seed {seed}: no valid draw in {attempts} ({reasons})")
 
 
 def generate_cases(seed: int, count: int, options: GeneratorOptions | None = None) -> list[GeneratedCase]:

@@ -55,7 +55,7 @@ def goal_bay(d: Draw, rail_max: float) -> tuple[Array, Array, BayLayout, float, 
         if not np.all(np.isfinite(p)):
             continue
         T_goal = pose(R, p)
-        sols = exact_solutions(robot, tool_pose(T_goal, d.payload), robot.home_drives)
+        sols = exact_solutions(robot, tool_pose(T_goal, d.payload), robot.home_drives, d.goal_solutions)
         if not sols:
             continue
         pre = exact_solutions(robot, tool_pose(pose(R, p - distance * e), d.payload), robot.home_drives, 1)

@@ -34,6 +34,7 @@ class Draw:
     kind: str
     section: Section
     meta: dict[str, Any] = field(default_factory=dict)
+    goal_solutions: int = 3
 
 
 @dataclass

@@ -107,7 +107,7 @@ def _goal_d1(d: Draw, goal: Goal, rail_max: float) -> float:
     if goal.pose is None:
         return float(d.rng.uniform(0.3, rail_max - 0.3))
     T_tool = tool_pose(goal.pose, d.payload)
-    goal.solutions = goal.solutions or exact_solutions(d.robot, T_tool, d.robot.home_drives)
+    goal.solutions = goal.solutions or exact_solutions(d.robot, T_tool, d.robot.home_drives, d.goal_solutions)
     return float(np.median([q[chain.D1] for q in goal.solutions])) if goal.solutions else 3.0
 
 
@@ -259,7 +259,7 @@ def draw_case(
         rail_max = float(np.round(rng.uniform(opts.rail_length_m - 2.0, opts.rail_length_m), 3))
     robot = robot_of(rail_max)
     section = draw_section(rng, family, -0.5, opts.rail_length_m + 0.5)
-    d = Draw(rng, robot, payload, size, kind, section, meta)
+    d = Draw(rng, robot, payload, size, kind, section, meta, family.goal_solutions)
     goal = _place_goal(d, rail_max)
     checks = _Checks(d)
     ends, hatch_wanted = _ends(d, family, checks, _layout(d, family, goal), goal, rail_max, opts.clearance_m)

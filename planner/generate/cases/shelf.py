@@ -23,7 +23,7 @@ def place_shelf(d: Draw, rail_max: float) -> Goal:
         R = payload_rotation(kind, int(rng.integers(2)))
         p = np.array([rng.uniform(-0.3, 0.9), rng.uniform(0.45, 1.2), rng.uniform(0.8, rail_max - 0.2)])
         T_goal = pose(R, p)
-        sols = exact_solutions(robot, tool_pose(T_goal, d.payload), robot.home_drives)
+        sols = exact_solutions(robot, tool_pose(T_goal, d.payload), robot.home_drives, d.goal_solutions)
         if not sols:
             continue
         lo, hi = aabb(R, p, -np.array(size) / 2, np.array(size) / 2)
@@ -35,7 +35,7 @@ def place_shelf(d: Draw, rail_max: float) -> Goal:
         )
         d.meta.update(shelf_gap_m=gap, free_per_side_m=[gap])
         keep = (np.array(plate[0]) - 0.45, np.array(plate[1]) + np.array([0.45, 0.8, 0.45]))
-        return Goal(pose=T_goal, plates=[plate], keep_out=[keep])
+        return Goal(pose=T_goal, solutions=sols, plates=[plate], keep_out=[keep])
     raise Redraw("no reachable shelf pose")
 
 
