@@ -102,7 +102,10 @@ def test_each_family_draws_what_it_promises(name: str, family_cases) -> None:
         assert 0 < meta["stringers"] < family.stringers[1]  # those above the carriage of those drawn
         for s in layout.stringers:
             assert layout.section.wall_point(s.angle_rad)[0][1] >= 0.12
-    assert family.ducts[0] <= len(layout.ducts) < family.ducts[1]
+    # drawn within the family's range; one that would enter the goal's keep-out is left out
+    assert len(layout.ducts) < family.ducts[1] and len(layout.brackets) < family.brackets[1]
+    for d in layout.ducts:
+        assert layout.section.inside(np.array([[d.x_m, d.y_m]]), d.radius_m, 0.0295)
     # the file loads to the cabin in its units and frame
     sc = load_scenario(path)
     mesh = load_mesh(case.mesh_bytes, units=meta["units"], name=case.mesh_name, pose=case.T_base_cabin)

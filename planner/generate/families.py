@@ -98,7 +98,7 @@ _FAMILIES: tuple[Family, ...] = (
     ),
     Family(
         "cluttered",
-        "1-3 ducts, 3-6 brackets and a bulkhead hatch between a far start and the goal",
+        "1-3 ducts and 3-6 brackets drawn, a bulkhead hatch between a far start and the goal",
         6,
         goal_kinds=("bay-side", "shelf", "drive"),
         goal_weights=(0.5, 0.25, 0.25),
