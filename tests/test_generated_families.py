@@ -127,3 +127,16 @@ def test_one_case_of_each_family_plans_and_passes_the_independent_check(name: st
     assert np.all(np.asarray(doc["velocity"])[[0, -1]] == 0.0)
     if sc.goal_u is not None:
         assert np.max(np.abs(u[-1] - sc.goal_u)) <= 1e-6
+
+
+def test_the_cli_names_an_unknown_family_in_one_line(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from planner.cli import app
+
+    result = CliRunner().invoke(
+        app, ["generate", "-o", str(tmp_path), "--count", "1", "--family", "spherical"]
+    )
+    assert result.exit_code == 2
+    assert "family: must be one of mixed, ring-frame" in result.stderr and "'spherical'" in result.stderr
+    assert not list(tmp_path.iterdir())
