@@ -111,8 +111,8 @@ PARK_D1_M = (0.05, 0.15, 0.3, 0.5)
 LIFT_M = 0.05
 #: Stations along the cabin for side bays: spacing [m] and the first one's place along the rail [m] (the
 #: docks are at 0.8-1.4 m).
-STATION_SPACING_M = 0.8
-FIRST_STATION_M = 2.1
+STATION_SPACING_M = 0.75
+FIRST_STATION_M = 1.9
 #: Heights of the side bays' unit centres [m].
 ROWS_Y_M = ((0.55, 1.2),)
 #: Exact IK solutions drawn before the force filter (a 60 kg unit held along +x at 0.6-0.8 m height: 1 of
@@ -373,7 +373,7 @@ def _place_units(
     end_wanted = rng.uniform() < opts.end_bay_probability and n >= 2
     stations = list(np.arange(FIRST_STATION_M, rail_max - 0.2, STATION_SPACING_M))
     # One bay per station (a stage reaching a high bay hits a low bay's panels below it).
-    slots = [(float(z), 0) for z in stations]
+    slots = [(float(z), 0) for z in stations for _ in range(2)]  # each station drawn twice at most
     slots = [slots[int(k)] for k in rng.permutation(len(slots))]
     k = 0
     while len(units) < n:
@@ -392,6 +392,8 @@ def _place_units(
             raise _Redraw("more units than bay stations")
         z, row = slots[k]
         k += 1
+        if any(v.kind == "side" and abs(v.p_bay[2] - z) < STATION_SPACING_M / 2 for v in units):
+            continue  # the station holds a bay already
         u = _draw_unit(rng, uid, "side")
         try:
             _side_bay(rng, robot, shell, u, z + rng.uniform(-0.05, 0.05), row, clearance)
