@@ -13,9 +13,15 @@ frame). A family's case ``i`` of ``seed`` is drawn from ``default_rng([seed, i, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
-from planner.generate.options import GOAL_KINDS, GOAL_WEIGHTS, GoalKind
 from planner.generate.sections import SectionKind
+
+GoalKind = Literal["bay-side", "bay-end-far", "bay-end-near", "shelf", "drive"]
+
+GOAL_KINDS: tuple[GoalKind, ...] = ("bay-side", "bay-end-far", "bay-end-near", "shelf", "drive")
+#: Draw weights of the goal kinds (bay insertions dominate, as in the issue's cabins).
+GOAL_WEIGHTS: tuple[float, ...] = (0.40, 0.15, 0.10, 0.15, 0.20)
 
 
 @dataclass(frozen=True)
@@ -114,4 +120,4 @@ FAMILIES: dict[str, Family] = {f.name: f for f in _FAMILIES}
 #: The families nobody tuned for (every family but ``mixed``).
 NEW_FAMILIES: tuple[str, ...] = tuple(f.name for f in _FAMILIES if f.tag is not None)
 
-__all__ = ["FAMILIES", "NEW_FAMILIES", "Family"]
+__all__ = ["FAMILIES", "GOAL_KINDS", "GOAL_WEIGHTS", "NEW_FAMILIES", "Family", "GoalKind"]

@@ -1,4 +1,7 @@
-"""What a generated case is made of: the goal kinds, formats and ranges, the options, the case itself.
+"""What a generated case is made of: the mesh formats and ranges, the options, the case itself.
+
+The goal kinds (:data:`GOAL_KINDS`, re-exported here) are the families' vocabulary
+(:mod:`planner.generate.families`).
 
 Every range here is drawn by the case's own generator (:mod:`planner.generate.cases`); the families
 (:mod:`planner.generate.families`) narrow or widen some of them. Lengths in metres, masses in kg.
@@ -10,17 +13,14 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 from planner.core.types import Array
+from planner.generate.families import FAMILIES, GOAL_KINDS, GoalKind
 
 if TYPE_CHECKING:
     from planner.generate.cabins import CabinLayout
 
-GoalKind = Literal["bay-side", "bay-end-far", "bay-end-near", "shelf", "drive"]
 MeshFormat = Literal["stl", "obj", "ply", "glb"]
 
-GOAL_KINDS: tuple[GoalKind, ...] = ("bay-side", "bay-end-far", "bay-end-near", "shelf", "drive")
 MESH_FORMATS: tuple[MeshFormat, ...] = ("stl", "obj", "ply", "glb")
-#: Draw weights of the goal kinds (bay insertions dominate, as in the issue's cabins).
-GOAL_WEIGHTS: tuple[float, ...] = (0.40, 0.15, 0.10, 0.15, 0.20)
 
 #: Inner diameters of the round shells [m] (the octagons' inscribed diameters alike).
 SHELL_DIAMETERS_M: tuple[float, ...] = (2.4, 2.6, 2.8, 3.0)
@@ -68,8 +68,6 @@ class GeneratorOptions:
     family: str = "mixed"
 
     def __post_init__(self) -> None:
-        from planner.generate.families import FAMILIES
-
         if not 3.0 <= self.rail_length_m <= 6.0:
             raise ValueError(f"rail_length_m must be within [3, 6] m, got {self.rail_length_m}")
         if self.family not in FAMILIES:
@@ -111,7 +109,6 @@ class GeneratedCase:
 __all__ = [
     "FREE_RANGE_M",
     "GOAL_KINDS",
-    "GOAL_WEIGHTS",
     "GRID_STEP_M",
     "MESH_FORMATS",
     "PAYLOAD_BOXES_M",
