@@ -651,11 +651,19 @@ def generate(
     rail_length: Annotated[
         float, typer.Option("--rail-length-m", min=3.0, max=6.0, help="rail length [m] (shorter cabins)")
     ] = 6.0,
+    family: Annotated[
+        str,
+        typer.Option(
+            help="family of cabins: mixed, ring-frame, octagonal, box-section, stringer, end-bay, cluttered"
+        ),
+    ] = "mixed",
 ) -> None:
     """Generate seeded, reproducible cabins and scenarios (YAML + mesh files) that `plan` runs as they are."""
-    from planner.tools.generate import GeneratorOptions, generate_case, write_case, write_manifest
+    from planner.generate import FAMILIES, GeneratorOptions, generate_case, write_case, write_manifest
 
-    options = GeneratorOptions(clearance_m=clearance, rail_length_m=rail_length)
+    if family not in FAMILIES:
+        raise InvalidInput(f"family: must be one of {', '.join(FAMILIES)}, got {family!r}", field="family")
+    options = GeneratorOptions(clearance_m=clearance, rail_length_m=rail_length, family=family)
     cases = []
     for index in range(start, start + count):
         case = generate_case(seed, index, options)

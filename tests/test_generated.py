@@ -1,4 +1,4 @@
-"""Generated scenarios (planner.tools.generate): the generator itself, and a sample planned end to end.
+"""Generated scenarios (planner.generate): the generator itself, and a sample planned end to end.
 
 The sample's profiles are checked against the gate's properties *independently of the gate*: limits on
 every sample against ``robot.limits``, at rest at both ends, the start equal to the scenario's start, the
@@ -24,7 +24,7 @@ from planner.gate.requirements import GATE_MOTION_MARGIN_M
 from planner.meshio.load import load_mesh
 from planner.plan.pipeline import plan_scenario as plan
 from planner.scenario import load_scenario
-from planner.tools.generate import (
+from planner.generate import (
     MESH_FORMATS,
     START_EXTRA_M,
     GeneratedCase,

@@ -47,7 +47,7 @@ from api.problems import Problem, problem_responses
 from api.routes import jobroutes
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
-from meshes import reference_cabin_path, reference_cabins
+from planner.meshes import reference_cabin_path, reference_cabins
 from planner.core.exceptions import InvalidInput, InvalidMesh
 
 router = APIRouter(tags=["cycles"])

@@ -33,7 +33,7 @@ from api.problems import Problem, problem_responses
 from api.routes import jobroutes
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
-from meshes import reference_cabin_path, reference_cabins
+from planner.meshes import reference_cabin_path, reference_cabins
 from planner.scenario import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
 
 router = APIRouter(tags=["plans"])

@@ -405,7 +405,7 @@ def campaign_meshes(campaign: Campaign, base_dir: Path | None = None) -> dict[st
     Raises:
         InvalidInput: a mesh file cannot be read (the field named).
     """
-    from meshes import reference_cabin_path
+    from planner.meshes import reference_cabin_path
 
     names: list[tuple[str, str]] = []
     if reference_cabin_path(campaign.cabin.mesh) is None:

@@ -24,7 +24,7 @@ import numpy as np
 
 from planner.collision.world import CollisionWorld
 from planner.core.types import Array
-from planner.dynamics.holding import StaticForceCheck  # also imported from here by planner.tools.generate
+from planner.dynamics.holding import StaticForceCheck  # also imported from here by planner.generate
 from planner.kinematics.closed_form import redundant_family
 from planner.plan.evidence import collision_evidence, force_evidence
 from planner.plan.motion import MIN_MARGIN_M, certify_motion

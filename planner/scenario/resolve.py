@@ -16,12 +16,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from meshes import reference_cabin_path, reference_cabins
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.obstacles import Obstacle
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
 from planner.core.types import Array
+from planner.meshes import reference_cabin_path, reference_cabins
 from planner.meshio.load import LoadedMesh, MeshLimits, load_mesh
 from planner.robots import load_robot
 from planner.robots.cabin8 import Cabin8

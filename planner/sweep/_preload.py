@@ -9,10 +9,12 @@ effect on purpose; nothing else imports it.
 
 from __future__ import annotations
 
+import atexit
 import gc
 import json
 import logging
 import os
+import sys
 
 from planner.sweep.task import warm_up
 
@@ -33,6 +35,11 @@ def _warm() -> None:
     # touch (and so copy) every object. Frozen objects are left out of collections.
     gc.collect()
     gc.freeze()
+    if "ompl" in sys.modules:
+        # The forkserver ends when the driver does; OMPL's bindings would then print reference-leak
+        # warnings at interpreter exit onto the driver's terminal (as the CLI's own exit avoids, see
+        # planner.cli.main). Its plan processes end through multiprocessing's own os._exit.
+        atexit.register(os._exit, 0)
 
 
 _warm()

@@ -559,7 +559,7 @@ def sweep_meshes(plans: Sequence[SweepPlan]) -> dict[str, bytes]:
     Handed to Ray tasks through the object store, so that the nodes of a cluster need the package but
     no copy of the sweep's mesh files.
     """
-    from meshes import reference_cabin_path
+    from planner.meshes import reference_cabin_path
 
     out: dict[str, bytes] = {}
     for plan in plans:
