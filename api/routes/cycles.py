@@ -47,8 +47,8 @@ from api.problems import Problem, problem_responses
 from api.routes import jobroutes
 from api.routes.deps import Ctx
 from api.store import scenario_mesh_resolver
-from planner.meshes import reference_cabin_path, reference_cabins
 from planner.core.exceptions import InvalidInput, InvalidMesh
+from planner.meshes import reference_cabin_path, reference_cabins
 
 router = APIRouter(tags=["cycles"])
 
