@@ -35,6 +35,7 @@ from api.db import ACTIVE_STATES, Job
 from api.jobkinds import PLAN
 from api.problems import Problem
 from api.routes.deps import Ctx
+from api.routes.inputs import empty_dir
 from api.routes.jobroutes import result_text
 from api.routes.pprs6 import Orientation, PosePath
 from api.store import scenario_mesh_resolver
@@ -87,8 +88,7 @@ def _finished_job(ctx: AppContext, tenant: str, plan_id: str) -> Job:
 def _resolved(ctx: AppContext, row: Job) -> ResolvedScenario:
     """The job's scenario resolved again against the files it was planned with."""
     spec = scenario_from_dict(row.scenario, source="plan")
-    empty = ctx.settings.data_dir / "empty"
-    empty.mkdir(parents=True, exist_ok=True)
+    empty = empty_dir(ctx)
     try:
         meshes = ctx.store.local_files(dict(row.meshes))  # the files may have come through another instance
         return resolve_scenario(spec, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes))
