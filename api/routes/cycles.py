@@ -46,8 +46,8 @@ from api.problems import Problem, problem_responses
 from api.routes import jobroutes
 from api.routes.deps import Ctx
 from api.routes.inputs import MeshField, check_time_limit, empty_dir, stored_meshes
+from api.routes.scene import rebuilding_scene
 from api.store import scenario_mesh_resolver
-from planner.core.exceptions import InvalidInput, InvalidMesh
 
 router = APIRouter(tags=["cycles"])
 
@@ -331,7 +331,7 @@ def _scene_document(ctx: AppContext, kind: JobKind, row: Job) -> dict[str, Any]:
         "reason": row.reason,
         "message": row.message,
     }
-    try:
+    with rebuilding_scene(f"{kind.noun} {row.id}", "was a mesh deleted?"):
         if kind is CYCLE:
             if row.status != "succeeded":
                 return {**base, "kind": "refusal", "details": result.get("details"), "frames": None}
@@ -351,12 +351,6 @@ def _scene_document(ctx: AppContext, kind: JobKind, row: Job) -> dict[str, Any]:
             **task_scene(planned, units, kind="campaign"),
             "summary_message": result.get("message"),
         }
-    except (InvalidMesh, InvalidInput, OSError) as exc:
-        raise Problem(
-            409,
-            "scene_unavailable",
-            f"{kind.noun} {row.id}: its scene cannot be rebuilt ({exc}); was a mesh deleted?",
-        ) from None
 
 
 def _scene(kind: JobKind, ctx: AppContext, tenant: str, job_id: str) -> Response:
@@ -392,13 +386,9 @@ def _cabin_glb(kind: JobKind, ctx: AppContext, tenant: str, job_id: str) -> Resp
             "goal": park,
         }
     )
-    try:
+    with rebuilding_scene(f"{kind.noun} {row.id}", "was its cabin deleted?"):
         meshes = ctx.store.local_files(dict(row.meshes))
         sc = resolve_scenario(spec, base_dir=empty_dir(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
-    except (InvalidMesh, InvalidInput, OSError) as exc:
-        raise Problem(
-            409, "scene_unavailable", f"{kind.noun} {row.id}: its cabin cannot be loaded ({exc})"
-        ) from None
     assert sc.cabin is not None
     mesh = trimesh.Trimesh(vertices=sc.cabin.vertices, faces=sc.cabin.faces, process=False)
     exported = mesh.export(file_type="glb")
