@@ -30,12 +30,13 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field
 from functools import cache
-from typing import Any
 
 import fcl
 import numpy as np
 
 from planner.collision.bodies import BodySet
+from planner.collision.kernels.buffers import cover
+from planner.collision.probes import GrownShapes
 from planner.collision.reports import Contact
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
@@ -236,26 +237,13 @@ class ObstacleSet:
         self._objects = [o.collision_object() for o in obstacles]
         self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
         # The bodies' fine sphere covers: box bodies by local centre, capsules by a fraction of the length.
-        sb, local, frac, radii = [], [], [], []
-        for b, (shape, c, r) in enumerate(
-            zip(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii, strict=True)
-        ):
-            sb.append(np.full(len(r), b))
-            radii.append(r)
-            if shape.kind == "capsule":
-                local.append(np.zeros_like(c))
-                frac.append(c[:, 2])
-            else:
-                local.append(c)
-                frac.append(np.zeros(len(r)))
-        self._sphere_body = np.concatenate(sb).astype(np.int64)
-        self._local = np.concatenate(local)
-        self._frac = np.concatenate(frac)
-        self._radii = np.concatenate(radii)
+        spheres = cover(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii)
+        self._sphere_body, self._local, self._frac = spheres.table
+        self._radii = spheres.radii
         self._capsule = np.array([s.kind == "capsule" for s in bodies.shapes])
         self._capsule_r = np.array([s.radius for s in bodies.shapes])
         self._box_r = np.array([0.5 * float(np.linalg.norm(s.size)) for s in bodies.shapes])
-        self._geoms: dict[tuple[int, float, float], Any] = {}
+        self._grown = GrownShapes(bodies.shapes)
         self._local_state = threading.local()
         self.queries = 0
 
@@ -329,22 +317,10 @@ class ObstacleSet:
         return self._meshes[o]
 
     # ----------------------------------------------------------------- FCL
-    def _geometry(self, b: int, margin: float, length: float) -> Any:
-        shape = self.bodies.shapes[b]
-        key = (b, margin, round(length, 9) if shape.kind == "capsule" else 0.0)
-        geom = self._geoms.get(key)
-        if geom is None:
-            if len(self._geoms) > 4096:
-                self._geoms.clear()
-            grown = shape.inflated(margin)
-            geom = fcl.Box(*grown.size) if grown.kind == "box" else fcl.Capsule(grown.radius, length)
-            self._geoms[key] = geom
-        return geom
-
     def _body(self, flat: Array, b: int, margin: float) -> fcl.CollisionObject:
         R = flat[b, :9].reshape(3, 3).T
         return fcl.CollisionObject(
-            self._geometry(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12])
+            self._grown(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12])
         )
 
     def hit(self, flat: Array, b: int, o: int, margin: float) -> bool:

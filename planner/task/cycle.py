@@ -31,7 +31,7 @@ import dataclasses
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -90,16 +90,8 @@ class LegTiming:
     sample_end: int
 
     def to_dict(self) -> dict[str, Any]:
-        """The contract's leg entry."""
-        return {
-            "name": self.name,
-            "kind": self.kind,
-            "payload": self.payload,
-            "t_start_s": self.t_start_s,
-            "t_end_s": self.t_end_s,
-            "sample_start": self.sample_start,
-            "sample_end": self.sample_end,
-        }
+        """The contract's leg entry (the fields, in order)."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -114,15 +106,8 @@ class CycleEvent:
     rotation_rad: float
 
     def to_dict(self) -> dict[str, Any]:
-        """The contract's event entry (plus the jump's rotation)."""
-        return {
-            "kind": self.kind,
-            "t_s": self.t_s,
-            "unit": self.unit,
-            "leg": self.leg,
-            "springback_m": self.springback_m,
-            "rotation_rad": self.rotation_rad,
-        }
+        """The contract's event entry (plus the jump's rotation): the fields, in order."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
