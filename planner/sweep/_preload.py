@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import atexit
 import gc
-import json
 import logging
 import os
+import pickle
 import sys
 
 from planner.sweep.task import warm_up
@@ -26,9 +26,9 @@ def _warm() -> None:
     task = None
     if path:
         try:
-            with open(path, encoding="utf-8") as fh:
-                task = json.load(fh)
-        except (OSError, ValueError):
+            with open(path, "rb") as fh:  # written by this sweep's driver (a private temporary file)
+                task = pickle.load(fh)
+        except (OSError, ValueError, pickle.UnpicklingError, AttributeError, ImportError):
             _LOG.warning("sweep warm-up task %s unreadable; warming up imports only", path)
     warm_up(task)
     # Forked children share the forkserver's heap copy-on-write; a garbage collection in a child would
