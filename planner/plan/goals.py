@@ -28,7 +28,7 @@ from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics.closed_form import redundant_family
-from planner.plan.motion import MIN_MARGIN_M, certify_motion
+from planner.plan.motion import MIN_MARGIN_M, AdaptiveMotion, certify_motion
 from planner.redundancy.ik import IKOptions, comfort_margins, family_candidates, normalised_margin, track_pose
 from planner.robots.cabin8 import Cabin8
 
@@ -155,6 +155,66 @@ def limit_evidence(violations: list[dict[str, Any]], q: Array, where: str) -> di
     }
 
 
+def state_evidence(
+    world: CollisionWorld,
+    q: Array,
+    required_m: float,
+    where: str,
+    forces: StaticForceCheck | None = None,
+    margin_m: float = 0.0,
+) -> dict[str, Any] | None:
+    """Why configuration q fails a planner state check: the measurement that fails, never one that passes.
+
+    A state check (:meth:`CollisionWorld.is_valid` and, with ``forces``, the static hold) fails on a limit
+    or margin of the mechanism, on a distance short of its requirement, or on a drive that cannot hold the
+    load; the record is the first of those that fails at q, in that order: :func:`limit_evidence` (the
+    limit furthest outside), :func:`collision_evidence` only when its distance is below its requirement
+    (``required_m`` + ``margin_m`` for the cabin and obstacles), :func:`force_evidence`. None when every
+    one passes at q (nothing true to report there).
+    """
+    violations = world.robot.violations(q)
+    if violations:
+        return limit_evidence(violations, q, where)
+    ev = collision_evidence(world, q, required_m, where, margin_m)
+    if ev["distance_m"] < ev["required_m"]:
+        return ev
+    if forces is not None and not forces.ok(q):
+        return force_evidence(forces, q, where)
+    return None
+
+
+def motion_evidence(
+    world: CollisionWorld,
+    q_a: Array,
+    q_b: Array,
+    motion: AdaptiveMotion,
+    required_m: float,
+    where: Callable[[float], str],
+) -> dict[str, Any] | None:
+    """Why the certified motion q_a -> q_b (the refused ``motion`` of :func:`certify_motion`) failed.
+
+    At the walk's failing fraction t (q = q_a + t (q_b - q_a)): a limit or margin contact gives
+    :func:`limit_evidence` there; a clearance failure the bodies short of ``required_m`` + the adaptive
+    walk's smallest margin (:data:`MIN_MARGIN_M`: a state with more spare clearance would have been walked
+    again with a smaller margin), or, when the walk stopped at a larger margin, of ``required_m`` + that
+    margin, the requirement the walk failed on. Only a failing measurement is returned: None when the walk
+    gives no failing state or the state measures clear of both (``where(t)`` names the place).
+    """
+    rep = motion.report
+    if rep.valid or rep.t_fail is None:
+        return None
+    t = float(rep.t_fail)
+    q_at = np.asarray(q_a, dtype=float) + t * (np.asarray(q_b, dtype=float) - q_a)
+    if any(c.kind == "limit" for c in rep.contacts):
+        violations = world.robot.violations(q_at)
+        return limit_evidence(violations, q_at, where(t)) if violations else None
+    for margin in dict.fromkeys((MIN_MARGIN_M, max(MIN_MARGIN_M, motion.margin_m))):
+        ev = collision_evidence(world, q_at, required_m, where(t), margin_m=margin)
+        if ev["distance_m"] < ev["required_m"]:
+            return ev
+    return None
+
+
 def _span(v: dict[str, Any]) -> float:
     lo, hi = v["lower"], v["upper"]
     if lo is None or hi is None or not np.isfinite(hi - lo) or hi <= lo:
@@ -252,7 +312,7 @@ def goal_configurations(
         if not world.is_valid(sol.q, clearance):
             stats["collision"] += 1
             if evidence is not None:
-                evidence.append(collision_evidence(world, sol.q, clearance, "at the goal"))
+                _record(evidence, state_evidence(world, sol.q, clearance, "at the goal"))
             continue
         if not forces.ok(sol.q):
             stats["force"] += 1
@@ -276,6 +336,7 @@ def approach_lines(
     max_lines: int = 3,
     grid: int = 21,
     evidence: list[dict[str, Any]] | None = None,
+    hold: StaticForceCheck | None = None,
 ) -> tuple[list[GoalCandidate], dict[str, int]]:
     """Straight approach lines with the redundancy fixed along each line, best margin first.
 
@@ -287,6 +348,13 @@ def approach_lines(
     best lines, diverse in (gamma, d5), are certified collision-free with the motion check of the
     collision layer. The redundancy is thus chosen once for the whole insertion, exactly (the line is
     followed to rounding error), rather than drifting step by step.
+
+    ``hold``: a static check the goal configuration must also pass (a grasp, where the load is taken at
+    the goal: the approach itself is checked with ``forces``). Every admissible grid point is checked
+    (vectorised) before any is certified, so a goal that cannot hold never takes a line's place nor hides
+    a neighbour that can; ``stats["hold"]`` counts the admissible points that cannot hold. When none can,
+    the one closest to holding (smallest largest force ratio) is the only evidence appended (a
+    :func:`force_evidence` record "at the goal"): the cause is the load, whatever the clearances.
     """
     robot = world.robot
     ps = robot.desc.parallel_stage
@@ -304,6 +372,14 @@ def approach_lines(
     worst = np.min(np.where(np.isnan(margins), -np.inf, margins), axis=(0, 2))
     stats = {"grid_points": len(Q), "admissible": int(np.sum(worst >= 0)), "force": 0, "collision": 0}
     order = [int(i) for i in np.argsort(-worst) if worst[i] >= 0]
+    if hold is not None:
+        ratios = hold.ratios(Q[order]) if order else np.zeros(0)
+        held = ratios <= hold.fraction
+        stats["hold"] = int(np.sum(~held))
+        if order and not np.any(held) and evidence is not None:
+            best = order[int(np.argmin(np.where(np.isnan(ratios), np.inf, ratios)))]
+            evidence.append(force_evidence(hold, Q[best], "at the goal"))
+        order = [i for i, ok in zip(order, held.tolist(), strict=True) if ok]
     out: list[GoalCandidate] = []
     used: list[Array] = []
     for i in order:
@@ -324,21 +400,24 @@ def approach_lines(
         if not world.is_valid(q_goal, clearance):
             stats["collision"] += 1
             if evidence is not None:
-                evidence.append(collision_evidence(world, q_goal, clearance, "at the goal"))
+                _record(evidence, state_evidence(world, q_goal, clearance, "at the goal"))
             continue
         motion = certify_motion(world, q_pre, q_goal, clearance, motion_margin)
         if not motion.valid:
             stats["collision"] += 1
-            if evidence is not None and motion.report.t_fail is not None:
-                t = float(motion.report.t_fail)
-                q_at = q_pre + t * (q_goal - q_pre)
-                evidence.append(
-                    collision_evidence(world, q_at, clearance, _along(1.0 - t), margin_m=MIN_MARGIN_M)
-                )
+            if evidence is not None:
+                ev = motion_evidence(world, q_pre, q_goal, motion, clearance, lambda t: _along(1.0 - t))
+                _record(evidence, ev)
             continue
         line = np.stack([q_pre, q_goal])
         out.append(GoalCandidate(q_goal, float(worst[i]), line, np.array([0.0, distance_m])))
     return out, stats
+
+
+def _record(evidence: list[dict[str, Any]], record: dict[str, Any] | None) -> None:
+    """Append a failing measurement (None: the check failed on nothing that can be measured there)."""
+    if record is not None:
+        evidence.append(record)
 
 
 def _along(remaining: float) -> str:
@@ -390,17 +469,16 @@ def track_approach(
             return None
         motion = certify_motion(world, qs[-1], q, clearance, motion_margin)
         if not motion.valid:
-            if evidence is not None and motion.report.t_fail is not None:
-                # What blocks the step: the closest bodies against the clearance a motion needs there.
-                t = float(motion.report.t_fail)
-                q_at = qs[-1] + t * (q - qs[-1])
-                back_m = s[k - 1] + t * (s[k] - s[k - 1])
-                where = (
-                    f"{1e3 * back_m:.0f} mm before the goal on the insertion line"
-                    if back_m >= 5e-4
-                    else "at the goal"
-                )
-                evidence.append(collision_evidence(world, q_at, clearance, where, margin_m=MIN_MARGIN_M))
+            if evidence is not None:
+                # What blocks the step: the limit there, or the closest bodies against the clearance a
+                # motion needs there.
+                def where(t: float, k: int = k) -> str:
+                    back_m = s[k - 1] + t * (s[k] - s[k - 1])
+                    if back_m < 5e-4:
+                        return "at the goal"
+                    return f"{1e3 * back_m:.0f} mm before the goal on the insertion line"
+
+                _record(evidence, motion_evidence(world, qs[-1], q, motion, clearance, where))
             return None
         if not forces.segment_ok(qs[-1], q):
             if evidence is not None:
