@@ -115,6 +115,12 @@ def test_the_heavy_cycle_is_refused_for_what_fails_not_as_unholdable() -> None:
     for record in d["candidates"]:
         _assert_failing(record, cyc)
     _assert_failing(d["best"], cyc)
+    # What the refusal used to quote there: the closest bodies, which keep their clearance.
+    best = d["best"]
+    assert best["cause"] == "limit" and "lift-off" in best["where"]
+    lift = PlanContext.build(leg_scenario(cyc, leg("lift_off"), cyc.park_q, goal_q=cyc.park_q), None, None)
+    old = collision_evidence(lift.world, np.asarray(best["q"]), lift.clearances.planner_m, best["where"])
+    assert old["distance_m"] > old["required_m"]
 
 
 def test_no_holdable_grasp_names_the_drive_and_ratio_of_the_best_candidate() -> None:
