@@ -50,6 +50,7 @@ from planner.plan.context import PRODUCT, PlanContext, Progress, SearchPreset
 from planner.plan.goals import (
     StaticForceCheck,
     approach_lines,
+    collision_evidence,
     describe,
     dominant,
     force_evidence,
@@ -404,7 +405,8 @@ def _line_evidence(ctx: PlanContext, q_a: Array, q_b: Array, what: str) -> dict[
         if ev is not None:
             return ev
     if not ctx.forces.segment_ok(q_a, q_b):
-        ts = np.linspace(0.0, 1.0, 51)
+        # The samples segment_ok checks (every 0.02 m or rad of the largest joint change): one fails.
+        ts = np.linspace(0.0, 1.0, int(max(1, np.ceil(float(np.max(np.abs(q_b - q_a))) / 0.02))) + 1)
         qs = q_a + ts[:, None] * (q_b - q_a)
         k = int(np.argmax(ctx.forces.ratios(qs)))
         return force_evidence(ctx.forces, qs[k], f"{100 * ts[k]:.0f}% along the {what} line")
@@ -487,14 +489,23 @@ def _check_line_end(cyc: ResolvedCycle, next_state: LegState, q: Array, what: st
 
     c = Clearances.of(sc.options)
     if not world.is_valid(q, c.planner_m):
-        ev = state_evidence(world, q, c.planner_m, f"at the end of the {what} line")
-        if ev is None:  # is_valid failed on nothing measurable: name the check itself
-            raise AssertionError(f"the {what} line's end fails the state check yet measures clear")
+        where = f"at the end of the {what} line"
+        ev = state_evidence(world, q, c.planner_m, where)
+        if ev is None:
+            # The state check's grown bodies refuse what the exact distances keep (near a box's corners a
+            # grown box overstates the clearance): say so, the closest bodies apart from the evidence.
+            near = collision_evidence(world, q, c.planner_m, where)
+            raise ApproachInfeasible(
+                f"the {what} line ends where the state check cannot certify {1e3 * c.planner_m:.1f} mm of "
+                f"clearance (the exact distances keep it: {describe(near)}; lengthen or turn {field_name})",
+                closest=near,
+                field=field_name,
+            )
         if "bodies" in ev:
             a, b = ev["bodies"]
             ev["bodies"] = [body_label(cyc, next_state, a), b]
         raise ApproachInfeasible(
-            f"the {what} line ends too close for the next leg: {describe(ev)} (lengthen {field_name})",
+            f"the {what} line ends where the next leg cannot start: {describe(ev)} (lengthen {field_name})",
             best=ev,
             field=field_name,
         )
