@@ -158,6 +158,12 @@ def _group_rss(pgid: int) -> list[tuple[str, int]]:
     return sorted((roles.get(p, "worker"), rss) for p, (_, rss) in procs.items())
 
 
+def _cpu_s(pid: int) -> float:
+    """CPU time [s] (user + system) process ``pid`` has used so far (Linux ``/proc/<pid>/stat``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+
+
 def _pct(values: list[float]) -> str:
     a = 1e3 * np.asarray(values)
     p50, p95 = np.percentile(a, 50), np.percentile(a, 95)
@@ -244,6 +250,7 @@ def main() -> None:
             with lock:
                 results.append({"scenario": sc, "doc": doc})
 
+        cpu0 = _cpu_s(proc.pid), time.process_time()
         t0 = time.perf_counter()
         threads = [threading.Thread(target=client, args=(k,)) for k in range(args.clients)]
         for th in threads:
@@ -251,6 +258,7 @@ def main() -> None:
         for th in threads:
             th.join()
         wall = time.perf_counter() - t0
+        server_cpu, clients_cpu = _cpu_s(proc.pid) - cpu0[0], time.process_time() - cpu0[1]
         stop.set()
         health_s, probe_status_s, slow = out.get(timeout=30)
         prober.join()
@@ -291,6 +299,10 @@ def main() -> None:
             f"  job overhead (run time, claim to stored outcome, minus the job's own planning_time_s): "
             f"median {1e3 * np.median(overhead):.0f} ms, p95 {1e3 * np.percentile(overhead, 95):.0f} ms "
             f"(n={len(overhead)})"
+        )
+        print(
+            f"  CPU time during the load, besides the jobs: server {server_cpu:.1f} s, the clients "
+            f"{clients_cpu:.1f} s (of {2 * wall:.1f} core-seconds)"
         )
         print(
             "  service processes after the run (server, forkserver, job workers): "
