@@ -15,7 +15,6 @@ import pytest
 
 from planner.robots.cabin8 import Cabin8
 
-
 #: Folders whose tests run together on one xdist worker: their session fixtures (the searched campaign, the
 #: embedded sweep, the planned cycles) are computed once, and the two local Rays (a sweep's, a campaign's)
 #: never run side by side (a test kills the Ray workers it finds by their title).
@@ -23,7 +22,7 @@ TOGETHER = {"sweep": "sweep-campaign", "campaign": "sweep-campaign", "task": "ta
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Every test in an xdist group (``make test`` runs ``-n 2 --dist loadgroup``): its module's, or its folder's.
+    """Every test in an xdist group (``make test`` runs ``-n 2 --dist loadgroup``): its module's or folder's.
 
     A module's tests stay on one worker, so its module fixtures (a service, a planned scenario) are set up
     once; the folders of :data:`TOGETHER` share a group. Without ``-n`` the marks do nothing.
