@@ -31,7 +31,6 @@ RUN python -m pip install --no-cache-dir -r requirements.lock
 COPY pyproject.toml README.md ./
 COPY planner ./planner
 COPY api ./api
-COPY meshes ./meshes
 RUN python -m pip install --no-cache-dir --no-deps .
 
 # The builds, portable, into the folder the final image carries. The warm-up plans the service's own

@@ -64,6 +64,8 @@ bench: $(DEV_STAMP)
 	$(BIN)/python -m bench.sweep
 	mkdir -p out
 	$(BIN)/python -m bench.generalization --count 100 --seed 0 --out out/generalization.json
+	$(BIN)/python -m bench.generalization --families new --count 10 --seed 0 --no-suite \
+		--out out/generalization-families.json
 
 lock:  ## re-pin requirements.lock (runtime) and requirements-dev.lock (development) from pyproject.toml
 	rm -rf /tmp/cabinplan-lock && $(PYTHON) -m venv /tmp/cabinplan-lock

@@ -25,8 +25,8 @@ from sqlalchemy.orm import Session
 from api.db import Database, Mesh, MeshBlob, now_s
 from api.jobstore import JobStore
 from api.problems import Problem
-from meshes import reference_cabin_path
 from planner.core.exceptions import InvalidInput, InvalidMesh
+from planner.meshes import reference_cabin_path
 from planner.meshio import SUPPORTED_EXTENSIONS, MeshLimits, load_mesh
 from planner.scenario.resolve import MeshResolver
 

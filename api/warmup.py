@@ -52,23 +52,15 @@ def _ignore(_stage: str, _fraction: float) -> None:
 
 
 #: What cycle and campaign jobs import beyond a plan's (:mod:`api.cycles`), imported once here.
-TASK_MODULES = (
-    "planner.task.cycle",
-    "planner.documents.cycle",
-    "planner.campaign.run",
-    "planner.campaign.worker",
-)
-
-
 def preload_tasks() -> None:
     """Import the cycle and campaign modules, so that their jobs fork with them loaded."""
-    import importlib
-
-    for name in TASK_MODULES:
-        try:
-            importlib.import_module(name)
-        except Exception:  # jobs then import it themselves
-            _LOG.exception("job warm-up: %s not preloaded", name)
+    try:
+        import planner.campaign.run
+        import planner.campaign.worker
+        import planner.documents.cycle
+        import planner.task.cycle  # noqa: F401 - the imports are the point
+    except Exception:  # jobs then import them themselves
+        _LOG.exception("job warm-up: the task modules not preloaded")
 
 
 warm_up()

@@ -18,18 +18,18 @@ from __future__ import annotations
 import json
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
+from planner.meshes import REFERENCE_DIR
 from planner.meshio import load_mesh
 from planner.redundancy.ik import random_admissible_joints
 from planner.robots.cabin8 import Cabin8
 
-MESHES = Path(__file__).resolve().parents[1] / "meshes"
+MESHES = REFERENCE_DIR
 
 
 def timed(fn, items) -> list[float]:  # type: ignore[no-untyped-def]

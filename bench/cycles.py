@@ -115,13 +115,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"bench.cycles: {_load()} (start)", flush=True)
     folder = Path(tempfile.mkdtemp(prefix="cabinplan-bench-cycles-"))
     t_gen = time.perf_counter()
-    small = [generate_campaign(args.seed, i, CycleGeneratorOptions(units=(3, 4))) for i in range(args.small)]
-    given = [
-        generate_campaign(args.seed, 100 + i, CycleGeneratorOptions(units=(5, 5))) for i in range(args.given)
-    ]
-    finds = [
-        generate_campaign(args.seed, 200 + i, CycleGeneratorOptions(units=(6, 6))) for i in range(args.find)
-    ]
+
+    # Blocking pairs and an end bay made likely: campaigns where the order matters, with room for 5-6 units.
+    def options(units: tuple[int, int]) -> CycleGeneratorOptions:
+        return CycleGeneratorOptions(
+            units=units, pair_probability=0.6, end_bay_probability=0.6, max_attempts=60
+        )
+
+    small = [generate_campaign(args.seed, i, options((3, 4))) for i in range(args.small)]
+    given = [generate_campaign(args.seed, 100 + i, options((5, 5))) for i in range(args.given)]
+    finds = [generate_campaign(args.seed, 200 + i, options((6, 6))) for i in range(args.find)]
     print(
         f"generated {len(small) + len(given) + len(finds)} campaigns in {time.perf_counter() - t_gen:.1f} s"
     )

@@ -1,4 +1,4 @@
-"""Generated scenarios (planner.tools.generate): the generator itself, and a sample planned end to end.
+"""Generated scenarios (planner.generate): the generator itself, and a sample planned end to end.
 
 The sample's profiles are checked against the gate's properties *independently of the gate*: limits on
 every sample against ``robot.limits``, at rest at both ends, the start equal to the scenario's start, the
@@ -21,10 +21,7 @@ from planner.core.schemas import Pose
 from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.gate.requirements import GATE_MOTION_MARGIN_M
-from planner.meshio.load import load_mesh
-from planner.plan.pipeline import plan_scenario as plan
-from planner.scenario import load_scenario
-from planner.tools.generate import (
+from planner.generate import (
     MESH_FORMATS,
     START_EXTRA_M,
     GeneratedCase,
@@ -34,6 +31,9 @@ from planner.tools.generate import (
     mesh_bytes,
     write_case,
 )
+from planner.meshio.load import load_mesh
+from planner.plan.pipeline import plan_scenario as plan
+from planner.scenario import load_scenario
 
 #: The tests' cases: a 3 m rail (a short cabin section: quick to build and to plan).
 OPTIONS = GeneratorOptions(rail_length_m=3.0)

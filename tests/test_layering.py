@@ -18,6 +18,7 @@ FLOORS = (
     "robots",
     "dynamics",
     "meshio",
+    "meshes",
     "collision",
     "redundancy",
     "timing",

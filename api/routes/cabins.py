@@ -15,7 +15,7 @@ from api.auth import CurrentPrincipal
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
 from api.store import MeshInUse, mesh_document
-from meshes import reference_cabins, reference_manifest
+from planner.meshes import reference_cabins, reference_manifest
 
 router = APIRouter(tags=["cabins"])
 

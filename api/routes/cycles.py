@@ -29,7 +29,6 @@ import hashlib
 import json
 import threading
 from collections import OrderedDict
-from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Header, Query, Request, Response
@@ -46,9 +45,9 @@ from api.openapi import SCENARIO_MEDIA_TYPES
 from api.problems import Problem, problem_responses
 from api.routes import jobroutes
 from api.routes.deps import Ctx
+from api.routes.inputs import MeshField, check_time_limit, empty_dir, stored_meshes
+from api.routes.scene import rebuilding_scene
 from api.store import scenario_mesh_resolver
-from meshes import reference_cabin_path, reference_cabins
-from planner.core.exceptions import InvalidInput, InvalidMesh
 
 router = APIRouter(tags=["cycles"])
 
@@ -71,9 +70,9 @@ def _request_body(schema: str, description: str, example: dict[str, Any]) -> dic
 
 
 # ------------------------------------------------------------------------------------------ mesh names
-def _mesh_fields(body: Any, prefix: str, cabin: bool) -> list[tuple[str, str, str, bool]]:
+def _mesh_fields(body: Any, prefix: str, cabin: bool) -> list[MeshField]:
     """``(field, name, units, may be a reference cabin)`` of every mesh a cycle-shaped mapping names."""
-    out: list[tuple[str, str, str, bool]] = []
+    out: list[MeshField] = []
 
     def add(where: str, node: Any, is_cabin: bool = False) -> None:
         if isinstance(node, dict) and isinstance(node.get("mesh"), str):
@@ -90,51 +89,6 @@ def _mesh_fields(body: Any, prefix: str, cabin: bool) -> list[tuple[str, str, st
     return out
 
 
-def mesh_map(ctx: AppContext, tenant: str, fields: list[tuple[str, str, str, bool]]) -> dict[str, str]:
-    """Stored files of the tenant's meshes named by ``fields``; 422 naming the field for any other name."""
-    meshes: dict[str, str] = {}
-    for field, name, units, cabin in fields:
-        if cabin and reference_cabin_path(name) is not None:
-            continue
-        row = ctx.store.get(tenant, name)
-        if row is None:
-            hint = f" nor a reference cabin ({', '.join(reference_cabins())})" if cabin else ""
-            raise Problem(
-                422,
-                "invalid_input",
-                f"{field}: {name!r} is neither the id of an uploaded mesh of this tenant{hint}",
-                errors=[{"field": field, "reason": "unknown mesh"}],
-            )
-        if row.units != units:
-            units_field = field.removesuffix(".mesh") + ".units"
-            raise Problem(
-                422,
-                "invalid_input",
-                f"{units_field}: the mesh {name[:12]}... was uploaded in {row.units!r}, the document says "
-                f"{units!r}",
-                errors=[{"field": units_field, "reason": f"must be {row.units!r} for this mesh"}],
-            )
-        meshes[name] = str(ctx.store.local_path(row))
-    return meshes
-
-
-def _ceiling(ctx: AppContext, time_limit_s: float) -> None:
-    ceiling = ctx.settings.time_limit_ceiling_s
-    if time_limit_s > ceiling:
-        raise Problem(
-            422,
-            "invalid_input",
-            f"options.time_limit_s: {time_limit_s} s exceeds the service's ceiling of {ceiling} s",
-            errors=[{"field": "options.time_limit_s", "reason": f"must be at most {ceiling}"}],
-        )
-
-
-def _empty(ctx: AppContext) -> Path:
-    empty = ctx.settings.data_dir / "empty"
-    empty.mkdir(parents=True, exist_ok=True)
-    return empty
-
-
 # ---------------------------------------------------------------------------------------- submission
 def _cycle_job(ctx: AppContext, tenant: str, body: Any, key: str | None, sha: str) -> Job:
     from planner.documents.cycle import cycle_provenance
@@ -142,9 +96,9 @@ def _cycle_job(ctx: AppContext, tenant: str, body: Any, key: str | None, sha: st
     from planner.task.schema import cycle_from_dict
 
     spec = cycle_from_dict(body, source="request")
-    _ceiling(ctx, float(spec.options.time_limit_s))
-    meshes = mesh_map(ctx, tenant, _mesh_fields(body, "", cabin=True))
-    cyc = resolve_cycle(spec, base_dir=_empty(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
+    check_time_limit(ctx, float(spec.options.time_limit_s))
+    meshes = stored_meshes(ctx, tenant, _mesh_fields(body, "", cabin=True))
+    cyc = resolve_cycle(spec, base_dir=empty_dir(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
     limit = SEARCHED_LEGS * float(spec.options.time_limit_s)
     doc = spec.model_dump(mode="json")
     return new_job(CYCLE, tenant, doc, spec.name, sha, meshes, cycle_provenance(cyc), limit, key)
@@ -163,13 +117,13 @@ def _campaign_job(ctx: AppContext, tenant: str, body: Any, key: str | None, sha:
     from planner.task.campaign_schema import campaign_from_dict
 
     campaign = campaign_from_dict(body, source="request")
-    _ceiling(ctx, float(campaign.options.time_limit_s))
+    check_time_limit(ctx, float(campaign.options.time_limit_s))
     fields = _mesh_fields(body, "", cabin=True)
     for k, u in enumerate(body.get("units") or []):
         if isinstance(u, dict):
             fields += _mesh_fields(u, f"units[{k}].", cabin=False)
-    meshes = mesh_map(ctx, tenant, fields)
-    check_campaign(campaign, base_dir=_empty(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
+    meshes = stored_meshes(ctx, tenant, fields)
+    check_campaign(campaign, base_dir=empty_dir(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
     limit = SEARCHED_LEGS * float(campaign.options.time_limit_s) * _campaign_cycles(campaign)
     provenance = {"campaign_sha256": campaign_sha256(campaign)}
     doc = campaign.model_dump(mode="json")
@@ -354,7 +308,7 @@ def _planned(ctx: AppContext, row: Job, cycle: dict[str, Any], doc: dict[str, An
     meshes = ctx.store.local_files(dict(row.meshes))
     cyc = resolve_cycle(
         cycle_from_dict(cycle, source="cycle"),
-        base_dir=_empty(ctx),
+        base_dir=empty_dir(ctx),
         mesh_resolver=scenario_mesh_resolver(meshes),
     )
     prof = DriveProfile.from_dict(doc, cyc.robot)
@@ -377,7 +331,7 @@ def _scene_document(ctx: AppContext, kind: JobKind, row: Job) -> dict[str, Any]:
         "reason": row.reason,
         "message": row.message,
     }
-    try:
+    with rebuilding_scene(f"{kind.noun} {row.id}", "was a mesh deleted?"):
         if kind is CYCLE:
             if row.status != "succeeded":
                 return {**base, "kind": "refusal", "details": result.get("details"), "frames": None}
@@ -397,12 +351,6 @@ def _scene_document(ctx: AppContext, kind: JobKind, row: Job) -> dict[str, Any]:
             **task_scene(planned, units, kind="campaign"),
             "summary_message": result.get("message"),
         }
-    except (InvalidMesh, InvalidInput, OSError) as exc:
-        raise Problem(
-            409,
-            "scene_unavailable",
-            f"{kind.noun} {row.id}: its scene cannot be rebuilt ({exc}); was a mesh deleted?",
-        ) from None
 
 
 def _scene(kind: JobKind, ctx: AppContext, tenant: str, job_id: str) -> Response:
@@ -438,13 +386,9 @@ def _cabin_glb(kind: JobKind, ctx: AppContext, tenant: str, job_id: str) -> Resp
             "goal": park,
         }
     )
-    try:
+    with rebuilding_scene(f"{kind.noun} {row.id}", "was its cabin deleted?"):
         meshes = ctx.store.local_files(dict(row.meshes))
-        sc = resolve_scenario(spec, base_dir=_empty(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
-    except (InvalidMesh, InvalidInput, OSError) as exc:
-        raise Problem(
-            409, "scene_unavailable", f"{kind.noun} {row.id}: its cabin cannot be loaded ({exc})"
-        ) from None
+        sc = resolve_scenario(spec, base_dir=empty_dir(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
     assert sc.cabin is not None
     mesh = trimesh.Trimesh(vertices=sc.cabin.vertices, faces=sc.cabin.faces, process=False)
     exported = mesh.export(file_type="glb")
@@ -487,4 +431,4 @@ for _kind in (CYCLE, CAMPAIGN):
     _scene_routes(_kind)
 
 
-__all__ = ["SEARCHED_LEGS", "mesh_map", "router"]
+__all__ = ["SEARCHED_LEGS", "router"]

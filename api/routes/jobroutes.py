@@ -32,6 +32,7 @@ from api.db import ACTIVE_STATES, TERMINAL_STATES, Job
 from api.jobkinds import FileSource, JobKind, ResultFile
 from api.jobstore import IdempotencyKeyReused, QuotaExceeded
 from api.problems import Problem
+from api.routes.inputs import empty_dir
 from planner.core.exceptions import InvalidInput, InvalidMesh
 
 
@@ -230,8 +231,7 @@ def _make(ctx: AppContext, kind: JobKind, row: Job, spec: ResultFile, what: str)
     text = result_text(ctx, row)
     if text is None:
         raise Problem(404, "not_found", f"{kind.noun} {row.id}: it has no {what}")
-    empty = ctx.settings.data_dir / "empty"
-    empty.mkdir(parents=True, exist_ok=True)
+    empty = empty_dir(ctx)
     try:
         meshes = ctx.store.local_files(dict(row.meshes))  # the files may have come through another instance
         source = FileSource(row.id, dict(row.scenario), json.loads(text), meshes, str(empty))

@@ -29,11 +29,11 @@ from api.examples import docked
 from api.jobkinds import PLAN
 from api.jobstore import new_job
 from api.openapi import scenario_request_body
-from api.problems import Problem, problem_responses
+from api.problems import problem_responses
 from api.routes import jobroutes
 from api.routes.deps import Ctx
+from api.routes.inputs import MeshField, check_time_limit, empty_dir, stored_meshes
 from api.store import scenario_mesh_resolver
-from meshes import reference_cabin_path, reference_cabins
 from planner.scenario import ResolvedScenario, Scenario, resolve_scenario, scenario_from_dict
 
 router = APIRouter(tags=["plans"])
@@ -61,52 +61,19 @@ def job_document(row: Job, warming: str | None = None) -> dict[str, Any]:
 
 def mesh_map(ctx: AppContext, tenant: str, spec: Scenario) -> dict[str, str]:
     """Stored files of the tenant's meshes the scenario names; 422 for any other mesh name."""
-    meshes: dict[str, str] = {}
-    names: list[tuple[str, str, str, bool]] = []
+    fields: list[MeshField] = []
     if spec.cabin is not None:
-        names.append(("cabin.mesh", spec.cabin.mesh, spec.cabin.units, True))
+        fields.append(("cabin.mesh", spec.cabin.mesh, spec.cabin.units, True))
     if spec.payload is not None and spec.payload.mesh is not None:
-        names.append(("payload.mesh", spec.payload.mesh, spec.payload.units, False))
-    for field, name, units, cabin in names:
-        if cabin and reference_cabin_path(name) is not None:
-            continue
-        row = ctx.store.get(tenant, name)
-        if row is None:
-            hint = f" nor a reference cabin ({', '.join(reference_cabins())})" if cabin else ""
-            raise Problem(
-                422,
-                "invalid_input",
-                f"{field}: {name!r} is neither the id of an uploaded cabin{hint}",
-                errors=[{"field": field, "reason": "unknown mesh"}],
-            )
-        if row.units != units:
-            units_field = field.replace(".mesh", ".units")
-            raise Problem(
-                422,
-                "invalid_input",
-                f"{units_field}: the mesh {name[:12]}... was uploaded in {row.units!r}, "
-                f"the scenario says {units!r}",
-                errors=[{"field": units_field, "reason": f"must be {row.units!r} for this mesh"}],
-            )
-        meshes[name] = str(ctx.store.local_path(row))
-    return meshes
+        fields.append(("payload.mesh", spec.payload.mesh, spec.payload.units, False))
+    return stored_meshes(ctx, tenant, fields)
 
 
 def _resolve(ctx: AppContext, tenant: str, body: Any) -> tuple[Scenario, ResolvedScenario, dict[str, str]]:
     spec = scenario_from_dict(body, source="request")
-    ceiling = ctx.settings.time_limit_ceiling_s
-    if spec.options.time_limit_s > ceiling:
-        raise Problem(
-            422,
-            "invalid_input",
-            f"options.time_limit_s: {spec.options.time_limit_s} s exceeds the service's ceiling of "
-            f"{ceiling} s",
-            errors=[{"field": "options.time_limit_s", "reason": f"must be at most {ceiling}"}],
-        )
+    check_time_limit(ctx, spec.options.time_limit_s)
     meshes = mesh_map(ctx, tenant, spec)
-    empty = ctx.settings.data_dir / "empty"
-    empty.mkdir(parents=True, exist_ok=True)
-    resolved = resolve_scenario(spec, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes))
+    resolved = resolve_scenario(spec, base_dir=empty_dir(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
     return spec, resolved, meshes
 
 

@@ -22,6 +22,8 @@ import hashlib
 import json
 import threading
 from collections import OrderedDict
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import lru_cache
 from typing import Annotated, Any
 
@@ -35,6 +37,7 @@ from api.db import ACTIVE_STATES, Job
 from api.jobkinds import PLAN
 from api.problems import Problem
 from api.routes.deps import Ctx
+from api.routes.inputs import empty_dir
 from api.routes.jobroutes import result_text
 from api.routes.pprs6 import Orientation, PosePath
 from api.store import scenario_mesh_resolver
@@ -87,16 +90,28 @@ def _finished_job(ctx: AppContext, tenant: str, plan_id: str) -> Job:
 def _resolved(ctx: AppContext, row: Job) -> ResolvedScenario:
     """The job's scenario resolved again against the files it was planned with."""
     spec = scenario_from_dict(row.scenario, source="plan")
-    empty = ctx.settings.data_dir / "empty"
-    empty.mkdir(parents=True, exist_ok=True)
-    try:
+    with rebuilding_scene(f"plan {row.id}", "was its cabin deleted?"):
         meshes = ctx.store.local_files(dict(row.meshes))  # the files may have come through another instance
-        return resolve_scenario(spec, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes))
+        return resolve_scenario(spec, base_dir=empty_dir(ctx), mesh_resolver=scenario_mesh_resolver(meshes))
+
+
+@contextmanager
+def rebuilding_scene(subject: str, hint: str) -> Iterator[None]:
+    """Rebuild a finished job's scene inside: a mesh that cannot be read again is a 409 problem.
+
+    Args:
+        subject: The job, as the message names it (``"plan 3f2a..."``).
+        hint: The likely cause, appended to the message (``"was its cabin deleted?"``).
+
+    Raises:
+        Problem: 409 ``scene_unavailable`` for an :class:`InvalidMesh`, :class:`InvalidInput` or
+            ``OSError`` inside, naming the subject and the error.
+    """
+    try:
+        yield
     except (InvalidMesh, InvalidInput, OSError) as exc:
         raise Problem(
-            409,
-            "scene_unavailable",
-            f"plan {row.id}: its scene cannot be rebuilt ({exc}); was its cabin deleted?",
+            409, "scene_unavailable", f"{subject}: its scene cannot be rebuilt ({exc}); {hint}"
         ) from None
 
 

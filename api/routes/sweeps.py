@@ -26,6 +26,7 @@ from api.examples import aisle_bay_goal, docked
 from api.openapi import BODY_SCHEMA_KEY
 from api.problems import Problem, problem_responses
 from api.routes.deps import Ctx
+from api.routes.inputs import empty_dir
 from api.routes.jobroutes import forget_result, result_text
 from api.routes.plans import mesh_map
 from api.store import scenario_mesh_resolver
@@ -130,8 +131,7 @@ def submit_sweep(
             )
     tenant = principal.tenant
     meshes = mesh_map(ctx, tenant, plans[0].scenario)  # the axes vary neither the cabin nor a mesh payload
-    empty = ctx.settings.data_dir / "empty"
-    empty.mkdir(parents=True, exist_ok=True)
+    empty = empty_dir(ctx)
     resolved = resolve_scenario(
         plans[0].scenario, base_dir=empty, mesh_resolver=scenario_mesh_resolver(meshes)
     )

@@ -417,7 +417,7 @@ function figures(job, scene) {
     row('min clearance (every sample, exact)', mm(r.min_clearance_m)),
     row('min clearance (between samples, certified ≥)', mm(gate.min_clearance_bound_m)),
     row('closest', gate.min_clearance_at
-      ? `${gate.min_clearance_at.bodies.join(' – ')} at ${fmt(gate.min_clearance_at.t_s, 2)} s` : '–', ''),
+      ? `${gate.min_clearance_at.bodies.join(' – ')}${gate.min_clearance_at.leg ? ` on ${gate.min_clearance_at.leg}` : ''} at ${fmt(gate.min_clearance_at.t_s, 2)} s` : '–', ''),
     row('min clearance (these frames)', mm(scene.min_clearance_m)),
     row('requested clearance', mm(scene.clearance_m)),
     ...(scene.certified_clearance_m > scene.clearance_m

@@ -192,8 +192,14 @@ export class Scene3D {
     if (box.isEmpty()) return;
     const centre = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3()).length();
-    const d = Math.max(size * 0.8, 0.25);
-    this.camera.position.set(centre.x + 0.9 * d, centre.y + 0.7 * d, centre.z - 0.8 * d);
+    this.aimCamera(centre, Math.max(size * 0.8, 0.25), [0.9, 0.7, -0.8]);
+  }
+
+  // Put the camera at centre + d * direction (direction in units of d), looking at the centre, with near
+  // and far planes scaled to the distance d [m].
+  aimCamera(centre, d, direction) {
+    const [x, y, z] = direction;
+    this.camera.position.set(centre.x + x * d, centre.y + y * d, centre.z + z * d);
     this.camera.near = d / 200;
     this.camera.far = d * 50;
     this.camera.updateProjectionMatrix();
@@ -213,14 +219,7 @@ export class Scene3D {
     if (box.isEmpty()) return;
     const centre = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3()).length();
-    const d = Math.max(size * 0.55, 0.25);
-    this.camera.position.set(centre.x - 0.75 * d, centre.y + 0.85 * d, centre.z - 0.35 * d);
-    this.camera.near = d / 200;
-    this.camera.far = d * 50;
-    this.camera.updateProjectionMatrix();
-    this.controls.target.copy(centre);
-    this.controls.update();
-    this.render();
+    this.aimCamera(centre, Math.max(size * 0.55, 0.25), [-0.75, 0.85, -0.35]);
   }
 
   showFrame(frames, i, closest) {

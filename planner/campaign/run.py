@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from planner.campaign.worker import cycle_outcome
 from planner.core.exceptions import InvalidInput
 from planner.sweep.results import Journal, atomic_write
 from planner.sweep.run import Executor, Job, drive
@@ -64,7 +65,7 @@ __all__ = [
 ]
 
 #: The executors' runner of one campaign cycle (:func:`planner.sweep.task.task_runner`).
-CYCLE_RUNNER = "planner.campaign.worker:cycle_outcome"
+CYCLE_RUNNER = cycle_outcome
 
 
 @dataclass
@@ -405,7 +406,7 @@ def campaign_meshes(campaign: Campaign, base_dir: Path | None = None) -> dict[st
     Raises:
         InvalidInput: a mesh file cannot be read (the field named).
     """
-    from meshes import reference_cabin_path
+    from planner.meshes import reference_cabin_path
 
     names: list[tuple[str, str]] = []
     if reference_cabin_path(campaign.cabin.mesh) is None:

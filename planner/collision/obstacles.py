@@ -30,12 +30,13 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field
 from functools import cache
-from typing import Any
 
 import fcl
 import numpy as np
 
 from planner.collision.bodies import BodySet
+from planner.collision.kernels.buffers import cover
+from planner.collision.probes import GrownShapes
 from planner.collision.reports import Contact
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
@@ -182,6 +183,15 @@ def _overlap_depth(a: Obstacle, b: Obstacle) -> float:
     return max(0.0, float(min(overlaps)))
 
 
+def _rows_times(local: Array, M: Array) -> Array:
+    """Local (S, 3) times each M (n, 3, 3): (n, S, 3), written out (no threaded BLAS call for 3 x 3)."""
+    return (
+        local[None, :, 0, None] * M[:, None, 0, :]
+        + local[None, :, 1, None] * M[:, None, 1, :]
+        + local[None, :, 2, None] * M[:, None, 2, :]
+    )
+
+
 def obstacle_contact(body: str, obstacle: str, margin: float) -> Contact:
     """The contact of a body with an obstacle within ``margin`` [m] (kind ``"obstacle"``)."""
     return Contact("obstacle", (body, obstacle), f"{body} within {margin:.4g} m of {obstacle}")
@@ -223,29 +233,17 @@ class ObstacleSet:
         self._R_bound = np.array([T[:3, :3] for T, _ in bounds]).reshape(n_o, 3, 3)
         self._p_bound = np.array([T[:3, 3] for T, _ in bounds]).reshape(n_o, 3)
         self._half = np.array([h for _, h in bounds]).reshape(n_o, 3)
+        self._origin_local = np.einsum("oi,oij->oj", self._p_bound, self._R_bound)  # p_o R_o (O, 3)
         self._objects = [o.collision_object() for o in obstacles]
         self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
         # The bodies' fine sphere covers: box bodies by local centre, capsules by a fraction of the length.
-        sb, local, frac, radii = [], [], [], []
-        for b, (shape, c, r) in enumerate(
-            zip(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii, strict=True)
-        ):
-            sb.append(np.full(len(r), b))
-            radii.append(r)
-            if shape.kind == "capsule":
-                local.append(np.zeros_like(c))
-                frac.append(c[:, 2])
-            else:
-                local.append(c)
-                frac.append(np.zeros(len(r)))
-        self._sphere_body = np.concatenate(sb).astype(np.int64)
-        self._local = np.concatenate(local)
-        self._frac = np.concatenate(frac)
-        self._radii = np.concatenate(radii)
+        spheres = cover(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii)
+        self._sphere_body, self._local, self._frac = spheres.table
+        self._radii = spheres.radii
         self._capsule = np.array([s.kind == "capsule" for s in bodies.shapes])
         self._capsule_r = np.array([s.radius for s in bodies.shapes])
         self._box_r = np.array([0.5 * float(np.linalg.norm(s.size)) for s in bodies.shapes])
-        self._geoms: dict[tuple[int, float, float], Any] = {}
+        self._grown = GrownShapes(bodies.shapes)
         self._local_state = threading.local()
         self.queries = 0
 
@@ -255,10 +253,16 @@ class ObstacleSet:
     # ---------------------------------------------------------------- bounds
     def _box_distance(self, points: Array) -> Array:
         """Distances (P, O) of points (P, 3) to every obstacle's bounding box (0 inside)."""
-        rel = points[:, None, :] - self._p_bound[None, :, :]  # (P, O, 3)
-        local = np.einsum("poi,oij->poj", rel, self._R_bound)  # in the box axes
-        outside = np.maximum(np.abs(local) - self._half[None, :, :], 0.0)
-        return np.sqrt(np.sum(outside * outside, axis=2))
+        # In each box's axes: (x - p_o) R_o = x R_o - p_o R_o, one batched product for all boxes.
+        R = self._R_bound  # written out, not matmul: a threaded BLAS call costs more than these sums
+        local = (
+            points[None, :, 0, None] * R[:, None, 0, :]
+            + points[None, :, 1, None] * R[:, None, 1, :]
+            + points[None, :, 2, None] * R[:, None, 2, :]
+            - self._origin_local[:, None, :]
+        )  # (O, P, 3)
+        outside = np.maximum(np.abs(local) - self._half[:, None, :], 0.0)
+        return np.sqrt(np.sum(outside * outside, axis=2)).T
 
     def lower_bounds(self, flat: Array, threshold: float | Array = np.inf) -> Array:
         """Certified lower bounds (B, O) of each body's distance to each obstacle at one state.
@@ -269,47 +273,54 @@ class ObstacleSet:
         (B, 1)) is refined with the body's fine sphere cover (the smallest of its spheres' bounds).
         Allowed pairs are +inf.
         """
-        R = flat[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1)  # (B, 3, 3)
-        p = flat[:, 9:12]
-        length = flat[:, 12]
-        radius = np.where(self._capsule, self._capsule_r + 0.5 * length, self._box_r)
-        out = self._box_distance(p) - radius[:, None]
-        out = np.where(self.active, out, np.inf)
+        out = self.coarse_bounds_batch(flat[None])[0]
         near = np.flatnonzero(np.any(out <= threshold, axis=1))
-        if len(near) == 0:
-            return out
-        sel = np.flatnonzero(np.isin(self._sphere_body, near))
-        b = self._sphere_body[sel]
-        Rb = R[b]
+        for b in near.tolist():  # both bound the distance from below: keep the larger
+            fine = self.fine_bounds_batch(flat[b][None], b)[0]
+            out[b] = np.where(self.active[b], np.maximum(out[b], fine), np.inf)
+        return out
+
+    def coarse_bounds_batch(self, poses: Array, allowed_too: bool = False) -> Array:
+        """Certified lower bounds (N, B, O) of each body's distance to each obstacle at N states, coarse.
+
+        ``poses`` (N, B, 13): each body's bounding sphere (centre, half-diagonal or half-length + radius)
+        against each obstacle's bounding box, in one vectorised pass. Allowed pairs are +inf unless
+        ``allowed_too`` (their bounds, for reports). :meth:`fine_bounds_batch` refines them.
+        """
+        n, n_b = poses.shape[0], poses.shape[1]
+        n_o = len(self.obstacles)
+        length = poses[:, :, 12]
+        capsule_r = self._capsule_r[None, :] + 0.5 * length
+        radius = np.where(self._capsule[None, :], capsule_r, self._box_r[None, :])
+        out = self._box_distance(poses[:, :, 9:12].reshape(-1, 3)).reshape(n, n_b, n_o) - radius[:, :, None]
+        active = np.ones_like(self.active) if allowed_too else self.active
+        return np.where(active[None], out, np.inf)
+
+    def fine_bounds_batch(self, poses_b: Array, b: int) -> Array:
+        """Certified lower bounds (n, O) of body b's distance to each obstacle, from its fine sphere cover.
+
+        ``poses_b`` (n, 13) are body b's poses: the smallest of its spheres' distances to the obstacle's
+        bounding box minus their radii (every pair, allowed ones too).
+        """
+        sel = np.flatnonzero(self._sphere_body == b)
+        Rt = poses_b[:, :9].reshape(-1, 3, 3)  # R^T (column-major storage), (n, 3, 3)
         centres = (
-            p[b]
-            + np.einsum("sij,sj->si", Rb, self._local[sel])
-            + Rb[:, :, 2] * (self._frac[sel] * length[b])[:, None]
-        )
-        d = self._box_distance(centres) - self._radii[sel, None]  # (S', O)
-        fine = np.full(self.active.shape, -np.inf)
-        fine[near] = np.inf
-        np.minimum.at(fine, b, d)
-        refined = np.maximum(out, fine)  # both bound the distance from below: keep the larger
-        return np.where(self.active, refined, np.inf)
+            poses_b[:, None, 9:12]
+            + _rows_times(self._local[sel], Rt)  # (R local)^T = local^T R^T
+            + Rt[:, None, 2, :] * (self._frac[sel][None, :] * poses_b[:, 12][:, None])[..., None]
+        )  # (n, S_b, 3)
+        d = self._box_distance(centres.reshape(-1, 3)).reshape(len(poses_b), len(sel), len(self.obstacles))
+        return np.min(d - self._radii[sel][None, :, None], axis=1)
+
+    def mesh_object(self, o: int) -> fcl.CollisionObject:
+        """Obstacle o as a posed FCL triangle mesh (the target of exact distances and swept hulls)."""
+        return self._meshes[o]
 
     # ----------------------------------------------------------------- FCL
-    def _geometry(self, b: int, margin: float, length: float) -> Any:
-        shape = self.bodies.shapes[b]
-        key = (b, margin, round(length, 9) if shape.kind == "capsule" else 0.0)
-        geom = self._geoms.get(key)
-        if geom is None:
-            if len(self._geoms) > 4096:
-                self._geoms.clear()
-            grown = shape.inflated(margin)
-            geom = fcl.Box(*grown.size) if grown.kind == "box" else fcl.Capsule(grown.radius, length)
-            self._geoms[key] = geom
-        return geom
-
     def _body(self, flat: Array, b: int, margin: float) -> fcl.CollisionObject:
         R = flat[b, :9].reshape(3, 3).T
         return fcl.CollisionObject(
-            self._geometry(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12])
+            self._grown(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12])
         )
 
     def hit(self, flat: Array, b: int, o: int, margin: float) -> bool:

@@ -44,11 +44,32 @@ def _box_bvh(size: tuple[float, float, float]) -> fcl.BVHModel:
     return _bvh(np.asarray(m.vertices), np.asarray(m.faces))
 
 
-def _fcl_geometry(shape: Shape, margin: float, length: float) -> Any:
-    grown = shape.inflated(margin)
-    if grown.kind == "box":
-        return fcl.Box(*grown.size)
-    return fcl.Capsule(grown.radius, length)
+class GrownShapes:
+    """FCL shapes of a world's bodies grown by a margin, cached per (body, margin, capsule length).
+
+    A box body grown by ``margin`` is a larger box; a capsule body a capsule of radius ``r + margin`` and
+    its posed ``length`` (rounded to 1 nm in the key). The cache is cleared past 4096 shapes.
+
+    Args:
+        shapes: The bodies' shapes, indexed by body.
+    """
+
+    def __init__(self, shapes: tuple[Shape, ...]) -> None:
+        self._shapes = shapes
+        self._geoms: dict[tuple[int, float, float], Any] = {}
+
+    def __call__(self, b: int, margin: float, length: float) -> Any:
+        """FCL shape of body b grown by ``margin`` (a capsule with its posed ``length`` [m])."""
+        shape = self._shapes[b]
+        key = (b, margin, round(length, 9) if shape.kind == "capsule" else 0.0)
+        geom = self._geoms.get(key)
+        if geom is None:
+            if len(self._geoms) > 4096:
+                self._geoms.clear()
+            grown = shape.inflated(margin)
+            geom = fcl.Box(*grown.size) if grown.kind == "box" else fcl.Capsule(grown.radius, length)
+            self._geoms[key] = geom
+        return geom
 
 
 class Probes:
@@ -64,21 +85,13 @@ class Probes:
         self.cabin_obj = fcl.CollisionObject(cabin, fcl.Transform()) if cabin is not None else None
         self.queries = 0
         self._capsule = [s.kind == "capsule" for s in bodies.shapes]
-        self._geoms: dict[tuple[int, float, float], Any] = {}
+        self._grown = GrownShapes(bodies.shapes)
         self._local = threading.local()
         self._req = fcl.CollisionRequest()
 
     def geometry(self, b: int, margin: float, length: float) -> Any:
         """FCL shape of body b grown by ``margin`` (a capsule with its posed ``length``), cached."""
-        shape = self.bodies.shapes[b]
-        key = (b, margin, round(length, 9) if shape.kind == "capsule" else 0.0)
-        geom = self._geoms.get(key)
-        if geom is None:
-            if len(self._geoms) > 4096:
-                self._geoms.clear()
-            geom = _fcl_geometry(shape, margin, length)
-            self._geoms[key] = geom
-        return geom
+        return self._grown(b, margin, length)
 
     def object(self, b: int, R: Array, p: Array, length: float, margin: float) -> fcl.CollisionObject:
         """A posed FCL object of body b grown by ``margin``; objects are reused (per thread), only moved."""

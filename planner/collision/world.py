@@ -435,8 +435,10 @@ class CollisionWorld(Generic[RobotT]):
     def along(self, qs: Array) -> AlongPath:
         """The batched pass over a sampled path (N, n), N >= 2: bounds at every sample in one kernel call.
 
-        The result certifies the polyline (:meth:`AlongPath.certify`, as strict as :meth:`check_path`) and
-        finds its smallest distance (:meth:`AlongPath.clearance`); see :mod:`planner.collision.along`.
+        The result certifies the polyline (:meth:`AlongPath.certify`, as strict as :meth:`check_path`, the
+        obstacles included) and finds its smallest distance (:meth:`AlongPath.clearance`: the cabin, the
+        robot's pairs and the obstacles; the allowed pairs apart, :meth:`AlongPath.allowed_clearance`); see
+        :mod:`planner.collision.along`.
         """
         qs = np.ascontiguousarray(np.asarray(qs, dtype=float))
         if qs.ndim != 2 or qs.shape[0] < 2 or qs.shape[1] != self.model.n_joints:
@@ -456,7 +458,9 @@ class CollisionWorld(Generic[RobotT]):
 
         has_cabin = self._probes.cabin_obj is not None
         kernels = (self.kernels, self._kernel, threshold)
-        return AlongPath(qs, poses, c, has_cabin, self.model, self.bodies, self._probes, kernels, walk)
+        return AlongPath(
+            qs, poses, c, has_cabin, self.model, self.bodies, self._probes, kernels, walk, self.obstacles
+        )
 
     # ------------------------------------------------------------- distances
     def min_distance(self, q: Array, include_self: bool = True, include_cabin: bool = True) -> Distance:

@@ -170,7 +170,8 @@ def clearance_phrase(gate: GateReport) -> str:
     if at is None or gate.min_clearance_bound_m is None:
         return f"min clearance {1e3 * gate.min_clearance_m:.1f} mm"
     a, b = at["bodies"]
+    leg = f" on {at['leg']}" if at.get("leg") else ""  # a cycle's figure names its leg
     return (
-        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b} at {at['t_s']:.2f} s; "
+        f"min clearance {1e3 * gate.min_clearance_m:.1f} mm ({a}-{b}{leg} at {at['t_s']:.2f} s; "
         f">= {1e3 * gate.min_clearance_bound_m:.1f} mm between samples)"
     )

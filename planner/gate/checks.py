@@ -27,17 +27,19 @@ re-derives and checks:
 ``approach``        (with an approach) the payload frame stays within 1 mm of the insertion line, with
                     the goal orientation (0.1 deg), from the pre-insertion pose to the goal;
 ``collision``       the polyline through the samples is certified to keep the requested clearance from the
-                    cabin (and the self-clearance between bodies): between consecutive samples, not only
-                    at them (:meth:`CollisionWorld.along`, :meth:`CollisionWorld.check_path` for the sag).
+                    cabin and the world's obstacles (and the self-clearance between bodies): between
+                    consecutive samples, not only at them (:meth:`CollisionWorld.along`,
+                    rigid and sagging alike).
 
 After the drive checks (:mod:`planner.gate.drive_checks`), the checks are :data:`CABIN8_CHECKS`, an ordered
 list of functions of (profile, context) -> Check. A failed check never stops the others: the report lists
 every failure with its worst value and where.
 
 The report's ``min_clearance_m`` is the smallest exact FCL distance of any body (payload included) to the
-cabin, or between two checked bodies, over *every* sample of the rigid robot (found by branch and bound on
-certified bounds, to within :data:`~planner.collision.along.CLEARANCE_TOL_M`; the value itself is the exact
-distance at ``min_clearance_at``), and ``min_clearance_bound_m`` a certified lower bound of it along the
+cabin or an obstacle (installed units, fixtures; allowed pairs apart), or between two checked bodies, over
+*every* sample of the rigid robot (found by branch and bound on certified bounds and swept hulls, to within
+:data:`~planner.collision.along.CLEARANCE_TOL_M`; the value itself is the exact distance at
+``min_clearance_at``), and ``min_clearance_bound_m`` a certified lower bound of it along the
 whole joint-space polyline, between samples included (:mod:`planner.collision.along`).
 """
 
@@ -48,8 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planner.collision.along import AlongReport, ClearanceAlong
-from planner.collision.reports import PathReport
+from planner.collision.along import AlongPath, AlongReport, ClearanceAlong
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
@@ -67,8 +68,6 @@ from planner.gate.drive_checks import Check, GateReport, drive_checks, ratio_che
 from planner.gate.path_check import path_deviation
 from planner.gate.requirements import (
     APPROACH_BACKOUT_TOL_M,
-    GATE_MAX_EXTRA_M,
-    GATE_MAX_RUN,
     GOAL_ANGLE_TOL_RAD,
     GOAL_POSITION_TOL_M,
     LIMIT_TOLERANCE,
@@ -202,36 +201,30 @@ def approach_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     return _approach_check(ctx.T_pay, req, ctx.T_line_goal)
 
 
-def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
+def collision_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     """``collision``: the polyline through the samples keeps the clearance, rigid and sagging.
 
-    The rigid robot's polyline is certified in one batched pass (:meth:`CollisionWorld.along`; pieces the
-    bounds cannot cover are walked by the certified motion check), which also gives the report's
-    smallest distance (exact over every sample, certified between them); with a payload and stiffness
-    data, the robot sagging under its predicted static deflection by :meth:`CollisionWorld.check_path`.
+    The rigid robot's polyline is certified in one batched pass (:meth:`CollisionWorld.along`: the cabin,
+    the robot's pairs and the world's obstacles; pieces the bounds cannot cover are walked by the certified
+    motion check), which also gives the report's smallest distance (exact over every sample, certified
+    between them, obstacles included); with a payload and stiffness
+    data, the robot sagging under its predicted static deflection likewise (:func:`sagging_certificate`).
+    Not applicable (None) where the requirements defer it (``req.collision``: a cycle's legs, which the
+    cycle gate certifies in the same worlds).
     """
+    if not ctx.req.collision:  # a cycle's leg: the cycle gate certifies these samples in this world
+        return None
     if ctx.q is None:
         return Check("collision", False, NOT_ASSEMBLED)
     req, world, robot = ctx.req, ctx.world, ctx.robot
     along = world.along(ctx.q)
     rep = along.certify(req.clearance_m, world.self_clearance, req.motion_margin_m)
-    if world.cabin is not None:
+    if world.cabin is not None or world.obstacles is not None:
         ctx.clearance = along.clearance()
-    failed: AlongReport | PathReport = rep
-    if rep.valid and world.obstacles is not None:
-        # The batched bounds cover the cabin and the robot's pairs only: the obstacles (installed units,
-        # fixtures) are certified by the motion walk over every piece of the polyline.
-        failed = world.check_path(
-            ctx.q, req.clearance_m, req.motion_margin_m, max_run=GATE_MAX_RUN, max_extra_m=GATE_MAX_EXTRA_M
-        )
-    if not failed.valid:
-        what = "; ".join(c.detail for c in failed.contacts) or "not certified"
+    if not rep.valid:
+        what = "; ".join(c.detail for c in rep.contacts) or "not certified"
         return Check(
-            "collision",
-            False,
-            f"between samples {failed.first_bad} and later: {what}",
-            None,
-            failed.first_bad,
+            "collision", False, f"between samples {rep.first_bad} and later: {what}", None, rep.first_bad
         )
     done = (
         f"certified clearance >= {req.clearance_m} m along the whole polyline ({rep.exact_queries} exact "
@@ -240,14 +233,13 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
     if not (req.deflection_check and robot.desc.stiffness is not None):
         return Check("collision", True, done)
     q_def, sag = deflected_joints(robot, ctx.q, req.payload, req.T_tool_payload)
-    rep_def = world.check_path(
-        q_def, req.clearance_m, req.motion_margin_m, max_run=GATE_MAX_RUN, max_extra_m=GATE_MAX_EXTRA_M
-    )
+    rep_def = sagging_certificate(world, q_def, req.clearance_m, req.motion_margin_m, along)
     if rep_def.valid:
         return Check(
             "collision",
             True,
-            f"{done}, and sagging (up to {1e3 * sag:.2f} mm) over {rep_def.motion_checks} runs",
+            f"{done}, and sagging (up to {1e3 * sag:.2f} mm; {rep_def.exact_queries} exact distances, "
+            f"{rep_def.walked} pieces walked)",
         )
     what = "; ".join(c.detail for c in rep_def.contacts) or "not certified"
     return Check(
@@ -258,6 +250,27 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check:
         None,
         rep_def.first_bad,
     )
+
+
+def sagging_certificate(
+    world: CollisionWorld,
+    q_def: Array,
+    clearance_m: float,
+    margin_m: float,
+    rigid: AlongPath | None = None,
+) -> AlongReport:
+    """The polyline through the sagging robot's configurations (N, 8) certified in one batched pass.
+
+    :meth:`CollisionWorld.along` on ``q_def`` (:func:`deflected_joints`): as strict as the certified walk
+    (:meth:`CollisionWorld.check_path`), the world's obstacles included; ``rigid``, the rigid robot's pass
+    over the same samples, seeds its bounds (:meth:`AlongPath.seed_from`: what the rigid pass proved, less
+    how far the sag moves each body). A single configuration (a leg at rest) is its own path of two samples.
+    """
+    q_def = np.ascontiguousarray(q_def if len(q_def) >= 2 else np.vstack([q_def, q_def]))
+    along = world.along(q_def)
+    if rigid is not None and rigid.n == along.n:
+        along.seed_from(rigid)
+    return along.certify(clearance_m, world.self_clearance, margin_m)
 
 
 #: cabin8's checks after the drive checks, in order (each a function of the profile and the context).
@@ -300,8 +313,9 @@ def validate_profile(
         if result is not None:
             checks.append(result)
     c = ctx.clearance
-    if c is None:
-        return GateReport(tuple(checks), n, float("inf") if ctx.q is not None else float("nan"), peaks)
+    if c is None:  # no cabin nor obstacle (inf), or no figure measured here (nan)
+        measured = ctx.q is not None and req.collision
+        return GateReport(tuple(checks), n, float("inf") if measured else float("nan"), peaks)
     where = {
         "t_s": float(profile.t[c.sample]),
         "sample": c.sample,
@@ -413,7 +427,9 @@ def deflected_joints(
 
     n = len(q)
     idx = deflection_sample_indices(n)
-    x = stiffness_model(robot).deflection_along(q[idx], payload, T_tool_payload)
+    # Each distinct configuration once (a dwell repeats one): the same inputs give the same deflection.
+    distinct, back = np.unique(q[idx], axis=0, return_inverse=True)
+    x = stiffness_model(robot).deflection_along(distinct, payload, T_tool_payload)[back.ravel()]
     T_pay = robot.fk_batch(q[idx]) @ T_tool_payload
     T_payload_tool = np.linalg.inv(T_tool_payload)
     T_def = T_pay.copy()  # the payload frames displaced by their small twists (as deflected_pose, batched)

@@ -12,8 +12,9 @@ re-derives and checks:
 ``effort``        the forces recomputed from the inverse dynamics *with each leg's load* match the reported
                   ones and are within the limits;
 ``dwell``         the robot rests at every dwell sample: positions held, velocity and acceleration zero;
-``collision``     each leg's samples (from the previous leg's last) are certified against that leg's world,
-                  rigid and sagging under that leg's load (:func:`~planner.gate.checks.deflected_joints`);
+``collision``     each leg's polyline (from the previous leg's last sample) is certified against that leg's
+                  world: rigid in one batched pass (:meth:`CollisionWorld.along`, obstacles included), and
+                  sagging under that leg's load (:func:`~planner.gate.checks.deflected_joints`);
 ``line``          each straight leg keeps the unit frame within 1 mm of its line with a constant
                   orientation (0.1 deg), never stepping back, for the line's full length;
 ``grasp`` / ``bay`` / ``park``  the unit frame at the grasp is the dock pose (1 mm / 0.1 deg); at the end of
@@ -23,11 +24,16 @@ re-derives and checks:
                   static deflection (:func:`~planner.dynamics.load_change.load_change`, reported in mm,
                   in metres in ``worst``); the sagging robot before and after and the straight motion
                   between them keep the clearance in the event's world (:func:`jump_check`);
-``allowed_pair``  (informational) the closest the explicitly allowed pair comes on the legs that allow it.
+``allowed_pair``  (informational) the closest the explicitly allowed pair comes on the legs that allow it
+                  (exact over every sample of those legs).
 
-``min_clearance_m``: the smallest exact distance at the probe samples (every ``n // 40``-th of the cycle, and
-each leg's last), each measured in its leg's world (the certified ``collision`` check, not this figure,
-guarantees the clearance between them).
+``min_clearance_m``: the smallest exact FCL distance over *every* sample of the cycle, each leg's samples
+(from the previous leg's last) measured in the leg's own world -- its payload state, the installed units,
+the fixture, the unit where it rests; allowed pairs apart, reported by ``allowed_pair`` -- found by the
+legs' batched passes (:mod:`planner.collision.along`, to within ``min_clearance_at.tolerance_m``);
+``min_clearance_bound_m`` a certified lower bound of it along every leg's polyline, between samples
+included; ``min_clearance_at`` the sample, time, leg and bodies (as reports name them: ``unit A3`` for the
+carried unit, ``gripper``, ``unit A2`` for an installed unit, ``cabin``) of the exact figure.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from planner.collision.along import CLEARANCE_TOL_M, AlongPath, ClearanceAlong
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
@@ -44,11 +51,9 @@ from planner.dynamics.load_change import load_change
 from planner.dynamics.models import DriveDynamics, drive_dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.dynamics.stiffness import COMPENSATION_TOL_M, COMPENSATION_TOL_RAD
-from planner.gate.checks import clearance_probe_indices, deflected_joints
+from planner.gate.checks import deflected_joints, sagging_certificate
 from planner.gate.drive_checks import Check, GateReport, drive_checks, ratio_check
 from planner.gate.requirements import (
-    GATE_MAX_EXTRA_M,
-    GATE_MAX_RUN,
     GATE_MOTION_MARGIN_M,
     GOAL_ANGLE_TOL_RAD,
     GOAL_POSITION_TOL_M,
@@ -163,7 +168,8 @@ def validate_cycle(
         )
     checks.append(_dwell_check(req, u, ud, udd))
     T_unit = robot.fk_batch(q) @ req.T_tool_unit
-    checks.extend(_collision_checks(robot, q, req))
+    collision, figure, allowed = _collision_checks(robot, q, req)
+    checks.extend(collision)
     checks.append(_line_check(T_unit, req))
     checks.extend(_goal_checks(robot, q, T_unit, u, req))
     for name, before, after in (("grasp", None, req.unit_payload), ("release", req.unit_payload, None)):
@@ -174,17 +180,50 @@ def validate_cycle(
                 robot, leg.world, q_event, before, after, req.T_tool_unit, req.clearance_m, name, leg.labels
             )
         )
-    checks.extend(_allowed_checks(q, req))
-    min_c = float("inf")
-    probe = clearance_probe_indices(n)
-    for leg in req.legs:
-        s, e = leg.sample_start, leg.sample_end
-        if e == s:
-            continue
-        mine = probe[(probe >= s) & (probe < e)]
-        rows = q[np.unique(np.concatenate([mine, [e - 1]]))]  # the probes in the leg, and its last sample
-        min_c = min(min_c, float(np.min(leg.world.clearance_profile(rows))))
-    return GateReport(tuple(checks), n, min_c, peaks)
+    checks.extend(_allowed_checks(allowed))
+    if figure is None:  # a leg failed its certificate: the failure says where, no figure is claimed
+        return GateReport(tuple(checks), n, float("nan"), peaks)
+    where = {
+        "t_s": float(profile.t[figure.sample]),
+        "sample": figure.sample,
+        "bodies": list(figure.bodies),
+        "tolerance_m": figure.tolerance_m,
+        "leg": figure.leg,
+    }
+    return GateReport(tuple(checks), n, figure.distance_m, peaks, figure.bound_m, where)
+
+
+@dataclass(frozen=True)
+class CycleClearance:
+    """The smallest distance over a whole cycle, each leg's samples measured in the leg's own world.
+
+    Attributes:
+        distance_m: Exact FCL distance at ``sample`` between ``bodies`` (in the leg's world): no sample of
+            any leg has an exact distance (any body to the cabin, an obstacle, or another checked body;
+            allowed pairs apart) below it by more than ``tolerance_m``.
+        bound_m: Certified lower bound of every such distance along every leg's polyline (between samples).
+        sample: The cycle's sample of ``distance_m``.
+        bodies: The two bodies as reports name them (``unit A3``, ``gripper``, ``unit A2``, ``cabin`` ...).
+        leg: The leg of ``sample``.
+        tolerance_m: What the branch and bound proved (see :class:`~planner.collision.along.ClearanceAlong`).
+    """
+
+    distance_m: float
+    bound_m: float
+    sample: int
+    bodies: tuple[str, str]
+    leg: str
+    tolerance_m: float
+
+
+@dataclass(frozen=True)
+class _LegPass:
+    """One leg's certified batched pass: the leg, its first cycle sample and the pass."""
+
+    leg: CycleLeg
+    first: int
+    last: int
+    along: AlongPath
 
 
 def _legs_check(req: CycleRequirements, n: int) -> Check:
@@ -229,33 +268,45 @@ def _label(leg: CycleLeg, detail: str) -> str:
     return detail
 
 
-def _collision_checks(robot: Cabin8, q: Array, req: CycleRequirements) -> list[Check]:
-    """Each leg's samples certified in its world, rigid and sagging under its load."""
+def _collision_checks(
+    robot: Cabin8, q: Array, req: CycleRequirements
+) -> tuple[list[Check], CycleClearance | None, list[tuple[CycleLeg, ClearanceAlong]]]:
+    """Each leg's samples certified in its world, rigid and sagging under its load; the cycle's figure.
+
+    The rigid robot: each leg's polyline (from the previous leg's last sample) in one batched pass of its
+    world (:meth:`CollisionWorld.along`: cabin, robot pairs, installed units, fixture, the unit where it
+    rests), which also gives the leg's exact minimum over its samples; the legs' figures combine into the
+    cycle's (:func:`_cycle_clearance`). The sagging robot under each leg's load: the certified walk.
+    Returns (checks, the cycle's figure or None after a failure, each allowed pair's figure per leg).
+    """
     failures: list[Check] = []
-    runs, worst_sag = 0, 0.0
+    passes: list[_LegPass] = []
+    worst_sag, exact, walked = 0.0, 0, 0
     for leg in req.legs:
-        rows = q[leg.rows()]
-        first = leg.rows().start
-        rep = leg.world.check_path(
-            rows, req.clearance_m, GATE_MOTION_MARGIN_M, GATE_MAX_RUN, GATE_MAX_EXTRA_M
-        )
-        runs += rep.motion_checks
+        sl = leg.rows()
+        rows = q[sl]
+        first = sl.start
+        # A leg of one sample (an empty leg at the start): its sample twice, a path at rest.
+        along = leg.world.along(rows if len(rows) >= 2 else np.vstack([rows, rows]))
+        rep = along.certify(req.clearance_m, leg.world.self_clearance, GATE_MOTION_MARGIN_M)
+        exact += rep.exact_queries
+        walked += rep.walked
         if not rep.valid:
             what = "; ".join(_label(leg, c.detail) for c in rep.contacts) or "not certified"
             bad = None if rep.first_bad is None else first + rep.first_bad
             failures.append(Check("collision", False, f"{leg.name}: from sample {bad}: {what}", None, bad))
             continue
+        passes.append(_LegPass(leg, first, sl.stop - 1, along))
         if not req.stiffness:
             continue
         q_def, sag = deflected_joints(robot, rows, leg.payload, req.T_tool_unit)
         worst_sag = max(worst_sag, sag)
-        rep = leg.world.check_path(
-            q_def, req.clearance_m, GATE_MOTION_MARGIN_M, GATE_MAX_RUN, GATE_MAX_EXTRA_M
-        )
-        runs += rep.motion_checks
-        if not rep.valid:
-            what = "; ".join(_label(leg, c.detail) for c in rep.contacts) or "not certified"
-            bad = None if rep.first_bad is None else first + rep.first_bad
+        rep_def = sagging_certificate(leg.world, q_def, req.clearance_m, GATE_MOTION_MARGIN_M, along)
+        exact += rep_def.exact_queries
+        walked += rep_def.walked
+        if not rep_def.valid:
+            what = "; ".join(_label(leg, c.detail) for c in rep_def.contacts) or "not certified"
+            bad = None if rep_def.first_bad is None else first + rep_def.first_bad
             failures.append(
                 Check(
                     "collision",
@@ -265,17 +316,57 @@ def _collision_checks(robot: Cabin8, q: Array, req: CycleRequirements) -> list[C
                     bad,
                 )
             )
+    allowed = [(p.leg, c) for p in passes if (c := p.along.allowed_clearance()) is not None]
     if failures:
-        return failures
-    return [
-        Check(
-            "collision",
-            True,
-            f"certified clearance >= {req.clearance_m} m over {runs} runs in each leg's world (installed "
-            f"units, fixture, the unit where it rests), rigid and sagging (up to {1e3 * worst_sag:.2f} mm) "
-            "alike",
-        )
-    ]
+        return failures, None, allowed
+    figure = _cycle_clearance(passes)
+    return (
+        [
+            Check(
+                "collision",
+                True,
+                f"certified clearance >= {req.clearance_m} m along every leg's polyline in its world "
+                f"(installed units, fixture, the unit where it rests), rigid and sagging (up to "
+                f"{1e3 * worst_sag:.2f} mm) alike ({exact} exact distances, {walked} pieces walked)",
+            )
+        ],
+        figure,
+        allowed,
+    )
+
+
+def _cycle_clearance(passes: list[_LegPass]) -> CycleClearance | None:
+    """The cycle's smallest distance: each leg's exact minimum over its samples, the smallest of them.
+
+    The legs are searched in the order of their smallest bound, each with the smallest figure found so far
+    as its cap (a leg need not resolve distances above it); the tolerance is what every leg proved: no
+    sample of leg l is below min(best_l - tol, its smallest open bound), so none of the cycle is below the
+    smallest of those.
+    """
+    if not passes:
+        return None
+
+    def key(p: _LegPass) -> float:
+        a = p.along
+        return float(np.min(a.lower[:, : a.n_checked])) if a.n_checked else np.inf
+
+    best: tuple[ClearanceAlong, _LegPass] | None = None
+    proven, bound = np.inf, np.inf
+    for p in sorted(passes, key=key):
+        cap = best[0].distance_m if best is not None else np.inf
+        c = p.along.clearance(cap_m=cap)
+        proven = min(proven, c.distance_m - c.tolerance_m)
+        bound = min(bound, c.bound_m)
+        if best is None or c.distance_m < best[0].distance_m:
+            best = (c, p)
+    assert best is not None
+    c, p = best
+    if not np.isfinite(c.distance_m):
+        return None
+    sample = min(p.first + c.sample, p.last)  # a one-sample leg's path repeats its sample
+    bodies = (p.leg.labels.get(c.bodies[0], c.bodies[0]), p.leg.labels.get(c.bodies[1], c.bodies[1]))
+    tolerance = max(CLEARANCE_TOL_M, c.distance_m - proven)
+    return CycleClearance(c.distance_m, min(bound, c.distance_m), sample, bodies, p.leg.name, tolerance)
 
 
 def _line_check(T_unit: Array, req: CycleRequirements) -> Check:
@@ -394,26 +485,23 @@ def jump_check(
     )
 
 
-def _allowed_checks(q: Array, req: CycleRequirements) -> list[Check]:
-    """The allowed pair's closest approach on the legs that allow it (informational, exact distances)."""
+def _allowed_checks(allowed: list[tuple[CycleLeg, ClearanceAlong]]) -> list[Check]:
+    """The allowed pair's closest approach on the legs that allow it (informational).
+
+    Exact over every sample of those legs (:meth:`~planner.collision.along.AlongPath.allowed_clearance`).
+    """
     out: dict[tuple[str, str], tuple[float, list[str]]] = {}
-    for leg in req.legs:
-        if leg.allowed is None or leg.world.obstacles is None:
+    for leg, c in allowed:
+        if leg.allowed is None:
             continue
-        body, obstacle = next(iter(leg.world.obstacles.allowed))
-        rows = q[leg.rows()]
-        probe = clearance_probe_indices(len(rows))
-        d = min(
-            leg.world.obstacle_distance(leg.world.flat_poses(r), obstacle=obstacle, body=body).distance_m
-            for r in rows[probe]
-        )
         best, legs = out.get(leg.allowed, (np.inf, []))
-        out[leg.allowed] = (min(best, d), [*legs, leg.name])
+        out[leg.allowed] = (min(best, c.distance_m), [*legs, leg.name])
     return [
         Check(
             "allowed_pair",
             True,
-            f"{a} ~ {b} allowed within the clearance on {', '.join(legs)} only; closest {1e3 * d:.2f} mm",
+            f"{a} ~ {b} allowed within the clearance on {', '.join(legs)} only; closest {1e3 * d:.2f} mm "
+            "(exact over every sample)",
             d,
         )
         for (a, b), (d, legs) in out.items()

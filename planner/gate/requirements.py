@@ -76,6 +76,9 @@ class GateRequirements:
     #: The certified geometric path, leg by leg: when given, every sample must lie on it
     #: (:data:`PATH_DEVIATION_TOL`). The planner passes it; a caller's profile (CLI ``check``) has none.
     path_legs: tuple[JointPath, ...] | None = field(default=None, repr=False)
+    #: Whether this gate certifies the clearance (``collision`` and the clearance figure); False only where
+    #: a caller's gate certifies the same samples in the same world (a cycle's legs: the cycle gate).
+    collision: bool = True
 
 
 #: Samples of a profile at which the static deflection is predicted (the gate's deflected collision check,
@@ -166,4 +169,5 @@ def requirements_for(
         sample_period_s=sc.options.sample_period_s,
         deflection_check=sc.payload is not None and sc.robot.desc.stiffness is not None,
         jerk_limited=stages.select(sc.options.timing, sc.robot).binds_jerk,
+        collision=sc.gate_collision,
     )

@@ -1,7 +1,8 @@
 """Seeded generator of assembly campaigns (and single cycles) nobody tuned the planner for.
 
-A generated campaign is a cabin of the scenario generator's kind (:mod:`planner.tools.generate`: a
-cylindrical shell with the floor deck and end walls, optional ring frames) with 3-8 units to install:
+A generated campaign is a cabin of the scenario generator's kind (:mod:`planner.generate`, its ``mixed``
+family: a cylindrical shell with the floor deck and end walls, optional ring frames) with 3-8 units to
+install:
 
 * **Bays**: rack bays in the +x side wall (insertion along +x; the arm cannot point to -x) at distinct
   stations along the cabin (one per station), and with some probability one bay recessed into
@@ -27,51 +28,35 @@ Each campaign is drawn from ``numpy.random.default_rng([seed, index, STREAM])``:
 is the same whatever the count, and the same seed gives the same bytes. Pure (numpy in, bytes and dicts
 out) except :func:`write_campaign` at the edge.
 
-Frame (as in ``meshes/README.md``): z along the cabin axis and the rail, y up, x lateral; SI units.
+Frame (as in ``planner/meshes/README.md``): z along the cabin axis and the rail, y up, x lateral; SI units.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from meshes.generate import Shell, binary_stl_bytes
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.obstacles import Obstacle
 from planner.collision.world import CollisionWorld
 from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
+from planner.generate.cabins import PANEL_M, BayLayout, CabinLayout, RingFrame, bay_boxes, cabin_parts, merge
+from planner.generate.cases.common import draw_payload, draw_section, ring_depth_max
+from planner.generate.families import FAMILIES
+from planner.generate.files import loaded_cabin, pose_doc
+from planner.generate.options import FREE_RANGE_M, GRID_STEP_M, ROBOT_RAIL_M
+from planner.generate.reach import exact_solutions, payload_rotation, pose, robot_of
+from planner.generate.sections import Section
 from planner.kinematics import chain
-from planner.meshio.load import LoadedMesh, load_mesh
+from planner.meshes.generate import binary_stl_bytes
 from planner.plan.goals import StaticForceCheck
 from planner.robots.cabin8 import Cabin8
-from planner.tools.generate import (
-    FREE_RANGE_M,
-    GRID_STEP_M,
-    MASS_RANGE_KG,
-    PANEL_M,
-    PAYLOAD_BOXES_M,
-    ROBOT_RAIL_M,
-    BayLayout,
-    CabinLayout,
-    RingFrame,
-    _merge,
-    _pose,
-    _pose_doc,
-    _ring_depth_max,
-    _robot,
-    _shell,
-    _shell_like,
-    bay_boxes,
-    cabin_parts,
-    exact_solutions,
-    payload_rotation,
-)
 
 __all__ = [
     "STREAM",
@@ -84,6 +69,10 @@ __all__ = [
     "write_campaign",
 ]
 
+#: The scenario generator's family whose cabins (round shells) and payloads the campaigns share.
+MIXED = FAMILIES["mixed"]
+#: Unit masses [kg]: the mixed family's payload range.
+MASS_RANGE_KG = MIXED.mass_range_kg
 #: The campaigns' random stream, apart from the scenario generator's (``[seed, index]``).
 STREAM = 0xC1C1E
 #: The fixture a docked unit waits on: footprint (x, z) [m] (its top follows the unit's height) and its
@@ -111,8 +100,8 @@ PARK_D1_M = (0.05, 0.15, 0.3, 0.5)
 LIFT_M = 0.05
 #: Stations along the cabin for side bays: spacing [m] and the first one's place along the rail [m] (the
 #: docks are at 0.8-1.4 m).
-STATION_SPACING_M = 0.8
-FIRST_STATION_M = 2.1
+STATION_SPACING_M = 0.75
+FIRST_STATION_M = 1.9
 #: Heights of the side bays' unit centres [m].
 ROWS_Y_M = ((0.55, 1.2),)
 #: Exact IK solutions drawn before the force filter (a 60 kg unit held along +x at 0.6-0.8 m height: 1 of
@@ -210,7 +199,7 @@ def _reachable(
     ``count`` solutions are drawn before the force filter: the holdable ones of a heavy unit held sideways
     are rarely among the three of the largest margin.
     """
-    sols = exact_solutions(robot, _tool(_pose(u.R, p), u.grasp), robot.home_drives, count)
+    sols = exact_solutions(robot, _tool(pose(u.R, p), u.grasp), robot.home_drives, count)
     if not held:
         return sols
     forces = StaticForceCheck(Cabin8Dynamics.of(robot), u.payload().rigid_payload())
@@ -218,11 +207,9 @@ def _reachable(
 
 
 def _draw_unit(rng: np.random.Generator, uid: str, kind: str) -> _Unit:
-    size = PAYLOAD_BOXES_M[int(rng.integers(len(PAYLOAD_BOXES_M)))]
-    mass = float(np.round(rng.uniform(*MASS_RANGE_KG), 1))
-    grasp = np.round(
-        [rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), size[2] / 2 + rng.uniform(0.03, 0.08)], 4
-    )
+    """A unit drawn as the scenario generator draws its payloads (box, mass, grasp), and its orientation."""
+    size, payload, _ = draw_payload(rng, MASS_RANGE_KG)
+    mass, grasp = float(payload.mass), payload.T_tool_payload[:3, 3].copy()
     roll = int(rng.integers(2))
     R = payload_rotation("bay-end-far" if kind == "end" else "bay-side", roll)
     return _Unit(uid, kind, size, mass, grasp, R, np.zeros(3), 0.0)
@@ -240,9 +227,9 @@ def _panels_clear(
     The panels are boxes, obstacles of a world without a cabin: no grid to build per candidate.
     """
     bay = BayLayout(kind, (f[0], f[1], f[2], f[3], f[4]), recess)
-    panels, _, _ = bay_boxes(_pose(u.R, p), u.size, bay)
+    panels, _, _ = bay_boxes(pose(u.R, p), u.size, bay)
     obstacles = tuple(
-        Obstacle.box(f"panel {k}", _size3(hi - lo), _pose(np.eye(3), (lo + hi) / 2))
+        Obstacle.box(f"panel {k}", _size3(hi - lo), pose(np.eye(3), (lo + hi) / 2))
         for k, (lo, hi) in enumerate(panels)
     )
     world = CollisionWorld(robot, None, u.payload(), obstacles=obstacles)
@@ -253,7 +240,7 @@ def _panels_clear(
 
 
 def _side_bay(
-    rng: np.random.Generator, robot: Cabin8, shell: Shell, u: _Unit, z: float, row: int, clearance: float
+    rng: np.random.Generator, robot: Cabin8, section: Section, u: _Unit, z: float, row: int, clearance: float
 ) -> None:
     """Place a side-wall bay at station ``z`` in ``row``: a reachable installed and pre-insertion pose."""
     f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
@@ -262,8 +249,7 @@ def _side_bay(
     half = np.abs(u.R) @ (np.array(u.size) / 2 + 0.06)
     for _ in range(24):
         y = rng.uniform(*ROWS_Y_M[row])
-        axis = shell.axis_y_m
-        x_wall = shell.half_width_at(axis + max(abs(y + half[1] - axis), abs(y - half[1] - axis)))
+        x_wall = section.wall_x(y - half[1], y + half[1])
         x_hi = x_wall - (u.size[2] / 2 + f[4] + PANEL_M)
         if x_hi <= 0.55:
             continue
@@ -359,13 +345,8 @@ def _pedestal(u: _Unit, deck_top: float, clearance: float) -> tuple[tuple[float,
     return (x_d - fx / 2, bottom, z_d - fz / 2), (x_d + fx / 2, top, z_d + fz / 2)
 
 
-def _loaded(parts_layout: CabinLayout) -> LoadedMesh:
-    whole = _merge("cabin", cabin_parts(parts_layout))
-    return load_mesh(binary_stl_bytes(whole.vertices, whole.faces, "generated"), units="m", name="cabin.stl")
-
-
 def _place_units(
-    rng: np.random.Generator, robot: Cabin8, shell: Shell, n: int, opts: CycleGeneratorOptions
+    rng: np.random.Generator, robot: Cabin8, section: Section, n: int, opts: CycleGeneratorOptions
 ) -> list[_Unit]:
     """Draw ``n`` units with reachable, holdable bays and docks (side bays, blocking pairs, an end bay)."""
     rail_max, clearance = opts.rail_length_m, opts.clearance_m
@@ -373,7 +354,7 @@ def _place_units(
     end_wanted = rng.uniform() < opts.end_bay_probability and n >= 2
     stations = list(np.arange(FIRST_STATION_M, rail_max - 0.2, STATION_SPACING_M))
     # One bay per station (a stage reaching a high bay hits a low bay's panels below it).
-    slots = [(float(z), 0) for z in stations]
+    slots = [(float(z), 0) for z in stations for _ in range(2)]  # each station drawn twice at most
     slots = [slots[int(k)] for k in rng.permutation(len(slots))]
     k = 0
     while len(units) < n:
@@ -392,9 +373,11 @@ def _place_units(
             raise _Redraw("more units than bay stations")
         z, row = slots[k]
         k += 1
+        if any(v.kind == "side" and abs(v.p_bay[2] - z) < STATION_SPACING_M / 2 for v in units):
+            continue  # the station holds a bay already
         u = _draw_unit(rng, uid, "side")
         try:
-            _side_bay(rng, robot, shell, u, z + rng.uniform(-0.05, 0.05), row, clearance)
+            _side_bay(rng, robot, section, u, z + rng.uniform(-0.05, 0.05), row, clearance)
             _dock(rng, robot, u, clearance)
         except _Redraw:
             continue
@@ -411,20 +394,18 @@ def _place_units(
     return units
 
 
-def _layout(
-    rng: np.random.Generator, shell: Shell, units: list[_Unit], rail_max: float
-) -> tuple[CabinLayout, Shell]:
+def _layout(rng: np.random.Generator, section: Section, units: list[_Unit], rail_max: float) -> CabinLayout:
     """The cabin: shell, deck, end walls (the far one with the end bay's opening), bay panels, rings."""
     boxes: list[tuple[tuple[float, ...], tuple[float, ...]]] = []
     end_opening = None
-    z_max = shell.z_max_m
+    z_max = section.shell.z_max_m
     for u in units:
         if u.kind == "front":
             continue
         kind = "bay-side" if u.kind == "side" else "bay-end-far"
         f = u.free_m
         bay = BayLayout(kind, (f[0], f[1], f[2], f[3], f[4]), u.recess_m)
-        panels, cavity, (_, _, _, _, z_open) = bay_boxes(_pose(u.R, u.p_bay), u.size, bay)
+        panels, cavity, (_, _, _, _, z_open) = bay_boxes(pose(u.R, u.p_bay), u.size, bay)
         boxes += [(tuple(map(float, a)), tuple(map(float, b))) for a, b in panels]
         if u.kind == "end":
             wall_z = float(u.p_bay[2] + (u.R @ np.array([0.0, 0.0, z_open]))[2])
@@ -433,28 +414,19 @@ def _layout(
             end_opening = ("far", wall_z, (lo_c[0], hi_c[0], lo_c[1], hi_c[1]))
             if wall_z - 0.26 < rail_max:
                 raise _Redraw("the end wall cuts the rail")
-    shell = _shell_like(shell, shell.z_min_m, z_max)
+    section = section.over(section.shell.z_min_m, z_max)
     rings: list[RingFrame] = []
     if rng.uniform() < 0.4:
-        depth_max = _ring_depth_max(shell)
+        depth_max = ring_depth_max(section)
         if depth_max > 0.03:
             depth = float(np.round(rng.uniform(0.03, min(0.06, depth_max)), 3))
             thick = float(np.round(rng.uniform(0.03, 0.06), 3))
             for z in np.arange(FIRST_STATION_M - STATION_SPACING_M / 2, rail_max, STATION_SPACING_M):
                 rings.append(RingFrame(float(np.round(z, 3)), thick, depth))
-    layout = CabinLayout(shell=shell, rings=tuple(rings), bay_boxes=tuple(boxes), end_opening=end_opening)
-    return layout, shell
+    return CabinLayout(section=section, rings=tuple(rings), bay_boxes=tuple(boxes), end_opening=end_opening)
 
 
-def _with_plates(
-    layout: CabinLayout, plates: tuple[tuple[tuple[float, ...], tuple[float, ...]], ...]
-) -> CabinLayout:
-    return CabinLayout(**{**{f: getattr(layout, f) for f in layout.__dataclass_fields__}, "plates": plates})
-
-
-def _witnesses(
-    robot: Cabin8, layout: CabinLayout, shell: Shell, u: _Unit, clearance: float, bays: CollisionWorld
-) -> None:
+def _witnesses(robot: Cabin8, layout: CabinLayout, u: _Unit, clearance: float, bays: CollisionWorld) -> None:
     """Every key configuration of unit ``u`` alone in the cabin: exact IK, clear, holdable (or redraw)."""
     e, up = u.R[:, 2], np.array([0.0, 1.0, 0.0])
     payload = u.payload()
@@ -463,7 +435,7 @@ def _witnesses(
         if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p)):
             raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     need = clearance + WITNESS_EXTRA_M
-    dock = _loaded(_with_plates(layout, (_pedestal(u, shell.deck_top_y_m, clearance),)))
+    dock = loaded_cabin(replace(layout, plates=(_pedestal(u, layout.shell.deck_top_y_m, clearance),)))
     held = CollisionWorld(robot, dock, payload, grid_step_m=GRID_STEP_M)
     p_dock = _dock_pose(u)
     for what, p in (("dock", p_dock), ("lift-off", p_dock + LIFT_M * up)):
@@ -489,15 +461,16 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
     lo, hi = opts.units
     n = int(rng.integers(lo, hi + 1))
     rail_max, clearance = opts.rail_length_m, opts.clearance_m
-    robot = _robot(rail_max)
-    shell = _shell(rng, -0.5, rail_max + 0.5)
-    units = _place_units(rng, robot, shell, n, opts)
-    layout, shell = _layout(rng, shell, units, rail_max)
-    cabin = _loaded(layout)
+    robot = robot_of(rail_max)
+    section = draw_section(rng, MIXED, -0.5, rail_max + 0.5)
+    units = _place_units(rng, robot, section, n, opts)
+    layout = _layout(rng, section, units, rail_max)
+    shell = layout.shell
+    cabin = loaded_cabin(layout)
     bays = CollisionWorld(robot, cabin, None, grid_step_m=GRID_STEP_M)
     for u in units:
         bays_u = CollisionWorld(robot, cabin, u.payload(), grid_step_m=GRID_STEP_M)
-        _witnesses(robot, layout, shell, u, clearance, bays_u)
+        _witnesses(robot, layout, u, clearance, bays_u)
     # Park: home at the rail's start, clear by the clearance + 20 mm without a unit.
     park = next(
         (q for q in (_park(robot, d1) for d1 in PARK_D1_M) if bays.is_valid(q, clearance + 0.02)), None
@@ -506,7 +479,7 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
         raise _Redraw("no clear park posture")
     name = f"camp-{seed}-{index:03d}"
     mesh_name = f"{name}-cabin.stl"
-    whole = _merge(name, cabin_parts(layout))
+    whole = merge(name, cabin_parts(layout))
     data = binary_stl_bytes(whole.vertices, whole.faces, f"cabinplan generated campaign cabin {name} [m]")
     doc_units = []
     for u in units:
@@ -519,19 +492,19 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
                     "id": u.uid,
                     "box": list(u.size),
                     "mass": u.mass,
-                    "grasp": _pose_doc(_pose(np.eye(3), u.grasp)),
+                    "grasp": pose_doc(pose(np.eye(3), u.grasp)),
                 },
                 "dock": {
-                    "pose": _pose_doc(_pose(u.R, _dock_pose(u))),
+                    "pose": pose_doc(pose(u.R, _dock_pose(u))),
                     "fixture": {
                         "box": [float(v) for v in np.round(np.array(p_hi) - np.array(p_lo), 6)],
-                        "pose": _pose_doc(_pose(np.eye(3), centre)),
+                        "pose": pose_doc(pose(np.eye(3), centre)),
                     },
                     "approach": {"direction": e, "distance": u.grasp_line_m},
                     "lift": {"direction": [0.0, 1.0, 0.0], "distance": LIFT_M},
                 },
                 "bay": {
-                    "pose": _pose_doc(_pose(u.R, u.p_bay)),
+                    "pose": pose_doc(pose(u.R, u.p_bay)),
                     "approach": {"direction": e, "distance": u.approach_m},
                 },
             }

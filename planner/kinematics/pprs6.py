@@ -122,39 +122,29 @@ def rotation(angles: Array) -> Array:
 
 def _rotation_and_derivatives(angles: Array) -> tuple[Array, Array, Array, Array]:
     """R and its partial derivatives w.r.t. phi, theta, psi, each (N, 3, 3)."""
-    n = angles.shape[0]
     phi, theta, psi = angles[:, 0], angles[:, 1], angles[:, 2]
-
-    def rz(t: Array, d: bool = False) -> Array:
-        c, s = np.cos(t), np.sin(t)
-        m = np.zeros((n, 3, 3))
-        if d:
-            m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1] = -s, -c, c, -s
-        else:
-            m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1], m[:, 2, 2] = c, -s, s, c, 1.0
-        return m
-
-    def ry(t: Array, d: bool = False) -> Array:
-        c, s = np.cos(t), np.sin(t)
-        m = np.zeros((n, 3, 3))
-        if d:
-            m[:, 0, 0], m[:, 0, 2], m[:, 2, 0], m[:, 2, 2] = -s, c, -c, -s
-        else:
-            m[:, 0, 0], m[:, 0, 2], m[:, 2, 0], m[:, 2, 2], m[:, 1, 1] = c, s, -s, c, 1.0
-        return m
-
-    def rx(t: Array, d: bool = False) -> Array:
-        c, s = np.cos(t), np.sin(t)
-        m = np.zeros((n, 3, 3))
-        if d:
-            m[:, 1, 1], m[:, 1, 2], m[:, 2, 1], m[:, 2, 2] = -s, -c, c, -s
-        else:
-            m[:, 1, 1], m[:, 1, 2], m[:, 2, 1], m[:, 2, 2], m[:, 0, 0] = c, -s, s, c, 1.0
-        return m
-
-    Z, Y, X = rz(phi), ry(theta), rx(psi)
+    Z, Y, X = _axis_rotation(2, phi), _axis_rotation(1, theta), _axis_rotation(0, psi)
     R = Z @ Y @ X
-    return R, rz(phi, True) @ Y @ X, Z @ ry(theta, True) @ X, Z @ Y @ rx(psi, True)
+    dZ, dY, dX = _axis_rotation(2, phi, True), _axis_rotation(1, theta, True), _axis_rotation(0, psi, True)
+    return R, dZ @ Y @ X, Z @ dY @ X, Z @ Y @ dX
+
+
+def _axis_rotation(axis: int, t: Array, derivative: bool = False) -> Array:
+    """Rotation about the base axis ``axis`` (0 x, 1 y, 2 z) by the angles t (N,) [rad], (N, 3, 3).
+
+    In the plane (i, j) = (axis + 1, axis + 2) mod 3: ``R[i, i] = R[j, j] = cos t``,
+    ``R[j, i] = -R[i, j] = sin t`` and ``R[axis, axis] = 1``. With ``derivative`` it is dR/dt: the same
+    pattern with (cos, sin) replaced by their derivatives (-sin, cos), and ``R[axis, axis] = 0``.
+    """
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    c, s = np.cos(t), np.sin(t)
+    if derivative:
+        c, s = -s, c
+    m = np.zeros((len(t), 3, 3))
+    m[:, i, i], m[:, i, j], m[:, j, i], m[:, j, j] = c, -s, s, c
+    if not derivative:
+        m[:, axis, axis] = 1.0
+    return m
 
 
 class PlatformPoints(NamedTuple):

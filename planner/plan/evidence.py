@@ -9,6 +9,7 @@ stage (:mod:`planner.plan.targets`) and of the compensation (:mod:`planner.plan.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from planner.collision.world import CollisionWorld
 from planner.core.types import Array
 from planner.dynamics.holding import StaticForceCheck
+from planner.plan.motion import MIN_MARGIN_M, AdaptiveMotion
 
 
 def collision_evidence(
@@ -100,6 +102,66 @@ def _span(v: dict[str, Any]) -> float:
     if lo is None or hi is None or not np.isfinite(hi - lo) or hi <= lo:
         return 1.0
     return float(hi - lo)
+
+
+def state_evidence(
+    world: CollisionWorld,
+    q: Array,
+    required_m: float,
+    where: str,
+    forces: StaticForceCheck | None = None,
+    margin_m: float = 0.0,
+) -> dict[str, Any] | None:
+    """Why configuration q fails a planner state check: the measurement that fails, never one that passes.
+
+    A state check (:meth:`CollisionWorld.is_valid` and, with ``forces``, the static hold) fails on a limit
+    or margin of the mechanism, on a distance short of its requirement, or on a drive that cannot hold the
+    load; the record is the first of those that fails at q, in that order: :func:`limit_evidence` (the
+    limit furthest outside), :func:`collision_evidence` only when its distance is below its requirement
+    (``required_m`` + ``margin_m`` for the cabin and obstacles), :func:`force_evidence`. None when every
+    one passes at q (nothing true to report there).
+    """
+    violations = world.robot.violations(q)
+    if violations:
+        return limit_evidence(violations, q, where)
+    ev = collision_evidence(world, q, required_m, where, margin_m)
+    if ev["distance_m"] < ev["required_m"]:
+        return ev
+    if forces is not None and not forces.ok(q):
+        return force_evidence(forces, q, where)
+    return None
+
+
+def motion_evidence(
+    world: CollisionWorld,
+    q_a: Array,
+    q_b: Array,
+    motion: AdaptiveMotion,
+    required_m: float,
+    where: Callable[[float], str],
+) -> dict[str, Any] | None:
+    """Why the certified motion q_a -> q_b (the refused ``motion`` of :func:`certify_motion`) failed.
+
+    At the walk's failing fraction t (q = q_a + t (q_b - q_a)): a limit or margin contact gives
+    :func:`limit_evidence` there; a clearance failure the bodies short of ``required_m`` + the adaptive
+    walk's smallest margin (:data:`MIN_MARGIN_M`: a state with more spare clearance would have been walked
+    again with a smaller margin), or, when the walk stopped at a larger margin, of ``required_m`` + that
+    margin, the requirement the walk failed on. Only a failing measurement is returned: None when the walk
+    gives no failing state or the state measures clear of both (``where(t)`` names the place).
+    """
+    rep = motion.report
+    if rep.valid or rep.t_fail is None:
+        return None
+    t = float(rep.t_fail)
+    q_at = np.asarray(q_a, dtype=float) + t * (np.asarray(q_b, dtype=float) - q_a)
+    if any(c.kind == "limit" for c in rep.contacts):
+        violations = world.robot.violations(q_at)
+        return limit_evidence(violations, q_at, where(t)) if violations else None
+    for margin in dict.fromkeys((MIN_MARGIN_M, max(MIN_MARGIN_M, motion.margin_m))):
+        ev = collision_evidence(world, q_at, required_m, where(t), margin_m=margin)
+        if ev["distance_m"] < ev["required_m"]:
+            return ev
+    return None
 
 
 def describe(evidence: dict[str, Any]) -> str:

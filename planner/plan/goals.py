@@ -24,10 +24,10 @@ import numpy as np
 
 from planner.collision.world import CollisionWorld
 from planner.core.types import Array
-from planner.dynamics.holding import StaticForceCheck  # also imported from here by planner.tools.generate
+from planner.dynamics.holding import StaticForceCheck  # also imported from here by planner.generate
 from planner.kinematics.closed_form import redundant_family
-from planner.plan.evidence import collision_evidence, force_evidence
-from planner.plan.motion import MIN_MARGIN_M, certify_motion
+from planner.plan.evidence import force_evidence, motion_evidence, state_evidence
+from planner.plan.motion import certify_motion
 from planner.redundancy.ik import IKOptions, comfort_margins, family_candidates, normalised_margin, track_pose
 from planner.robots.cabin8 import Cabin8
 
@@ -92,7 +92,7 @@ def goal_configurations(
         if not world.is_valid(sol.q, clearance):
             stats["collision"] += 1
             if evidence is not None:
-                evidence.append(collision_evidence(world, sol.q, clearance, "at the goal"))
+                _record(evidence, state_evidence(world, sol.q, clearance, "at the goal"))
             continue
         if not forces.ok(sol.q):
             stats["force"] += 1
@@ -116,6 +116,7 @@ def approach_lines(
     max_lines: int = 3,
     grid: int = 21,
     evidence: list[dict[str, Any]] | None = None,
+    hold: StaticForceCheck | None = None,
 ) -> tuple[list[GoalCandidate], dict[str, int]]:
     """Straight approach lines with the redundancy fixed along each line, best margin first.
 
@@ -127,6 +128,13 @@ def approach_lines(
     best lines, diverse in (gamma, d5), are certified collision-free with the motion check of the
     collision layer. The redundancy is thus chosen once for the whole insertion, exactly (the line is
     followed to rounding error), rather than drifting step by step.
+
+    ``hold``: a static check the goal configuration must also pass (a grasp, where the load is taken at
+    the goal: the approach itself is checked with ``forces``). Every admissible grid point is checked
+    (vectorised) before any is certified, so a goal that cannot hold never takes a line's place nor hides
+    a neighbour that can; ``stats["hold"]`` counts the admissible points that cannot hold. When none can,
+    the one closest to holding (smallest largest force ratio) is the only evidence appended (a
+    :func:`force_evidence` record "at the goal"): the cause is the load, whatever the clearances.
     """
     robot = world.robot
     ps = robot.desc.parallel_stage
@@ -144,6 +152,14 @@ def approach_lines(
     worst = np.min(np.where(np.isnan(margins), -np.inf, margins), axis=(0, 2))
     stats = {"grid_points": len(Q), "admissible": int(np.sum(worst >= 0)), "force": 0, "collision": 0}
     order = [int(i) for i in np.argsort(-worst) if worst[i] >= 0]
+    if hold is not None:
+        ratios = hold.ratios(Q[order]) if order else np.zeros(0)
+        held = ratios <= hold.fraction
+        stats["hold"] = int(np.sum(~held))
+        if order and not np.any(held) and evidence is not None:
+            best = order[int(np.argmin(np.where(np.isnan(ratios), np.inf, ratios)))]
+            evidence.append(force_evidence(hold, Q[best], "at the goal"))
+        order = [i for i, ok in zip(order, held.tolist(), strict=True) if ok]
     out: list[GoalCandidate] = []
     used: list[Array] = []
     for i in order:
@@ -164,21 +180,24 @@ def approach_lines(
         if not world.is_valid(q_goal, clearance):
             stats["collision"] += 1
             if evidence is not None:
-                evidence.append(collision_evidence(world, q_goal, clearance, "at the goal"))
+                _record(evidence, state_evidence(world, q_goal, clearance, "at the goal"))
             continue
         motion = certify_motion(world, q_pre, q_goal, clearance, motion_margin)
         if not motion.valid:
             stats["collision"] += 1
-            if evidence is not None and motion.report.t_fail is not None:
-                t = float(motion.report.t_fail)
-                q_at = q_pre + t * (q_goal - q_pre)
-                evidence.append(
-                    collision_evidence(world, q_at, clearance, _along(1.0 - t), margin_m=MIN_MARGIN_M)
-                )
+            if evidence is not None:
+                ev = motion_evidence(world, q_pre, q_goal, motion, clearance, lambda t: _along(1.0 - t))
+                _record(evidence, ev)
             continue
         line = np.stack([q_pre, q_goal])
         out.append(GoalCandidate(q_goal, float(worst[i]), line, np.array([0.0, distance_m])))
     return out, stats
+
+
+def _record(evidence: list[dict[str, Any]], record: dict[str, Any] | None) -> None:
+    """Append a failing measurement (None: the check failed on nothing that can be measured there)."""
+    if record is not None:
+        evidence.append(record)
 
 
 def _along(remaining: float) -> str:
@@ -230,17 +249,16 @@ def track_approach(
             return None
         motion = certify_motion(world, qs[-1], q, clearance, motion_margin)
         if not motion.valid:
-            if evidence is not None and motion.report.t_fail is not None:
-                # What blocks the step: the closest bodies against the clearance a motion needs there.
-                t = float(motion.report.t_fail)
-                q_at = qs[-1] + t * (q - qs[-1])
-                back_m = s[k - 1] + t * (s[k] - s[k - 1])
-                where = (
-                    f"{1e3 * back_m:.0f} mm before the goal on the insertion line"
-                    if back_m >= 5e-4
-                    else "at the goal"
-                )
-                evidence.append(collision_evidence(world, q_at, clearance, where, margin_m=MIN_MARGIN_M))
+            if evidence is not None:
+                # What blocks the step: the limit there, or the closest bodies against the clearance a
+                # motion needs there.
+                def where(t: float, k: int = k) -> str:
+                    back_m = s[k - 1] + t * (s[k] - s[k - 1])
+                    if back_m < 5e-4:
+                        return "at the goal"
+                    return f"{1e3 * back_m:.0f} mm before the goal on the insertion line"
+
+                _record(evidence, motion_evidence(world, qs[-1], q, motion, clearance, where))
             return None
         if not forces.segment_ok(qs[-1], q):
             if evidence is not None:

@@ -37,8 +37,10 @@ _PROBE_T = np.array([0.5, 0.25, 0.75, 0.125, 0.375, 0.625, 0.875])
 MIN_MARGIN_M = 0.0005
 #: The next margin tried is this fraction of the spare clearance measured where the walk failed.
 SPARE_FRACTION = 0.8
-#: Retries of the walk with a smaller margin (each at most halves the margin).
-MAX_RETRIES = 4
+#: Retries of the walk with a smaller margin (each at most halves the margin, down to MIN_MARGIN_M): enough
+#: to reach MIN_MARGIN_M from the largest margin a scenario may set (50 mm: 50 / 2**7 < 0.5 mm), so a
+#: refused motion always comes closer than MIN_MARGIN_M beyond the clearance where it failed.
+MAX_RETRIES = 8
 
 
 @dataclass(frozen=True)

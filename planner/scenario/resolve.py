@@ -16,12 +16,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from meshes import reference_cabin_path, reference_cabins
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.obstacles import Obstacle
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
 from planner.core.types import Array
+from planner.meshes import reference_cabin_path, reference_cabins
 from planner.meshio.load import LoadedMesh, MeshLimits, load_mesh
 from planner.robots import load_robot
 from planner.robots.cabin8 import Cabin8
@@ -73,6 +73,10 @@ class ResolvedScenario:
             their loaded triangles [m]: the sum of both meshes' ``surface_deviation_m`` (a STEP file's
             tessellation tolerance plus float32 rounding; 0 for triangle files and box payloads).
         payload_mesh: The payload's loaded mesh (its file hash goes into the provenance), or ``None``.
+        gate_collision: Whether the plan's own gate certifies the clearance (its ``collision`` check and
+            figure). False only for a cycle's legs inside :func:`planner.task.cycle.plan_cycle`, whose
+            cycle gate certifies the same samples in the same world, with the same clearance and margin
+            (:func:`planner.gate.cycle.validate_cycle`); True for every scenario a user gives.
     """
 
     spec: Scenario
@@ -94,6 +98,7 @@ class ResolvedScenario:
     allowed_pairs: frozenset[tuple[str, str]] = frozenset()
     surface_deviation_m: float = 0.0
     payload_mesh: LoadedMesh | None = field(default=None, repr=False)
+    gate_collision: bool = True
 
     def world(self) -> CollisionWorld:
         """The collision world of this scenario: robot, payload, cabin and its obstacles."""

@@ -21,7 +21,8 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-from typing import Annotated, Any, Literal
+from collections.abc import Callable
+from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 from pydantic import (
@@ -67,9 +68,40 @@ PlannerName = Literal["RRTConnect", "RRT", "RRTstar", "AORRTC"]
 
 _IDENTITY_POSE = Pose(position=(0.0, 0.0, 0.0))
 _MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+ModelT = TypeVar("ModelT", bound=BaseModel)
 
 
 # ------------------------------------------------------------------------------------------------- schema
+
+
+class RealisableInertia(BaseModel):
+    """Mixin: the model's ``inertia`` field (3x3 [kg m^2] or ``None``) must be a rigid body's inertia.
+
+    Symmetric, positive semi-definite, principal moments obeying the triangle inequality (the rules of
+    :class:`~planner.dynamics.payload.RigidPayload`); the subclass declares the field and its description.
+    """
+
+    @field_validator("inertia", check_fields=False)
+    @classmethod
+    def _realisable_inertia(cls, value: Matrix3 | None) -> Matrix3 | None:
+        if value is not None:
+            _check_inertia(np.array(value, dtype=float))
+        return value
+
+
+class OrientedPose(BaseModel):
+    """Mixin: the model's ``pose`` field, when given, states its orientation explicitly.
+
+    A goal the payload must reach is never silently "unrotated": the orientation is part of it, so an
+    omitted ``orientation`` (which would default to the identity) is an error naming the field.
+    """
+
+    @field_validator("pose", check_fields=False)
+    @classmethod
+    def _explicit_orientation(cls, value: Pose | None) -> Pose | None:
+        if value is not None and "orientation" not in value.model_fields_set:
+            raise ValueError("a goal pose needs its orientation {w, x, y, z} (the identity is [1, 0, 0, 0])")
+        return value
 
 
 class CabinSpec(BaseModel):
@@ -98,7 +130,7 @@ class CabinSpec(BaseModel):
     )
 
 
-class PayloadSpec(BaseModel):
+class PayloadSpec(RealisableInertia):
     """The carried object: a box or a mesh (covered by its oriented bounding box), inertia and grasp."""
 
     model_config = _MODEL_CONFIG
@@ -138,13 +170,6 @@ class PayloadSpec(BaseModel):
     grasp: Pose = Field(
         _IDENTITY_POSE, description="T_tool_payload: the payload frame in the tool frame (position in m)."
     )
-
-    @field_validator("inertia")
-    @classmethod
-    def _realisable_inertia(cls, value: Matrix3 | None) -> Matrix3 | None:
-        if value is not None:
-            _check_inertia(np.array(value, dtype=float))
-        return value
 
     @model_validator(mode="after")
     def _box_or_mesh(self) -> PayloadSpec:
@@ -194,7 +219,7 @@ class ApproachSpec(BaseModel):
         return value
 
 
-class GoalSpec(BaseModel):
+class GoalSpec(OrientedPose):
     """The goal: drive positions, joint coordinates, or a payload pose (exactly one)."""
 
     model_config = _MODEL_CONFIG
@@ -208,14 +233,6 @@ class GoalSpec(BaseModel):
     approach: ApproachSpec | None = Field(
         None, description="Optional straight final motion onto the goal pose (pose goals only)."
     )
-
-    @field_validator("pose")
-    @classmethod
-    def _explicit_orientation(cls, value: Pose | None) -> Pose | None:
-        # A goal the payload must reach is never silently "unrotated": the orientation is part of it.
-        if value is not None and "orientation" not in value.model_fields_set:
-            raise ValueError("a goal pose needs its orientation {w, x, y, z} (the identity is [1, 0, 0, 0])")
-        return value
 
     @field_validator("approach")
     @classmethod
@@ -356,19 +373,47 @@ def scenario_from_dict(data: object, source: str = "scenario") -> Scenario:
             as a dotted path and the reason (``"options.clearance_m: Input should be greater than 0"``);
             ``details`` has ``field``, ``source`` and ``errors`` (every error as ``{field, message}``).
     """
-    if isinstance(data, Scenario):
+    return validate_document(Scenario, data, "scenario", source)
+
+
+def validate_document(
+    model: type[ModelT],
+    data: object,
+    name: str,
+    source: str,
+    relabel: Callable[[dict[str, str]], None] | None = None,
+) -> ModelT:
+    """Validate a parsed document (scenario, cycle, sweep ...) into its frozen pydantic ``model``.
+
+    Args:
+        model: The document's model class.
+        data: The parsed document; its top level must be a mapping (an instance of ``model`` passes).
+        name: The document's name, the field of a top-level error (``"scenario"``, ``"cycle"``).
+        source: Where the data came from (file path or the name), recorded in the error details.
+        relabel: Rewrites one error ``{field, message}`` in place before it is reported (a model-level
+            message naming its own field, the document's name instead of ``"scenario"``).
+
+    Returns:
+        The validated model.
+
+    Raises:
+        InvalidInput: the message names the first offending field as a dotted path and the reason;
+            ``details`` has ``field``, ``source`` and ``errors`` (every error as ``{field, message}``).
+    """
+    if isinstance(data, model):
         return data
     if not isinstance(data, dict):
         kind = "nothing (empty document)" if data is None else type(data).__name__
         raise InvalidInput(
-            f"scenario: expected a mapping of fields at the top level, got {kind}",
-            field="scenario",
-            source=source,
+            f"{name}: expected a mapping of fields at the top level, got {kind}", field=name, source=source
         )
     try:
-        return Scenario.model_validate(data)
+        return model.model_validate(data)
     except ValidationError as exc:
         errors = [describe_error(e) for e in exc.errors(include_url=False, include_input=False)]
+        if relabel is not None:
+            for e in errors:
+                relabel(e)
         first = errors[0]
         raise InvalidInput(
             f"{first['field']}: {first['message']}", field=first["field"], source=source, errors=errors

@@ -9,10 +9,12 @@ effect on purpose; nothing else imports it.
 
 from __future__ import annotations
 
+import atexit
 import gc
-import json
 import logging
 import os
+import pickle
+import sys
 
 from planner.sweep.task import warm_up
 
@@ -24,15 +26,20 @@ def _warm() -> None:
     task = None
     if path:
         try:
-            with open(path, encoding="utf-8") as fh:
-                task = json.load(fh)
-        except (OSError, ValueError):
+            with open(path, "rb") as fh:  # written by this sweep's driver (a private temporary file)
+                task = pickle.load(fh)
+        except (OSError, ValueError, pickle.UnpicklingError, AttributeError, ImportError):
             _LOG.warning("sweep warm-up task %s unreadable; warming up imports only", path)
     warm_up(task)
     # Forked children share the forkserver's heap copy-on-write; a garbage collection in a child would
     # touch (and so copy) every object. Frozen objects are left out of collections.
     gc.collect()
     gc.freeze()
+    if "ompl" in sys.modules:
+        # The forkserver ends when the driver does; OMPL's bindings would then print reference-leak
+        # warnings at interpreter exit onto the driver's terminal (as the CLI's own exit avoids, see
+        # planner.cli.main). Its plan processes end through multiprocessing's own os._exit.
+        atexit.register(os._exit, 0)
 
 
 _warm()

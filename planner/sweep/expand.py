@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from meshes import reference_cabin_path, reference_manifest
 from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Pose
+from planner.meshes import reference_cabin_path, reference_manifest
 from planner.scenario import Scenario, load_scenario_file, scenario_from_dict, scenario_hash
 from planner.sweep.spec import MAX_PLANS, PlanPoint, StartPosture, SweepSpec
 

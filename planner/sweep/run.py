@@ -22,10 +22,10 @@ one row per scenario hash, so no row is lost or duplicated.
 
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing
 import os
+import pickle
 import sys
 import tempfile
 import threading
@@ -187,9 +187,10 @@ class EmbeddedExecutor:
             os.environ.setdefault(name, value)
         self._warm_file: str | None = None
         if warm_task is not None:
-            fd, self._warm_file = tempfile.mkstemp(prefix="cabinplan-sweep-warm-", suffix=".json")
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump(warm_task, fh)
+            # Pickled: a task names its runner by the function itself (pickled by reference).
+            fd, self._warm_file = tempfile.mkstemp(prefix="cabinplan-sweep-warm-", suffix=".pkl")
+            with os.fdopen(fd, "wb") as fh:
+                pickle.dump(warm_task, fh)
             # Read by planner.sweep._preload when the forkserver starts (the first plan process).
             os.environ["CABINPLAN_SWEEP_WARMUP"] = self._warm_file
         self._ctx = multiprocessing.get_context("forkserver")
@@ -559,7 +560,7 @@ def sweep_meshes(plans: Sequence[SweepPlan]) -> dict[str, bytes]:
     Handed to Ray tasks through the object store, so that the nodes of a cluster need the package but
     no copy of the sweep's mesh files.
     """
-    from meshes import reference_cabin_path
+    from planner.meshes import reference_cabin_path
 
     out: dict[str, bytes] = {}
     for plan in plans:

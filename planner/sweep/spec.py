@@ -22,12 +22,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Limits, Pose, Quaternion
 from planner.scenario.files import MAX_SCENARIO_BYTES, read_document
-from planner.scenario.schema import ConfigurationSpec, Number, PositiveNumber, describe_error
+from planner.scenario.schema import ConfigurationSpec, Number, PositiveNumber, validate_document
 
 _CONFIG = ConfigDict(extra="forbid", frozen=True)
 
@@ -203,24 +202,15 @@ def sweep_from_dict(data: object, source: str = "sweep") -> SweepSpec:
         InvalidInput: the message names the first offending field as a dotted path and the reason;
             ``details['errors']`` lists every error as ``{field, message}``.
     """
-    if isinstance(data, SweepSpec):
-        return data
-    if not isinstance(data, dict):
-        kind = "nothing (empty document)" if data is None else type(data).__name__
-        raise InvalidInput(f"sweep: expected a mapping of fields at the top level, got {kind}", field="sweep")
-    try:
-        return SweepSpec.model_validate(data)
-    except ValidationError as exc:
-        errors = [describe_error(e) for e in exc.errors(include_url=False, include_input=False)]
-        for e in errors:
-            if e["field"] == "scenario":
-                e["field"] = "sweep"
-            elif e["message"] == "unknown field (not part of the scenario schema)":
-                e["message"] = "unknown field (not part of the sweep schema)"
-        first = errors[0]
-        raise InvalidInput(
-            f"{first['field']}: {first['message']}", field=first["field"], source=source, errors=errors
-        ) from None
+    return validate_document(SweepSpec, data, "sweep", source, _relabel_sweep_error)
+
+
+def _relabel_sweep_error(error: dict[str, str]) -> None:
+    """The sweep's own name in a top-level error and an unknown field's message."""
+    if error["field"] == "scenario":
+        error["field"] = "sweep"
+    elif error["message"] == "unknown field (not part of the scenario schema)":
+        error["message"] = "unknown field (not part of the sweep schema)"
 
 
 def load_sweep_file(path: Path) -> SweepSpec:

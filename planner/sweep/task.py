@@ -8,14 +8,13 @@ and puts it into the object store, so cluster nodes need no shared file system).
 
 from __future__ import annotations
 
-import importlib
 import json
 import logging
 import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from planner.core.exceptions import PlannerError
 from planner.sweep.results import atomic_write, evidence_text
@@ -138,27 +137,26 @@ RUNNER_PACKAGES = ("planner.",)
 
 
 def task_runner(task: dict[str, Any]) -> Runner:
-    """The function that runs ``task``: :func:`plan_outcome`, or the one ``task["runner"]`` names.
+    """The function that runs ``task``: :func:`plan_outcome`, or the one ``task["runner"]`` holds.
 
     The executors run any kind of independent plan the same way (a sweep's plans, a campaign's cycles):
-    the task names its runner as ``"planner.some.module:function"``, imported in the plan process. The
-    executors themselves import no layer above this one; the layer that makes the tasks names the runner.
+    the task carries its runner, a module-level function of the planner package, pickled by reference
+    into the plan process (the embedded pool and its warm-up file, Ray alike). The executors themselves
+    import no layer above this one: the layer that makes the tasks hands over the function.
 
     Raises:
-        InvalidInput: the runner is not a ``module:function`` within the planner package.
+        InvalidInput: the runner is not a function of the planner package.
     """
-    name = task.get(RUNNER_KEY)
-    if name is None:
+    runner = task.get(RUNNER_KEY)
+    if runner is None:
         return plan_outcome
-    from planner.core.exceptions import InvalidInput
+    if not callable(runner) or not str(getattr(runner, "__module__", "")).startswith(RUNNER_PACKAGES):
+        from planner.core.exceptions import InvalidInput
 
-    module, _, function = str(name).partition(":")
-    if not function or not module.startswith(RUNNER_PACKAGES):
         raise InvalidInput(
-            f"task.runner: expected 'planner.<module>:<function>', got {name!r}", field="task.runner"
+            f"task.runner: expected a function of the planner package, got {runner!r}", field="task.runner"
         )
-    runner: Runner = getattr(importlib.import_module(module), function)
-    return runner
+    return cast(Runner, runner)
 
 
 def run_task(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> dict[str, Any]:

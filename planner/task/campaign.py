@@ -116,7 +116,7 @@ def _mesh_digests(node: Any, base_dir: Path | None, out: dict[str, str]) -> None
 
 
 def _file_digest(name: str, base_dir: Path | None) -> str:
-    from meshes import reference_cabin_path
+    from planner.meshes import reference_cabin_path
 
     path = reference_cabin_path(name)
     if path is None:

@@ -27,10 +27,11 @@ period), and :func:`planner.gate.cycle.validate_cycle` certifies the whole of it
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -48,9 +49,16 @@ from planner.gate.checks import GateReport
 from planner.gate.cycle import CycleLeg, CycleRequirements, validate_cycle
 from planner.gate.requirements import compensates_deflection, requirements_for
 from planner.plan.context import PRODUCT, PlanContext, Progress, SearchPreset
-from planner.plan.evidence import collision_evidence, describe, dominant, force_evidence
+from planner.plan.evidence import (
+    collision_evidence,
+    describe,
+    dominant,
+    force_evidence,
+    motion_evidence,
+    state_evidence,
+)
 from planner.plan.goals import approach_lines
-from planner.plan.motion import MIN_MARGIN_M, certify_motion
+from planner.plan.motion import certify_motion
 from planner.plan.pipeline import PlanResult, plan_scenario
 from planner.plan.retime import time_and_validate
 from planner.scenario.resolve import ResolvedScenario
@@ -89,16 +97,8 @@ class LegTiming:
     sample_end: int
 
     def to_dict(self) -> dict[str, Any]:
-        """The contract's leg entry."""
-        return {
-            "name": self.name,
-            "kind": self.kind,
-            "payload": self.payload,
-            "t_start_s": self.t_start_s,
-            "t_end_s": self.t_end_s,
-            "sample_start": self.sample_start,
-            "sample_end": self.sample_end,
-        }
+        """The contract's leg entry (the fields, in order)."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -113,15 +113,8 @@ class CycleEvent:
     rotation_rad: float
 
     def to_dict(self) -> dict[str, Any]:
-        """The contract's event entry (plus the jump's rotation)."""
-        return {
-            "kind": self.kind,
-            "t_s": self.t_s,
-            "unit": self.unit,
-            "leg": self.leg,
-            "springback_m": self.springback_m,
-            "rotation_rad": self.rotation_rad,
-        }
+        """The contract's event entry (plus the jump's rotation): the fields, in order."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -208,13 +201,13 @@ def plan_cycle(
     report_progress("pre_grasp", 0.1)
     with _in_leg("pre_grasp"):
         res = plan_scenario(
-            leg_scenario(cyc, leg("pre_grasp"), cyc.park_q, goal_q=q_pre), None, timing, preset
+            _leg_of_cycle(cyc, leg("pre_grasp"), cyc.park_q, goal_q=q_pre), None, timing, preset
         )
     pieces.append(_Piece(leg("pre_grasp"), q_pre, res.profile, report=_leg_report(res)))
 
     with _in_leg("grasp_line"):
         line_ctx = PlanContext.build(
-            leg_scenario(cyc, leg("grasp_line"), q_pre, goal_q=q_grasp), None, timing, preset
+            _leg_of_cycle(cyc, leg("grasp_line"), q_pre, goal_q=q_grasp), None, timing, preset
         )
         line_ctx.report["grasp"] = grasp_ctx.report.get("grasp", {})
         pieces.append(_line_leg(line_ctx, leg("grasp_line"), q_pre, q_grasp))
@@ -223,13 +216,13 @@ def plan_cycle(
     report_progress("lift_off", 0.3)
     with _in_leg("lift_off"):
         lift_ctx = PlanContext.build(
-            leg_scenario(cyc, leg("lift_off"), q_grasp, goal_q=q_lift), None, timing, preset
+            _leg_of_cycle(cyc, leg("lift_off"), q_grasp, goal_q=q_lift), None, timing, preset
         )
         pieces.append(_line_leg(lift_ctx, leg("lift_off"), q_grasp, q_lift))
 
     report_progress("transit", 0.4)
     with _in_leg("transit"):
-        sc = leg_scenario(
+        sc = _leg_of_cycle(
             cyc, leg("transit"), q_lift, T_base_unit_goal=cyc.T_base_unit_bay, approach=cyc.insertion_line
         )
         res = plan_scenario(sc, None, timing, preset)
@@ -245,7 +238,7 @@ def plan_cycle(
     q_retract = line_joints(q_release, cyc.retract_line.offset)
     with _in_leg("retract"):
         retract_ctx = PlanContext.build(
-            leg_scenario(cyc, leg("retract"), q_release, goal_q=q_retract), None, timing, preset
+            _leg_of_cycle(cyc, leg("retract"), q_release, goal_q=q_retract), None, timing, preset
         )
         _check_release(cyc, retract_ctx, q_release)
         _check_line_end(cyc, leg("park"), q_retract, "retract", "retract.distance")
@@ -254,7 +247,7 @@ def plan_cycle(
     report_progress("park", 0.8)
     with _in_leg("park"):
         res = plan_scenario(
-            leg_scenario(cyc, leg("park"), q_retract, goal_q=cyc.park_q), None, timing, preset
+            _leg_of_cycle(cyc, leg("park"), q_retract, goal_q=cyc.park_q), None, timing, preset
         )
     pieces.append(_Piece(leg("park"), cyc.park_q, res.profile, report=_leg_report(res)))
 
@@ -277,6 +270,17 @@ def plan_cycle(
 
 
 # ------------------------------------------------------------------------------------------------ legs
+def _leg_of_cycle(cyc: ResolvedCycle, state: LegState, start_q: Array, **goal: Any) -> ResolvedScenario:
+    """:func:`leg_scenario` for planning inside this cycle: its gate leaves the clearance to the cycle gate.
+
+    The cycle gate (:func:`~planner.gate.cycle.validate_cycle`) certifies every leg's samples -- the very
+    samples of the leg's plan, joined unchanged -- in the same world (:func:`leg_world`: the leg's payload,
+    obstacles and allowed pair), with the same clearance and margin, rigid and sagging; the leg's own gate
+    would certify them twice. A leg that fails there fails the cycle (never a weaker certificate).
+    """
+    return dataclasses.replace(leg_scenario(cyc, state, start_q, **goal), gate_collision=False)
+
+
 def _leg_report(res: PlanResult) -> dict[str, Any]:
     keep = ("planning_time_s", "legs", "leg_durations_s", "approach", "compensation", "duration")
     return {k: v for k, v in res.report.items() if k in keep}
@@ -292,13 +296,17 @@ def _grasp_line(
     """The grasp line (pre-grasp and grasp configurations) and its leg's context.
 
     Lines of fixed redundancy onto the grasp pose (:func:`approach_lines`, in the grasp line's world: the
-    gripper may come near the unit), held to the static forces of the *loaded* tool so that the grasp can
-    hold the unit; of those, the first whose pre-grasp is clear without the allowed pair and whose lift-off
-    line is clear with the unit held (and ends clear of the fixture).
+    gripper may come near the unit). Every admissible grasp configuration of the grid is first held to
+    the static forces of the *loaded* tool (``hold``): only those that can hold the unit are certified as
+    lines, so a grasp that cannot hold never takes the place of one that can. Of the lines found, the
+    first whose pre-grasp is clear without the allowed pair and whose lift-off line is clear with the unit
+    held (and ends clear of the fixture).
 
     Raises:
-        UnitNotHoldable: every line fails on the static forces (the drive and its force ratio).
-        ApproachInfeasible: no line is clear (the closest bodies and their distance).
+        UnitNotHoldable: no admissible grasp configuration holds the unit (the drive and force ratio of
+            the one closest to holding it).
+        ApproachInfeasible: no holdable line is clear (the failing measurement closest to passing: bodies
+            and distance below its requirement, a limit, or a drive, with the place).
     """
     T_tool_grasp = cyc.T_base_unit_dock @ np.linalg.inv(cyc.T_tool_unit)
     state = leg("grasp_line")
@@ -318,23 +326,26 @@ def _grasp_line(
         ctx.forces,
         max_lines=6,
         evidence=evidence,
+        hold=loaded,
     )
-    for e in evidence:  # approach_lines speaks of an insertion line: here it is the grasp line
-        e["where"] = str(e.get("where", "")).replace("insertion line", "grasp line")
-    held = [x for x in lines if x.line is not None and loaded.ok(x.line[-1])]
-    if lines and not held:
-        heavy = [force_evidence(loaded, x.line[-1], "at the grasp") for x in lines if x.line is not None]
-        best = min(heavy, key=lambda e: e["force_ratio"])
+    for e in evidence:  # approach_lines speaks of an insertion line and its goal: here the grasp line
+        e["where"] = (
+            str(e.get("where", ""))
+            .replace("insertion line", "grasp line")
+            .replace("at the goal", "at the grasp")
+        )
+    if stats["admissible"] > 0 and stats["hold"] == stats["admissible"]:
+        best = min((e for e in evidence if e["cause"] == "force"), key=lambda e: e["force_ratio"])
         raise UnitNotHoldable(
             f"{cyc.unit_name} ({cyc.unit_payload.mass:g} kg) cannot be held at its dock: {describe(best)} "
-            f"(best of {len(heavy)} clear grasp lines)",
+            f"(the best of {stats['admissible']} admissible grasp configurations)",
             drive=best["drive"],
             force_ratio=best["force_ratio"],
             allowed_ratio=best["allowed_ratio"],
             best=best,
-            candidates=heavy,
+            **stats,
         )
-    lines = held
+    lines = [x for x in lines if x.line is not None]
     pre_ctx = PlanContext.build(
         leg_scenario(cyc, leg("pre_grasp"), cyc.park_q, goal_q=cyc.park_q), None, timing, preset
     )
@@ -347,22 +358,17 @@ def _grasp_line(
         q_pre, q_grasp = cand.line[0], cand.line[-1]
         q_lift = line_joints(q_grasp, cyc.lift_line.offset)
         if not pre_ctx.state_ok(q_pre):
-            evidence.append(collision_evidence(pre_ctx.world, q_pre, c.planner_m, "at the pre-grasp"))
+            _record(
+                evidence,
+                state_evidence(pre_ctx.world, q_pre, c.planner_m, "at the pre-grasp", pre_ctx.forces),
+            )
             continue
         if not (lift_ctx.state_ok(q_lift) and lift_ctx.motion_ok(q_grasp, q_lift)):
-            if not lift_ctx.forces.ok(q_lift):
-                evidence.append(force_evidence(lift_ctx.forces, q_lift, "at the end of the lift-off"))
-            else:
-                evidence.append(
-                    collision_evidence(lift_ctx.world, q_lift, c.planner_m, "along the lift-off line")
-                )
+            _record(evidence, _line_evidence(lift_ctx, q_grasp, q_lift, "lift-off"))
             continue
         if not carry_world.is_valid(q_lift, c.planner_m):
-            evidence.append(
-                collision_evidence(
-                    carry_world, q_lift, c.planner_m, "at the end of the lift-off (dock.lift.distance)"
-                )
-            )
+            where = "at the end of the lift-off (dock.lift.distance)"
+            _record(evidence, state_evidence(carry_world, q_lift, c.planner_m, where))
             continue
         ctx.report["grasp"] = {"lines": len(lines), **stats}
         return q_pre, q_grasp, ctx
@@ -370,10 +376,41 @@ def _grasp_line(
     cause = f"; closest: {describe(closest)}" if closest is not None else ""
     raise ApproachInfeasible(
         f"no clear grasp line onto {cyc.unit_name} on its dock ({len(lines)} lines of fixed redundancy "
-        f"tried){cause}",
+        f"that hold the unit tried){cause}",
         **stats,
         best=closest,
         candidates=evidence,
+    )
+
+
+def _record(evidence: list[dict[str, Any]], record: dict[str, Any] | None) -> None:
+    """Append a failing measurement (None: nothing measured there fails)."""
+    if record is not None:
+        evidence.append(record)
+
+
+def _line_evidence(ctx: PlanContext, q_a: Array, q_b: Array, what: str) -> dict[str, Any] | None:
+    """Why the straight line q_a -> q_b fails the leg's planner checks: the failing measurement, where.
+
+    In the order of the checks: the ends (:func:`state_evidence`: a limit, bodies short of the planner's
+    clearance, a drive that cannot hold), the static forces along the line (the worst sample), then the
+    certified walk (:func:`motion_evidence`: a limit, or bodies short of the clearance plus the walk's
+    margin, at the fraction of the line where it failed). None when every check passes.
+    """
+    c = ctx.clearances
+    for q, where in ((q_a, f"at the start of the {what} line"), (q_b, f"at the end of the {what} line")):
+        ev = state_evidence(ctx.world, q, c.planner_m, where, ctx.forces)
+        if ev is not None:
+            return ev
+    if not ctx.forces.segment_ok(q_a, q_b):
+        # The samples segment_ok checks (every 0.02 m or rad of the largest joint change): one fails.
+        ts = np.linspace(0.0, 1.0, int(max(1, np.ceil(float(np.max(np.abs(q_b - q_a))) / 0.02))) + 1)
+        qs = q_a + ts[:, None] * (q_b - q_a)
+        k = int(np.argmax(ctx.forces.ratios(qs)))
+        return force_evidence(ctx.forces, qs[k], f"{100 * ts[k]:.0f}% along the {what} line")
+    motion = certify_motion(ctx.world, q_a, q_b, c.planner_m, c.motion_margin_m)
+    return motion_evidence(
+        ctx.world, q_a, q_b, motion, c.planner_m, lambda t: f"{100 * t:.0f}% along the {what} line"
     )
 
 
@@ -381,20 +418,18 @@ def _line_leg(ctx: PlanContext, state: LegState, q_a: Array, q_b: Array) -> _Pie
     """A straight leg q_a -> q_b: certified by the planner's clearance, then timed and gated.
 
     Raises:
-        ApproachInfeasible: the segment is not clear (the closest bodies and their distance, where).
+        ApproachInfeasible: the segment is not clear (the failing measurement: bodies and distance below
+            its requirement, a limit, or a drive, and where).
     """
     c = ctx.clearances
     motion = certify_motion(ctx.world, q_a, q_b, c.planner_m, c.motion_margin_m)
     if not (motion.valid and ctx.state_ok(q_a) and ctx.state_ok(q_b) and ctx.forces.segment_ok(q_a, q_b)):
-        t = motion.report.t_fail if motion.report.t_fail is not None else 1.0
-        q_at = q_a + t * (q_b - q_a)
-        if not ctx.forces.segment_ok(q_a, q_b):
-            ev = force_evidence(ctx.forces, q_at, f"{100 * t:.0f}% along the line")
-        else:
-            ev = collision_evidence(
-                ctx.world, q_at, c.planner_m, f"{100 * t:.0f}% along the line", margin_m=MIN_MARGIN_M
-            )
-        raise ApproachInfeasible(f"the straight {state.name} line is not clear: {describe(ev)}", best=ev)
+        what = state.name.replace("_", "-")
+        ev = _line_evidence(ctx, q_a, q_b, what)
+        cause = describe(ev) if ev is not None else "its certified walk failed"
+        raise ApproachInfeasible(
+            f"the straight {state.name} line is not clear: {cause}", **({"best": ev} if ev else {})
+        )
     path = JointPath((LinePiece(q_a, q_b, segment_time_length(ctx.robot, q_a, q_b)),))
     profile, gate, _ = time_and_validate(ctx, [path], requirements_for(ctx.sc, ctx.payload))
     return _Piece(state, np.asarray(q_b, dtype=float), profile, report={"gate_checks": len(gate.checks)})
@@ -452,11 +487,23 @@ def _check_line_end(cyc: ResolvedCycle, next_state: LegState, q: Array, what: st
 
     c = Clearances.of(sc.options)
     if not world.is_valid(q, c.planner_m):
-        ev = collision_evidence(world, q, c.planner_m, f"at the end of the {what} line")
-        a, b = ev["bodies"]
-        ev["bodies"] = [body_label(cyc, next_state, a), b]
+        where = f"at the end of the {what} line"
+        ev = state_evidence(world, q, c.planner_m, where)
+        if ev is None:
+            # The state check's grown bodies refuse what the exact distances keep (near a box's corners a
+            # grown box overstates the clearance): say so, the closest bodies apart from the evidence.
+            near = collision_evidence(world, q, c.planner_m, where)
+            raise ApproachInfeasible(
+                f"the {what} line ends where the state check cannot certify {1e3 * c.planner_m:.1f} mm of "
+                f"clearance (the exact distances keep it: {describe(near)}; lengthen or turn {field_name})",
+                closest=near,
+                field=field_name,
+            )
+        if "bodies" in ev:
+            a, b = ev["bodies"]
+            ev["bodies"] = [body_label(cyc, next_state, a), b]
         raise ApproachInfeasible(
-            f"the {what} line ends too close for the next leg: {describe(ev)} (lengthen {field_name})",
+            f"the {what} line ends where the next leg cannot start: {describe(ev)} (lengthen {field_name})",
             best=ev,
             field=field_name,
         )

@@ -24,9 +24,8 @@ import hashlib
 import json
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Pose
 from planner.scenario.schema import (
     MAX_BOX_SIDE_M,
@@ -36,10 +35,11 @@ from planner.scenario.schema import (
     ConfigurationSpec,
     Matrix3,
     Number,
+    OrientedPose,
     PlanOptions,
+    RealisableInertia,
     Vector3,
-    _check_inertia,
-    describe_error,
+    validate_document,
 )
 
 _MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
@@ -93,7 +93,7 @@ class InstalledUnit(Geometry):
     pose: Pose = Field(description="T_base_unit: the unit frame in the base frame (position in m).")
 
 
-class UnitSpec(Geometry):
+class UnitSpec(Geometry, RealisableInertia):
     """The unit to install.
 
     its shape, inertia and grasp. A mesh unit is held and installed as its oriented bounding box (collision
@@ -113,15 +113,6 @@ class UnitSpec(Geometry):
         description="T_tool_unit: the unit frame in the tool frame when held (position in m)."
     )
 
-    @field_validator("inertia")
-    @classmethod
-    def _realisable_inertia(cls, value: Matrix3 | None) -> Matrix3 | None:
-        if value is not None:
-            import numpy as np
-
-            _check_inertia(np.array(value, dtype=float))
-        return value
-
 
 class FixtureSpec(Geometry):
     """The transport fixture the unit waits on at its dock (an obstacle, named ``fixture of <id>``)."""
@@ -133,7 +124,7 @@ class LineSpec(ApproachSpec):
     """A straight line of the tool: a direction in the base frame (normalised) and a length [m]."""
 
 
-class DockSpec(BaseModel):
+class DockSpec(OrientedPose):
     """Where the unit waits: its pose on the fixture, the fixture, and the grasp and lift-off lines."""
 
     model_config = _MODEL_CONFIG
@@ -145,13 +136,8 @@ class DockSpec(BaseModel):
     )
     lift: LineSpec = Field(description="The lift-off line: from the grasp, the loaded tool moves along it.")
 
-    @field_validator("pose")
-    @classmethod
-    def _explicit_orientation(cls, value: Pose) -> Pose:
-        return _oriented(value)
 
-
-class BayGoal(BaseModel):
+class BayGoal(OrientedPose):
     """The bay: the installed pose of the unit and its insertion line."""
 
     model_config = _MODEL_CONFIG
@@ -160,11 +146,6 @@ class BayGoal(BaseModel):
     approach: LineSpec = Field(
         description="The insertion line: the unit moves along `direction` for `distance` m onto the pose."
     )
-
-    @field_validator("pose")
-    @classmethod
-    def _explicit_orientation(cls, value: Pose) -> Pose:
-        return _oriented(value)
 
 
 class GripperSpec(BaseModel):
@@ -231,12 +212,6 @@ class Cycle(BaseModel):
         return self
 
 
-def _oriented(value: Pose) -> Pose:
-    if "orientation" not in value.model_fields_set:
-        raise ValueError("a goal pose needs its orientation {w, x, y, z} (the identity is [1, 0, 0, 0])")
-    return value
-
-
 def cycle_from_dict(data: object, source: str = "cycle") -> Cycle:
     """Validate a parsed cycle document (a mapping, e.g. from YAML/JSON or an HTTP body).
 
@@ -244,25 +219,16 @@ def cycle_from_dict(data: object, source: str = "cycle") -> Cycle:
         InvalidInput: the data does not match the schema; the message names the first offending field as
             a dotted path and the reason; ``details`` has ``field``, ``source`` and ``errors``.
     """
-    if isinstance(data, Cycle):
-        return data
-    if not isinstance(data, dict):
-        kind = "nothing (empty document)" if data is None else type(data).__name__
-        raise InvalidInput(f"cycle: expected a mapping of fields at the top level, got {kind}", field="cycle")
-    try:
-        return Cycle.model_validate(data)
-    except ValidationError as exc:
-        errors = [describe_error(e) for e in exc.errors(include_url=False, include_input=False)]
-        for e in errors:  # a model-level message that names its own field: that field, not "cycle"
-            head, sep, rest = e["message"].partition(": ")
-            if e["field"] == "scenario" and sep and " " not in head:
-                e["field"], e["message"] = head, rest
-            elif e["field"] == "scenario":
-                e["field"] = "cycle"
-        first = errors[0]
-        raise InvalidInput(
-            f"{first['field']}: {first['message']}", field=first["field"], source=source, errors=errors
-        ) from None
+    return validate_document(Cycle, data, "cycle", source, _relabel_cycle_error)
+
+
+def _relabel_cycle_error(error: dict[str, str]) -> None:
+    """A model-level message that names its own field: that field, not "cycle"."""
+    head, sep, rest = error["message"].partition(": ")
+    if error["field"] == "scenario" and sep and " " not in head:
+        error["field"], error["message"] = head, rest
+    elif error["field"] == "scenario":
+        error["field"] = "cycle"
 
 
 def cycle_hash(c: Cycle) -> str:

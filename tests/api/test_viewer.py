@@ -277,7 +277,7 @@ def test_missing_or_wrong_key_says_so(plans: Plans, browser: Any, tmp_path: Path
     options = page.locator("#submit-example option").all_inner_texts()
     assert any(o.startswith("aisle-bay-insert") for o in options) and len(options) == 5
     page.set_input_files("#submit-file", str(ROOT / "tests" / "scenarios" / "refuse-goal-in-collision.yaml"))
-    page.set_input_files("#submit-mesh", str(ROOT / "meshes" / "cabin-aisle.stl"))
+    page.set_input_files("#submit-mesh", str(ROOT / "planner" / "meshes" / "cabin-aisle.stl"))
     page.click("#submit-form button[type=submit]")
     page.wait_for_url("**/viewer/#/plan/*")
     state = _wait_ready(page)

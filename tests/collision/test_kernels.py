@@ -6,8 +6,6 @@ route's numbers and verdicts -- exactly, report for report -- on hundreds of ran
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import fcl
 import numpy as np
 import pytest
@@ -18,12 +16,13 @@ from planner.collision.kernels.packed import unpack
 from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
+from planner.meshes import REFERENCE_DIR
 from planner.meshio import load_mesh
 from planner.robots.cabin8 import Cabin8
 from planner.robots.kernels import body_poses
 from tests.conftest import admissible_joints
 
-MESHES = Path(__file__).resolve().parents[2] / "meshes"
+MESHES = REFERENCE_DIR
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,6 @@ geometry is refused with the reason.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -16,13 +14,14 @@ from planner.collision.bodies import PayloadGeometry
 from planner.collision.kernels.packed import unpack
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
+from planner.meshes import REFERENCE_DIR
 from planner.meshio import load_mesh
 from planner.robots.cabin8 import Cabin8
 from planner.robots.cabin8_geometry import Cabin8CollisionModel
 from planner.robots.pprs6 import Pprs6
 from tests.conftest import admissible_joints
 
-MESHES = Path(__file__).resolve().parents[2] / "meshes"
+MESHES = REFERENCE_DIR
 
 
 class _NoRailModel(Cabin8CollisionModel):

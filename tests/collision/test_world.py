@@ -16,13 +16,14 @@ from planner.collision.clearance_grid import ClearanceGrid, surface_samples
 from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import InvalidInput
+from planner.meshes import REFERENCE_DIR
 from planner.meshio import LoadedMesh, load_mesh
 from planner.redundancy.ik import IKOptions, family_candidates
 from planner.robots.cabin8 import Cabin8
 from planner.robots.cabin8_geometry import ADJACENT
 from tests.conftest import admissible_joints
 
-MESHES = Path(__file__).resolve().parents[2] / "meshes"
+MESHES = REFERENCE_DIR
 
 
 def mesh_of(*parts: trimesh.Trimesh) -> LoadedMesh:

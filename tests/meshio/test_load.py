@@ -22,12 +22,12 @@ import trimesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from meshes import generate
 from planner.core.exceptions import InvalidInput, InvalidMesh, PlannerError
+from planner.meshes import REFERENCE_DIR, generate
 from planner.meshio import LoadedMesh, MeshLimits, load_mesh
 from planner.meshio import build as mesh_build
 
-MESH_DIR = Path(__file__).resolve().parents[2] / "meshes"
+MESH_DIR = REFERENCE_DIR
 MANIFEST = json.loads((MESH_DIR / "cabins.json").read_text(encoding="utf-8"))
 
 # A box 0.4 x 0.3 x 0.5 m centred at (0.1, 0.2, 0.3): corners known exactly (and exact in float32).

@@ -13,11 +13,11 @@ import pytest
 
 from planner.core.exceptions import StartInvalid
 from planner.gate.checks import deflected_joints
+from planner.generate import GeneratorOptions, generate_case, write_case
 from planner.plan.context import PlanContext
 from planner.plan.targets import goal_targets
 from planner.scenario import load_scenario
 from planner.scenario.resolve import ResolvedScenario
-from planner.tools.generate import GeneratorOptions, generate_case, write_case
 
 
 def _scenario(seed: int, index: int, folder: Path) -> tuple[ResolvedScenario, dict[str, object]]:

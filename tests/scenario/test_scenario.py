@@ -18,9 +18,9 @@ import pytest
 import trimesh
 import yaml
 
-from meshes import REFERENCE_DIR, reference_cabin_path, reference_cabins, reference_manifest
 from planner.core.exceptions import InvalidInput, InvalidMesh, UnknownRobot
 from planner.core.schemas import Pose
+from planner.meshes import REFERENCE_DIR, reference_cabin_path, reference_cabins, reference_manifest
 from planner.meshio import MeshLimits, load_mesh
 from planner.scenario.files import MAX_SCENARIO_BYTES, load_scenario_file
 from planner.scenario.resolve import load_scenario, resolve_scenario

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from meshes import reference_cabin_path, reference_manifest
 from planner.core.exceptions import InvalidInput
+from planner.meshes import reference_cabin_path, reference_manifest
 from planner.scenario import load_scenario_file, scenario_hash
 from planner.sweep.expand import expand_sweep
 from planner.sweep.spec import load_sweep_file, sweep_from_dict

@@ -280,3 +280,71 @@ def test_a_release_whose_springback_ends_within_the_clearance_is_refused(
     assert exc.value.details["springback_m"] == pytest.approx(
         next(e for e in planned.events if e.kind == "detach").springback_m, abs=1e-9
     )
+
+
+def test_the_cycle_figure_is_the_exact_minimum_over_every_sample(
+    planned: CycleResult, cycle: ResolvedCycle
+) -> None:
+    """min_clearance_m against exact FCL distances at every sample, each leg's in its own world."""
+    gate = planned.gate
+    at = gate.min_clearance_at
+    assert at is not None and gate.min_clearance_bound_m is not None
+    q = planned.profile.joints
+    lowest, where = np.inf, None
+    for lt in planned.legs:
+        world = leg_world(cycle, leg(lt.name))
+        rows = _rows(planned, lt.name, with_previous=lt.sample_start > 0)
+        d = world.clearance_profile(q[rows])  # cabin, robot pairs, obstacles (allowed pairs apart)
+        k = int(np.argmin(d))
+        if d[k] < lowest:
+            lowest, where = float(d[k]), (lt.name, rows.start + k)
+        if lt.name == at["leg"]:  # the figure is the exact distance at its sample, in its leg's world
+            exact = world.min_distance(q[at["sample"]])
+            assert gate.min_clearance_m == pytest.approx(exact.distance_m, abs=1e-9)
+    # An exact distance at a sample (never below the lowest), and no sample lower by more than the tolerance.
+    figure = gate.min_clearance_m
+    assert figure - at["tolerance_m"] <= lowest <= figure + 1e-9, (lowest, where, at)
+    assert at["tolerance_m"] <= 5e-4
+    assert gate.min_clearance_bound_m <= lowest
+    assert at["t_s"] == pytest.approx(planned.profile.t[at["sample"]])
+    labels = {"unit A3", "gripper", "cabin", "unit A2", "fixture of A3", *leg_world(cycle, leg("park")).names}
+    assert set(at["bodies"]) <= labels, at
+
+
+def test_a_cycle_passing_within_the_clearance_of_an_installed_unit_is_refused(
+    planned: CycleResult, cycle: ResolvedCycle
+) -> None:
+    """An installed unit 5 mm from the carried unit on the transit: the cycle gate refuses, naming both."""
+    import dataclasses
+
+    from planner.collision.world import CollisionWorld
+    from planner.gate.cycle import validate_cycle
+    from planner.task.cycle import cycle_requirements
+
+    req = cycle_requirements(cycle, planned.legs)
+    transit = next(x for x in req.legs if x.name == "transit")
+    world = transit.world
+    q = planned.profile.joints[(transit.sample_start + transit.sample_end) // 2]
+    flat = world.flat_poses(q)
+    b = world.names.index(PAYLOAD)
+    R, c = flat[b, :9].reshape(3, 3).T, flat[b, 9:12]
+    half = 0.5 * np.asarray(world.bodies.shapes[b].size)
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = c + (half[2] + 0.005 + 0.01) * R[:, 2]  # a 2 cm cube 5 mm off the unit's top face
+    extra = Obstacle.box("unit X9", (0.02, 0.02, 0.02), T)
+    assert world.obstacles is not None
+    crowded = CollisionWorld(
+        cycle.robot,
+        world.cabin,
+        world.payload,
+        obstacles=(*world.obstacles.obstacles, extra),
+        allowed=world.obstacles.allowed,
+    )
+    assert world.obstacle_distance(flat).distance_m > 0.005  # the others are farther
+    assert crowded.obstacle_distance(flat).distance_m == pytest.approx(0.005, abs=1e-6)
+    legs = tuple(dataclasses.replace(x, world=crowded) if x.name == "transit" else x for x in req.legs)
+    report = validate_cycle(planned.profile, cycle.robot, dataclasses.replace(req, legs=legs))
+    assert not report.passed
+    bad = [c for c in report.failures if c.name == "collision"]
+    assert bad and "transit" in bad[0].detail and "unit X9" in bad[0].detail, bad

@@ -1,14 +1,14 @@
 """Generate the reference cabins: binary STL meshes (one also as GLB) and the ``cabins.json`` manifest.
 
-Run ``python -m meshes.generate`` (or ``python meshes/generate.py``) from the project root; ``--out DIR``
-writes somewhere else. The output is deterministic: the same parameters give the same bytes.
+Run ``python -m planner.meshes.generate`` (writes into the package folder, ``planner/meshes/``);
+``--out DIR`` writes somewhere else. The output is deterministic: the same parameters give the same bytes.
 
 Frame (the cabin frame equals the robot base frame): z along the cabin axis (the rail runs along the
 floor at y = 0 from z = 0 to 6 m), y up, x lateral. Every length is in metres.
 
 The parameters of each cabin are one :class:`CabinSpec` instance at the top of this file (``AISLE``,
-``HATCH``, ``CLUTTERED``, ``TIGHTBAY``); tune them there and regenerate. ``meshes/README.md`` documents
-the resulting geometry.
+``HATCH``, ``CLUTTERED``, ``TIGHTBAY``); tune them there and regenerate. ``planner/meshes/README.md``
+documents the resulting geometry.
 
 Geometry is built from closed, outward-wound pieces (boxes, convex prisms, a thick cylindrical tube,
 cylinders) that may overlap where they join; a collision checker only sees the union of the triangles.
@@ -30,7 +30,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-_LOG = logging.getLogger("meshes.generate")
+_LOG = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -310,13 +310,26 @@ def prism(name: str, polygon_xy: Array, z0: float, z1: float) -> Part:
 
 def tube(shell: Shell) -> Part:
     """Closed thick cylindrical shell (inner + outer surface + end rings), axis along z at y = axis_y."""
-    m, k = shell.sections, shell.z_segments
-    theta = 2 * np.pi * np.arange(m) / m
-    zs = np.linspace(shell.z_min_m, shell.z_max_m, k + 1)
-    rings = []
-    for radius in (shell.inner_radius_m, shell.inner_radius_m + shell.wall_m):
-        x, y = radius * np.cos(theta), shell.axis_y_m + radius * np.sin(theta)
-        rings.append(np.array([[x[j], y[j], z] for z in zs for j in range(m)]))
+    inner = _circle(shell, shell.inner_radius_m)
+    outer = _circle(shell, shell.inner_radius_m + shell.wall_m)
+    return wall_tube("shell", inner, outer, np.linspace(shell.z_min_m, shell.z_max_m, shell.z_segments + 1))
+
+
+def wall_tube(name: str, inner_xy: Array, outer_xy: Array, zs: Array) -> Part:
+    """Closed thick wall between two closed cross-section outlines, extruded along z.
+
+    Args:
+        name: The part's name.
+        inner_xy: The inner surface's outline (M, 2), counter-clockwise seen from +z.
+        outer_xy: The outer surface's outline (M, 2): point j faces inner point j.
+        zs: The stations along z (K + 1,), increasing; the surfaces are split there (short triangles keep
+            the collision BVH tight).
+
+    Returns:
+        Inner and outer surfaces and the two end rings, outward-wound.
+    """
+    m, k = len(inner_xy), len(zs) - 1
+    rings = [np.array([[xy[j, 0], xy[j, 1], z] for z in zs for j in range(m)]) for xy in (inner_xy, outer_xy)]
     vertices = np.vstack(rings)
     outer0 = m * (k + 1)
 
@@ -337,7 +350,7 @@ def tube(shell: Shell) -> Part:
         faces += [(i0, o1, o0), (i0, i1, o1)]  # ring at z_min, normal -z
         i0, i1, o0, o1 = idx(0, k, j), idx(0, k, j + 1), idx(1, k, j), idx(1, k, j + 1)
         faces += [(i0, o0, o1), (i0, o1, i1)]  # ring at z_max, normal +z
-    return Part("shell", vertices, np.array(faces, dtype=np.int64))
+    return Part(name, vertices, np.array(faces, dtype=np.int64))
 
 
 def _circle(shell: Shell, radius: float) -> Array:
@@ -359,10 +372,9 @@ def _clip(polygon: Array, normal: tuple[float, float], offset: float) -> Array:
     return np.array(out).reshape(-1, 2)
 
 
-def _disk_piece(
-    shell: Shell, radius: float, x_range: tuple[float, float], y_range: tuple[float, float]
-) -> Array:
-    poly = _circle(shell, radius)
+def _disk_piece(outline: Array, x_range: tuple[float, float], y_range: tuple[float, float]) -> Array:
+    """The part of a convex outline (M, 2) within the x and y ranges (infinite bounds: no cut)."""
+    poly = outline
     for normal, offset in (
         ((-1.0, 0.0), -x_range[0]),
         ((1.0, 0.0), x_range[1]),
@@ -393,22 +405,28 @@ def deck(shell: Shell) -> Part:
     )
 
 
-def bulkhead(shell: Shell, spec: Bulkhead) -> Part:
-    """The bulkhead as convex prisms: disk minus the stepped opening, split into horizontal bands."""
-    radius = shell.inner_radius_m + shell.wall_m / 2
+def bulkhead(shell: Shell, spec: Bulkhead, outline: Array | None = None) -> Part:
+    """The bulkhead as convex prisms: disk minus the stepped opening, split into horizontal bands.
+
+    Args:
+        shell: The shell (its circle, mid-wall, is the disk's edge unless ``outline`` is given).
+        spec: Position, thickness and the opening's steps.
+        outline: Another convex edge (M, 2), counter-clockwise (a polygonal shell's mid-wall outline).
+    """
+    disk = _circle(shell, shell.inner_radius_m + shell.wall_m / 2) if outline is None else outline
     inf = math.inf
     steps = spec.steps
     for lower, upper in zip(steps, steps[1:], strict=False):
         if not math.isclose(lower.y_max_m, upper.y_min_m):
             raise ValueError(f"bulkhead steps {lower.name} and {upper.name} do not touch")
     pieces = [
-        _disk_piece(shell, radius, (-inf, inf), (-inf, steps[0].y_min_m)),
-        _disk_piece(shell, radius, (-inf, inf), (steps[-1].y_max_m, inf)),
+        _disk_piece(disk, (-inf, inf), (-inf, steps[0].y_min_m)),
+        _disk_piece(disk, (-inf, inf), (steps[-1].y_max_m, inf)),
     ]
     for step in steps:
         y_range = (step.y_min_m, step.y_max_m)
-        pieces.append(_disk_piece(shell, radius, (-inf, step.x_min_m), y_range))
-        pieces.append(_disk_piece(shell, radius, (step.x_max_m, inf), y_range))
+        pieces.append(_disk_piece(disk, (-inf, step.x_min_m), y_range))
+        pieces.append(_disk_piece(disk, (step.x_max_m, inf), y_range))
     parts = [
         prism(f"bulkhead_{i}", p, spec.z_m, spec.z_m + spec.thickness_m)
         for i, p in enumerate(pieces)
@@ -464,8 +482,14 @@ def bracket_bounds(
     shell: Shell, spec: Bracket
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Corners (lo, hi) of a bracket's box [m]."""
-    wall = shell.half_width_at(spec.y_center_m)
-    inner, outer = wall - spec.protrusion_m, wall + spec.embed_m
+    return bracket_box(shell.half_width_at(spec.y_center_m), spec)
+
+
+def bracket_box(
+    wall_x_m: float, spec: Bracket
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Corners (lo, hi) of a bracket's box [m] on a wall whose inner surface is at |x| = ``wall_x_m``."""
+    inner, outer = wall_x_m - spec.protrusion_m, wall_x_m + spec.embed_m
     x0, x1 = (inner, outer) if spec.side > 0 else (-outer, -inner)
     y0, y1 = spec.y_center_m - spec.height_m / 2, spec.y_center_m + spec.height_m / 2
     z0, z1 = spec.z_center_m - spec.length_m / 2, spec.z_center_m + spec.length_m / 2
@@ -613,7 +637,7 @@ def generate(out_dir: Path) -> dict[str, Any]:
         "frame": (
             "robot base frame: z along the cabin axis (rail at y = 0 from z = 0 to 6 m), y up, x lateral"
         ),
-        "generator": "meshes/generate.py",
+        "generator": "planner/meshes/generate.py",
         "payload_reference_size_m": list(PAYLOAD_SIZE_M),
         "carriage": {
             "size_m": list(CARRIAGE_SIZE_M),

@@ -1,0 +1,172 @@
+"""Swept-hull lower bounds: one FCL query bounds a body's distance over a whole run of samples.
+
+A body is the convex hull of its *vertices* (a box: its 8 corners) or of them grown by a radius (a capsule:
+its 2 axis end points grown by its radius). Over a run of samples i..j of a path, take the convex hull H of
+the body's vertices at the run's two ends (16 points for a box, 4 for a capsule) and, for each sample s of
+the run, e_s = the largest distance of a vertex v_s from the segment between the same vertex at the ends
+[v_i, v_j] (a subset of H). Every vertex of the body at s then lies in H grown by e = max_s e_s, which is
+convex, so the whole body at s does (grown by the capsule's radius r); hence, for any fixed target C (the
+cabin mesh, an obstacle),
+
+    d(body_s, C) >= d(H, C) - e - r    for every sample s in i..j.
+
+When the body only translates along a straight line over the run (a carriage on its rail, a payload on its
+insertion line), e = 0 and d(H, C) is the smallest distance of the continuous sweep: one query settles a
+*flat* minimum that per-sample Lipschitz bounds could only approach sample by sample. Curved motions make e
+grow with the square of the run's length, so halving a run that does not settle converges quickly
+(:meth:`planner.collision.along.AlongPath.clearance` does so, best first).
+
+H is an FCL convex shape (GJK against the target's triangles, so a target part inside H is found); a
+capsule's end points are thickened to cubes of half size :data:`THICKEN_M` so that H is never flat, and
+:data:`GJK_SLACK_M` is subtracted for the hull's joggled facets. A hull that touches the target proves
+nothing (``-inf``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import fcl
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from planner.core.types import Array
+from planner.robots.geometry import Shape
+
+#: Half size [m] of the cube each capsule end point is thickened to (a flat hull is no FCL convex).
+THICKEN_M = 1e-6
+#: Subtracted from every hull distance [m]: qhull's joggled facets (~1e-10 m on cabin coordinates) and the
+#: tolerance of FCL's GJK (1e-6 relative): a micrometre, far below the figure's 0.1 mm.
+GJK_SLACK_M = 1e-6
+
+_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+_REQUEST = fcl.DistanceRequest()
+
+
+def body_vertices(poses: Array, shape: Shape) -> Array:
+    """The body's vertices (n, V, 3) in the base frame at poses (n, 13) (R column-major, centre, length).
+
+    A box: its 8 corners; a capsule: its 2 axis end points (the posed length, ``poses[:, 12]``).
+    """
+    n = poses.shape[0]
+    R = poses[:, :9].reshape(n, 3, 3).transpose(0, 2, 1)  # R[s, :, k]: body axis k in the base frame
+    p = poses[:, 9:12]
+    if shape.kind == "box":
+        local = _SIGNS * (0.5 * np.asarray(shape.size, dtype=float))  # (8, 3)
+        Rt = R.transpose(0, 2, 1)  # (R local)^T = local^T R^T, written out (no threaded BLAS for 3 x 3)
+        return (
+            p[:, None, :]
+            + local[None, :, 0, None] * Rt[:, None, 0, :]
+            + local[None, :, 1, None] * Rt[:, None, 1, :]
+            + local[None, :, 2, None] * Rt[:, None, 2, :]
+        )
+    half = (0.5 * poses[:, 12])[:, None] * R[:, :, 2]  # (n, 3)
+    return np.stack([p - half, p + half], axis=1)
+
+
+def pose_offsets(poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...]) -> Array:
+    """How far any point of each body is between two poses of it: (M, B) [m], an upper bound.
+
+    From poses (M, B, 13) each: a box's point p + R c (|c| <= h, its half-diagonal) moves by
+    |dp + dR c| <= |dp| + |dR|_F h; a capsule's axis end points p +- z L / 2 move by at most
+    |dp| + |d(z L)| / 2, and so does every point of its axis segment (a convex combination of the two).
+    A box's distance to anything fixed, and a capsule's (its axis segment's less its radius), differ by no
+    more between the two poses.
+    """
+    d = poses_b - poses_a
+    dp = np.sqrt(np.sum(d[:, :, 9:12] ** 2, axis=2))
+    box = np.array([s.kind == "box" for s in shapes])
+    half = np.array([0.5 * float(np.linalg.norm(s.size)) if s.kind == "box" else 0.0 for s in shapes])
+    dR = np.sqrt(np.sum(d[:, :, :9] ** 2, axis=2))  # Frobenius norm >= spectral norm
+    dzl = poses_b[:, :, 6:9] * poses_b[:, :, 12:13] - poses_a[:, :, 6:9] * poses_a[:, :, 12:13]
+    return dp + np.where(box[None, :], dR * half[None, :], 0.5 * np.sqrt(np.sum(dzl**2, axis=2)))
+
+
+def pose_steps(poses: Array, shapes: tuple[Shape, ...]) -> Array:
+    """How far any point of each body moves from each sample to the next: (N - 1, B) [m], an upper bound.
+
+    :func:`pose_offsets` of consecutive samples of poses (N, B, 13).
+    """
+    return pose_offsets(poses[:-1], poses[1:], shapes)
+
+
+def grown_radius(shape: Shape) -> float:
+    """The radius the body's vertex hull is grown by: a capsule's radius, 0 for a box."""
+    return float(shape.radius) if shape.kind == "capsule" else 0.0
+
+
+def hull_deviation(verts: Array) -> float:
+    """The hull's deviation e: the largest distance of verts[s, v] from [verts[0, v], verts[-1, v]] [m].
+
+    Over every sample s and vertex v of ``verts`` (n, V, 3).
+    """
+    a, b = verts[0], verts[-1]
+    ab = b - a  # (V, 3)
+    den = (ab * ab).sum(axis=1)
+    rel = verts - a[None]
+    t = (rel * ab[None]).sum(axis=2) / np.where(den > 0.0, den, 1.0)[None]
+    off = rel - np.clip(t, 0.0, 1.0)[..., None] * ab[None]
+    return float(np.sqrt(np.max((off * off).sum(axis=2))))
+
+
+def hull_object(verts: Array, shape: Shape) -> fcl.CollisionObject:
+    """The FCL convex hull of the body's vertices at the run's two ends (verts (n, V, 3))."""
+    pts = np.vstack([verts[0], verts[-1]])
+    if shape.kind == "capsule":
+        pts = (pts[:, None, :] + THICKEN_M * _SIGNS[None]).reshape(-1, 3)
+    try:
+        hull = ConvexHull(pts, qhull_options="QJ")
+    except QhullError:  # all points (nearly) equal: the cube around their centre
+        c = pts.mean(axis=0)
+        pts = c + (float(np.max(np.abs(pts - c))) + THICKEN_M) * _SIGNS
+        hull = ConvexHull(pts, qhull_options="QJ")
+    simplices = hull.simplices.astype(np.int32)
+    faces = np.hstack([np.full((len(simplices), 1), 3, dtype=np.int32), simplices]).ravel()
+    return fcl.CollisionObject(
+        fcl.Convex(np.ascontiguousarray(hull.points, dtype=float), len(simplices), faces), fcl.Transform()
+    )
+
+
+def relative_poses(poses_a: Array, poses_b: Array) -> Array:
+    """Poses (n, 13) of body a in body b's frame, from both bodies' poses (n, 13) in the base frame.
+
+    A pair's distance is body a's distance to body b fixed at the origin: the pair's swept hull is a's
+    vertices in b's frame (:func:`swept_bound` with b's shape as the target, :func:`shape_object`).
+    """
+    n = poses_a.shape[0]
+    Ra = poses_a[:, :9].reshape(n, 3, 3).transpose(0, 2, 1)
+    Rb = poses_b[:, :9].reshape(n, 3, 3).transpose(0, 2, 1)
+    R = np.einsum("nji,njk->nik", Rb, Ra)  # Rb^T Ra
+    p = np.einsum("nji,nj->ni", Rb, poses_a[:, 9:12] - poses_b[:, 9:12])
+    out = np.empty_like(poses_a)
+    out[:, :9] = R.transpose(0, 2, 1).reshape(n, 9)  # column-major again
+    out[:, 9:12] = p
+    out[:, 12] = poses_a[:, 12]
+    return out
+
+
+def shape_object(shape: Shape, length: float) -> fcl.CollisionObject:
+    """Body b's shape at the origin as an FCL object (a capsule of the posed ``length``).
+
+    A capsule frame is centred on the body, so the longest posed length of a run contains every shorter.
+    """
+    geom = fcl.Box(*shape.size) if shape.kind == "box" else fcl.Capsule(shape.radius, length)
+    return fcl.CollisionObject(geom, fcl.Transform())
+
+
+def swept_bound(verts: Array, shape: Shape, target: Any) -> float:
+    """Certified lower bound of the body's distance to ``target`` at every sample of a run.
+
+    Args:
+        verts: The body's vertices (n, V, 3) at the run's samples, n >= 1 (:func:`body_vertices`).
+        shape: The body's shape.
+        target: The fixed FCL object (the cabin mesh, an obstacle's mesh, the other body of a pair).
+
+    Returns:
+        d(H, target) - e - r - :data:`GJK_SLACK_M`, or ``-inf`` when the hull touches the target.
+    """
+    e = hull_deviation(verts)
+    d = float(fcl.distance(hull_object(verts, shape), target, _REQUEST, fcl.DistanceResult()))
+    if not d > 0.0:
+        return -np.inf
+    return d - e - grown_radius(shape) - GJK_SLACK_M
