@@ -32,10 +32,12 @@ run: $(STAMP)  ## the main job on embedded defaults: plan the reference bay inse
 serve: $(STAMP)  ## the HTTP service on 127.0.0.1:8000 (embedded defaults; prints the local API key)
 	$(BIN)/python -m api
 
+# The suite on two pytest-xdist workers: a module's tests (a folder's, for folders that share session
+# fixtures) stay on one worker (tests/conftest.py gives every test its xdist group).
 test: $(DEV_STAMP) chromium  ## lint, type-check and the whole test suite (installs Debian's Chromium first)
 	$(BIN)/ruff check planner api tests bench
 	$(BIN)/mypy planner api
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
 
 chromium:  ## Debian's Chromium for the viewer's browser tests (they skip without it); never a downloaded browser
 	@command -v chromium >/dev/null 2>&1 || { apt-get update -qq && \

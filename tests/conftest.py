@@ -1,4 +1,4 @@
-"""Shared fixtures: the reference robot and admissible random configurations."""
+"""Shared fixtures: the reference robot and admissible random configurations; the suite's xdist groups."""
 
 from __future__ import annotations
 
@@ -14,6 +14,26 @@ import numpy as np
 import pytest
 
 from planner.robots.cabin8 import Cabin8
+
+#: Folders whose tests run together on one xdist worker: their session fixtures (the searched campaign, the
+#: embedded sweep, the planned cycles) are computed once, and the two local Rays (a sweep's, a campaign's)
+#: never run side by side (a test kills the Ray workers it finds by their title).
+TOGETHER = {"sweep": "sweep-campaign", "campaign": "sweep-campaign", "task": "task"}
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Every test in an xdist group (``make test`` runs ``-n 2 --dist loadgroup``): its module's or folder's.
+
+    A module's tests stay on one worker, so its module fixtures (a service, a planned scenario) are set up
+    once; the folders of :data:`TOGETHER` share a group. Without ``-n`` the marks do nothing.
+    """
+    root = Path(__file__).resolve().parent
+    for item in items:
+        if item.get_closest_marker("xdist_group") is not None:
+            continue
+        rel = item.path.resolve().relative_to(root)
+        folder = rel.parts[0] if len(rel.parts) > 1 else ""
+        item.add_marker(pytest.mark.xdist_group(TOGETHER.get(folder, rel.as_posix())))
 
 
 @pytest.fixture(scope="session")
