@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import heapq
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -62,7 +61,13 @@ from planner.collision.kernels.entries import Kernels
 from planner.collision.motion import LIMIT_STEP
 from planner.collision.obstacles import ObstacleSet
 from planner.collision.probes import Probes
-from planner.collision.reports import BodyState, Contact, MotionReport, limit_contacts
+from planner.collision.reports import (
+    AlongReport,
+    BodyState,
+    ClearanceAlong,
+    MotionReport,
+    limit_contacts,
+)
 from planner.collision.sweep import (
     body_vertices,
     pose_offsets,
@@ -96,51 +101,6 @@ MAX_PROBES = 20_000
 #: Spare clearances [m] beyond the clearance plus margin an FCL probe on the grown body tries to prove, the
 #: largest first (a collision query costs ~10 us; an exact distance to a nearby wall ~0.5 ms).
 PROBE_LEVELS = (0.016, 0.004, 0.001, 0.0)
-
-
-@dataclass(frozen=True)
-class AlongReport:
-    """Result of :meth:`AlongPath.certify`: the polyline keeps the clearance everywhere, or where not.
-
-    Attributes:
-        valid: Every piece certified (limits at every sample and every ``LIMIT_STEP`` within pieces).
-        exact_queries: FCL distance queries the certificate needed.
-        walked: Pieces the bounds could not cover, handed to the certified motion walk.
-        first_bad: The sample starting the first piece that failed (None if valid).
-        contacts: Why it failed.
-    """
-
-    valid: bool
-    exact_queries: int
-    walked: int
-    first_bad: int | None = None
-    contacts: tuple[Contact, ...] = ()
-
-
-@dataclass(frozen=True)
-class ClearanceAlong:
-    """The smallest distance of a path: exact over every sample, certified between samples.
-
-    Attributes:
-        distance_m: Exact FCL distance at ``sample`` for ``bodies``: no sample's exact distance of any
-            body to the cabin, or between two checked bodies, is below it by more than ``tolerance_m``.
-        bound_m: Certified lower bound of every distance along the polyline through the samples (between
-            samples included), <= ``distance_m``.
-        sample: The sample of ``distance_m``.
-        bodies: The body and ``"cabin"``, or the two bodies, of ``distance_m``.
-        bound_sample: The sample starting the piece where ``bound_m`` is smallest.
-        exact_queries: FCL distance queries the search needed.
-        tolerance_m: No sample's exact distance is below ``distance_m`` by more than this (the requested
-            tolerance, or what the query budget reached where the distances are flat over many samples).
-    """
-
-    distance_m: float
-    bound_m: float
-    sample: int
-    bodies: tuple[str, str]
-    bound_sample: int
-    exact_queries: int
-    tolerance_m: float
 
 
 class AlongPath:

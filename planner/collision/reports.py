@@ -121,3 +121,48 @@ def body_contact(
         return Contact("cabin", (names[idx],), f"{names[idx]} within {margin:.4g} m of the cabin")
     a, b = pairs[idx]
     return Contact("self", (names[a], names[b]), f"{names[a]} within {margin:.4g} m of {names[b]}")
+
+
+@dataclass(frozen=True)
+class AlongReport:
+    """Result of :meth:`~planner.collision.along.AlongPath.certify`: the polyline keeps the clearance or not.
+
+    Attributes:
+        valid: Every piece certified (limits at every sample and every ``LIMIT_STEP`` within pieces).
+        exact_queries: FCL distance queries the certificate needed.
+        walked: Pieces the bounds could not cover, handed to the certified motion walk.
+        first_bad: The sample starting the first piece that failed (None if valid).
+        contacts: Why it failed.
+    """
+
+    valid: bool
+    exact_queries: int
+    walked: int
+    first_bad: int | None = None
+    contacts: tuple[Contact, ...] = ()
+
+
+@dataclass(frozen=True)
+class ClearanceAlong:
+    """The smallest distance of a path: exact over every sample, certified between samples.
+
+    Attributes:
+        distance_m: Exact FCL distance at ``sample`` for ``bodies``: no sample's exact distance of any
+            body to the cabin, or between two checked bodies, is below it by more than ``tolerance_m``.
+        bound_m: Certified lower bound of every distance along the polyline through the samples (between
+            samples included), <= ``distance_m``.
+        sample: The sample of ``distance_m``.
+        bodies: The body and ``"cabin"``, or the two bodies, of ``distance_m``.
+        bound_sample: The sample starting the piece where ``bound_m`` is smallest.
+        exact_queries: FCL distance queries the search needed.
+        tolerance_m: No sample's exact distance is below ``distance_m`` by more than this (the requested
+            tolerance, or what the query budget reached where the distances are flat over many samples).
+    """
+
+    distance_m: float
+    bound_m: float
+    sample: int
+    bodies: tuple[str, str]
+    bound_sample: int
+    exact_queries: int
+    tolerance_m: float
