@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench import ompl_log
 from planner.campaign.run import CampaignRun
 from planner.generate.cycles import (
     CycleGeneratorOptions,
@@ -111,7 +112,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ray", action="store_true", help="run the cycles on a local Ray")
     parser.add_argument("--no-suite", action="store_true", help="skip the reference scenarios' plans")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument(
+        "--ompl-log",
+        type=Path,
+        default=None,
+        help="also write OMPL benchmark logs here",
+    )
     args = parser.parse_args(argv)
+    journals: list[tuple[str, list[dict[str, Any]], float]] = []  # (experiment, rows, time limit [s])
     print(f"bench.cycles: {_load()} (start)", flush=True)
     folder = Path(tempfile.mkdtemp(prefix="cabinplan-bench-cycles-"))
     t_gen = time.perf_counter()
@@ -142,6 +150,7 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             has_order, rows = exhaustive(ex)
             wall = time.perf_counter() - t0
+            journals.append((f"{case.name}-exhaustive", [r for r in rows if r], camp.options.time_limit_s))
             cycle_times += [float(r["planning_time_s"] or r["wall_time_s"]) for r in rows if r]
             for u in camp.ids:
                 row = ex.journal.rows[ex.job(u, ()).sha256]
@@ -185,6 +194,7 @@ def main(argv: list[str] | None = None) -> int:
             res = run.run()
             given_walls.append(time.perf_counter() - t0)
             rows = [r for r in run.journal.rows.values()]
+            journals.append((f"{case.name}-given", rows, run.campaign.options.time_limit_s))
             cycle_times += [float(r["planning_time_s"] or r["wall_time_s"]) for r in rows]
             print(
                 f"{case.name}: given order, {'all installed' if res.succeeded else res.message} "
@@ -200,6 +210,7 @@ def main(argv: list[str] | None = None) -> int:
             res = run.run()
             find_walls.append(time.perf_counter() - t0)
             rows = [r for r in run.journal.rows.values()]
+            journals.append((f"{case.name}-find", rows, run.campaign.options.time_limit_s))
             cycle_times += [float(r["planning_time_s"] or r["wall_time_s"]) for r in rows]
             print(
                 f"{case.name}: find over 6 units: {' '.join(res.order) or res.message} "
@@ -255,6 +266,15 @@ def main(argv: list[str] | None = None) -> int:
             f"{suite['median_s']:.2f} s, p95 {suite['p95_s']:.2f} s"
         )
     print(f"bench.cycles: {_load()} (end); executor {record['executor']} with {args.workers} workers")
+    if args.ompl_log is not None:
+        logs = [
+            ompl_log.write_log(
+                ompl_log.cycle_experiment(name, rows, seed=args.seed, time_limit_s=float(limit)),
+                args.ompl_log / f"{name}.log",
+            )
+            for name, rows, limit in journals
+        ]
+        print(f"OMPL benchmark logs: {len(logs)} -> {args.ompl_log}")
     if args.json:
         args.json.write_text(json.dumps(record, indent=1, default=str) + "\n", encoding="utf-8")
     return 0

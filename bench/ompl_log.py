@@ -233,3 +233,50 @@ def generalization_experiments(
 def write_generalization_logs(out_dir: Path, experiments: Sequence[Experiment]) -> list[Path]:
     """One ``<experiment>.log`` per experiment in ``out_dir`` (``ompl_benchmark_statistics.py`` reads all)."""
     return [write_log(e, out_dir / f"{_token(e.name)}.log") for e in experiments]
+
+
+def cycle_run_of(row: Mapping[str, Any]) -> dict[str, float | int | bool | None]:
+    """The run properties of one cycle of a campaign's journal (:mod:`planner.campaign.worker`'s row).
+
+    A planned cycle passed the cycle gate over its whole timeline (``correct solution``); its clearance is
+    the cycle's exact minimum over every sample. Cycles have no single path length in one space (their
+    legs carry different loads): left empty, as the strict re-check, which the benchmark does not run.
+    """
+    ok = row.get("status") == "succeeded"
+    wall = row.get("planning_time_s") if row.get("planning_time_s") is not None else row.get("wall_time_s")
+    return {
+        "time": wall,
+        "solved": ok,
+        "solution length": None,
+        "solution clearance": row.get("min_clearance_m") if ok else None,
+        "correct solution": True if ok else None,
+        "correct solution strict": None,
+        "trajectory duration": row.get("duration_s") if ok else None,
+        "duration ratio": None,
+    }
+
+
+def cycle_experiment(
+    name: str, rows: Sequence[Mapping[str, Any]], *, seed: int, time_limit_s: float, version: str = "0"
+) -> Experiment:
+    """One experiment of the cycle benchmark: every cycle a campaign run planned, as runs of the default.
+
+    Args:
+        name: The experiment's name (e.g. the campaign's).
+        rows: The journal rows of its cycles (one per cycle planned, refused ones included).
+        seed: The generator's seed.
+        time_limit_s: The cycles' time limit [s].
+        version: The planner's version.
+    """
+    runs = [cycle_run_of(r) for r in rows]
+    total = float(sum(float(r["time"]) for r in runs if r.get("time") is not None))
+    return Experiment(
+        name=name,
+        planners=[PlannerEntry("cabinplan_cycle_default", {"preset": "product"}, runs)],
+        setup=f"campaign {name}: one run per cycle planned\n",
+        seed=int(seed),
+        time_limit_s=float(time_limit_s),
+        total_time_s=total,
+        properties={"generator_seed": ("INTEGER", int(seed)), "cycles": ("INTEGER", len(runs))},
+        version=version,
+    )

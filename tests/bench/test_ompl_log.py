@@ -222,3 +222,35 @@ def test_a_real_plan_record_carries_its_path_length(tmp_path: Path) -> None:
         1,
         record["planning_time_s"],
     )
+
+
+def test_the_cycle_benchmarks_campaign_runs_parse_into_sqlite(tmp_path: Path) -> None:
+    """Each campaign run of ``bench.cycles`` is one experiment, a run per cycle, refused cycles included."""
+    rows = [
+        {"status": "succeeded", "planning_time_s": 1.25, "min_clearance_m": 0.0144, "duration_s": 37.75},
+        {
+            "status": "failed",
+            "planning_time_s": None,
+            "wall_time_s": 30.5,
+            "reason": "no_path_within_time_limit",
+        },
+    ]
+    exp = ompl_log.cycle_experiment("gen-camp-0-100-given", rows, seed=3, time_limit_s=30.0)
+    path = ompl_log.write_log(exp, tmp_path / "logs" / "gen-camp-0-100-given.log")
+    db = sqlite3.connect(tmp_path / "cycles.db")
+    eid = parse_into(db, path.read_text())
+    assert db.execute(
+        "SELECT name, seed, timelimit, totaltime, cycles FROM experiments WHERE id = ?", (eid,)
+    ).fetchone() == (
+        "gen-camp-0-100-given",
+        3,
+        30.0,
+        1.25 + 30.5,
+        2,
+    )
+    runs = db.execute(
+        "SELECT time, solved, solution_clearance, correct_solution, trajectory_duration FROM runs "
+        "WHERE experimentid = ? ORDER BY id",
+        (eid,),
+    ).fetchall()
+    assert runs == [(1.25, 1, 0.0144, 1, 37.75), (30.5, 0, None, None, None)]
