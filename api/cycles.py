@@ -38,6 +38,7 @@ from typing import Any
 from api.compact import pack_value, unpack_document
 from api.jobkinds import FileSource
 from api.jobstore import KEEP_PREFIX
+from api.worker import failed_outcome
 
 _LOG = logging.getLogger(__name__)
 
@@ -77,13 +78,7 @@ def cycle_job(job: dict[str, Any], progress: Any) -> dict[str, Any]:
         else:
             doc = {"kind": "cycle", **refusal_document(exc, None, name=job["scenario"].get("name"))}
             doc["cycle"] = doc.pop("scenario")
-        return {
-            "status": "failed",
-            "reason": exc.reason,
-            "message": exc.message,
-            "document": doc,
-            "provenance": doc.get("provenance"),
-        }
+        return failed_outcome(exc, doc)
     doc = cycle_document(cyc, result)
     return {
         "status": "succeeded",

@@ -70,14 +70,7 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
         result = planner.plan()
     except PlannerError as exc:
         name = job["scenario"].get("name") if isinstance(job["scenario"], dict) else None
-        doc = refusal_document(exc, sc, name=name)
-        return {
-            "status": "failed",
-            "reason": exc.reason,
-            "message": exc.message,
-            "document": doc,
-            "provenance": doc.get("provenance"),
-        }
+        return failed_outcome(exc, refusal_document(exc, sc, name=name))
     doc = result_document(sc, result)
     return {
         "status": "succeeded",
@@ -199,3 +192,14 @@ def _plot(sc: ResolvedScenario, doc: dict[str, Any], profile: DriveProfile) -> b
 
 
 __all__ = ["plan_job", "plot_png", "profile_csv", "run_job", "worker_setup"]
+
+
+def failed_outcome(exc: PlannerError, document: dict[str, Any]) -> dict[str, Any]:
+    """A job's outcome for a refusal: its reason and message, and its refusal document (with provenance)."""
+    return {
+        "status": "failed",
+        "reason": exc.reason,
+        "message": exc.message,
+        "document": document,
+        "provenance": document.get("provenance"),
+    }

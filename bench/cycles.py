@@ -185,36 +185,33 @@ def main(argv: list[str] | None = None) -> int:
                 f"{len(rows)} cycles in {wall:.1f} s",
                 flush=True,
             )
-        # 2. Given order over 5 units.
+
+        # 2. Given order over 5 units; 3. order: find over 6 units.
+        def campaign_run(case: GeneratedCampaign, order: str) -> tuple[Any, float]:
+            """Run one campaign afresh; (its result, its wall time [s]), its cycles recorded."""
+            path = _write(case, folder / case.name, order)
+            run = CampaignRun(_campaign(path), folder / case.name / order, executor, base_dir=path.parent)
+            t0 = time.perf_counter()
+            res = run.run()
+            wall = time.perf_counter() - t0
+            rows = list(run.journal.rows.values())
+            journals.append((f"{case.name}-{order}", rows, run.campaign.options.time_limit_s))
+            cycle_times.extend(float(r["planning_time_s"] or r["wall_time_s"]) for r in rows)
+            return res, wall
+
         given_walls = []
         for case in given:
-            path = _write(case, folder / case.name, "given")
-            run = CampaignRun(_campaign(path), folder / case.name / "given", executor, base_dir=path.parent)
-            t0 = time.perf_counter()
-            res = run.run()
-            given_walls.append(time.perf_counter() - t0)
-            rows = [r for r in run.journal.rows.values()]
-            journals.append((f"{case.name}-given", rows, run.campaign.options.time_limit_s))
-            cycle_times += [float(r["planning_time_s"] or r["wall_time_s"]) for r in rows]
-            print(
-                f"{case.name}: given order, {'all installed' if res.succeeded else res.message} "
-                f"({given_walls[-1]:.1f} s)",
-                flush=True,
-            )
-        # 3. order: find over 6 units.
+            res, wall = campaign_run(case, "given")
+            given_walls.append(wall)
+            outcome = "all installed" if res.succeeded else res.message
+            print(f"{case.name}: given order, {outcome} ({wall:.1f} s)", flush=True)
         find_walls = []
         for case in finds:
-            path = _write(case, folder / case.name, "find")
-            run = CampaignRun(_campaign(path), folder / case.name / "find", executor, base_dir=path.parent)
-            t0 = time.perf_counter()
-            res = run.run()
-            find_walls.append(time.perf_counter() - t0)
-            rows = [r for r in run.journal.rows.values()]
-            journals.append((f"{case.name}-find", rows, run.campaign.options.time_limit_s))
-            cycle_times += [float(r["planning_time_s"] or r["wall_time_s"]) for r in rows]
+            res, wall = campaign_run(case, "find")
+            find_walls.append(wall)
             print(
                 f"{case.name}: find over 6 units: {' '.join(res.order) or res.message} "
-                f"({res.cycles_planned} cycles, {find_walls[-1]:.1f} s)",
+                f"({res.cycles_planned} cycles, {wall:.1f} s)",
                 flush=True,
             )
     finally:
