@@ -36,8 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from api.compact import pack_value, unpack_document
-from api.jobkinds import FileSource
-from api.jobstore import KEEP_PREFIX
+from api.jobtypes import KEEP_PREFIX, FileSource
 from api.worker import failed_outcome
 
 _LOG = logging.getLogger(__name__)

@@ -61,6 +61,7 @@ from multiprocessing.process import BaseProcess
 from typing import Any, Protocol
 
 from api.db import Database
+from api.jobkinds import kind_of
 from api.jobstore import (
     KEEP_PREFIX,
     MAX_ATTEMPTS,
@@ -74,6 +75,7 @@ from api.lifeline import SERVER_PID_ENV
 from api.metrics import ServiceMetrics
 from api.settings import Settings
 from api.store import local_mesh_file
+from api.worker import run_job, worker_setup
 from planner.core.procpool import SINGLE_THREAD_ENV, WarmPool, Worker
 
 _LOG = logging.getLogger(__name__)
@@ -196,13 +198,13 @@ class ProcessJobRunner:
         self.ran_on: OrderedDict[str, tuple[int, int]] = OrderedDict()
 
     def _new_pool(self) -> WarmPool:
-        return WarmPool(  # the workers' functions by name: imported in the workers (forkserver preload)
+        return WarmPool(
             self._ctx,
-            "api.worker:run_job",
+            run_job,
             slots=self.settings.workers,
             tasks_per_process=self.settings.worker_max_jobs,
             max_rss_bytes=self.settings.worker_max_rss_bytes,
-            setup="api.worker:worker_setup",
+            setup=worker_setup,
             setup_args=(os.getpid(), self.settings.worker_nice),
             name="cabinplan-job-worker",
             on_retire=lambda cause: self.metrics.workers_replaced.labels(cause=cause).inc(),
@@ -385,6 +387,7 @@ class ProcessJobRunner:
         return {
             "id": row.id,
             "kind": row.kind,
+            "runner": kind_of(row.kind).runner,  # pickled by reference: the worker imports its module
             "kept": kept,
             "scenario": row.scenario,
             "meshes": dict(row.meshes),

@@ -38,12 +38,9 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from api.db import ACTIVE_STATES, JOB_STATES, TERMINAL_STATES, Database, Job, JobFile, now_s
-from api.jobkinds import DEFAULT_KIND, JobKind
+from api.jobtypes import DEFAULT_KIND, KEEP_PREFIX, JobKind
 
 _LOG = logging.getLogger(__name__)
-
-#: Name prefix of the files a running job keeps for a relaunch (:meth:`JobStore.keep`).
-KEEP_PREFIX: Final = "keep/"
 
 #: A job that ran this many times and was interrupted again is failed with reason ``interrupted``.
 MAX_ATTEMPTS = 2

@@ -1,24 +1,26 @@
 """The child side of a job: runs in a warm worker process, talks to the parent through a pipe; and plan files.
 
-A job worker is a reused process (:class:`planner.core.procpool.WarmPool`, see :mod:`api.jobs`): it
-arms its parent-death signal and lowers its priority once (:func:`worker_setup`), so it ends with the
-service (:mod:`api.lifeline`) and yields the CPU to the event loop; then it runs one job after another
-(:func:`run_job`). The parent sends the job description (its kind, the scenario as submitted and the
-tenant's mesh files it names) on the pipe. The worker runs its kind's function (:mod:`api.jobkinds`;
-:func:`plan_job` for plans), sends ``("progress", stage, fraction, detail)`` messages while planning
-(``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)`` for what a relaunch must not
-redo (a campaign's finished cycles) and one ``("done", outcome)`` at the end of each job; the parent
-writes everything to the database. The packed result document (:mod:`api.compact`) is made here, never
-in the server's event loop; it is the only thing a job writes: the CSV and the plot are made on request
-(:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the plot kept once made).
+A job worker is a reused process (:class:`planner.core.procpool.WarmPool`, see :mod:`api.jobs`): it arms
+its parent-death signal and lowers its priority once (:func:`worker_setup`), so it ends with the service
+(:mod:`api.lifeline`) and yields the CPU to the event loop; then it runs one job after another
+(:func:`run_job`). The parent sends the job description (its kind's function, the scenario as submitted
+and the tenant's mesh files it names) on the pipe. The worker runs that function (``runner``,
+:mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction, detail)``
+messages while planning (``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)`` for
+what a relaunch must not redo (a campaign's finished cycles) and one ``("done", outcome)`` at the end of
+each job; the parent writes everything to the database. The packed result document (:mod:`api.compact`)
+is made here, never in the server's event loop; it is the only thing a job writes: the CSV and the plot
+are made on request (:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the
+plot kept once made).
 
 What a worker keeps from one job to the next is what the planner caches by content: imports, compiled
 kernels, parsed meshes and a cabin's collision geometry (keyed by the mesh's content hash). Every job
 resolves its scenario afresh and seeds its own random generators, so a reused worker plans exactly what
 a fresh process plans (tests/api/test_warm_workers.py).
 
-Importing this module imports the planner, so the forkserver can preload it once and every worker forks
-warm.
+The planner is imported inside the functions (the first job, or the forkserver's warm-up,
+:mod:`api.warmup`, imports it once and every worker forks warm), so the server can name these functions
+(:mod:`api.jobkinds`) without importing the planner.
 """
 
 from __future__ import annotations
@@ -28,24 +30,16 @@ import os
 import threading
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from api.compact import pack_value
-from api.jobkinds import FileSource, kind_of
+from api.jobtypes import FileSource
 from api.lifeline import die_with_parent
-from api.store import scenario_mesh_resolver
-from planner.collision.world import CollisionWorld
-from planner.core.exceptions import PlannerError
-from planner.documents.output import refusal_document, result_document
-from planner.documents.plot import profile_png
-from planner.plan.pipeline import Planner
-from planner.robots import load_robot
-from planner.robots.cabin8 import Cabin8
-from planner.scenario.resolve import ResolvedScenario, resolve_scenario
-from planner.scenario.schema import scenario_from_dict
-from planner.timing.profile import DriveProfile
+
+if TYPE_CHECKING:
+    from planner.core.exceptions import PlannerError
+    from planner.scenario.resolve import ResolvedScenario
+    from planner.timing.profile import DriveProfile
 
 _LOG = logging.getLogger(__name__)
 
@@ -60,6 +54,13 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
         job: ``{"id", "scenario" (dict as submitted), "meshes" ({id: path}), "empty_dir"}``.
         send: Called with ``(stage, fraction)`` as the planner's stages start.
     """
+    from api.store import scenario_mesh_resolver
+    from planner.core.exceptions import PlannerError
+    from planner.documents.output import refusal_document, result_document
+    from planner.plan.pipeline import Planner
+    from planner.scenario.resolve import resolve_scenario
+    from planner.scenario.schema import scenario_from_dict
+
     sc: ResolvedScenario | None = None
     try:
         spec = scenario_from_dict(job["scenario"], source="scenario")
@@ -120,7 +121,7 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
     progress = Progress()
 
     try:
-        outcome = kind_of(job.get("kind")).run()(job, progress)
+        outcome = job["runner"](job, progress)
     except Exception as exc:  # a bug in the planner: report it as a failed job, never hang
         _LOG.exception("job %s crashed", job.get("id"))
         outcome = {
@@ -139,6 +140,10 @@ _PLOT_LOCK = threading.Lock()
 
 
 def _resolved(source: FileSource) -> ResolvedScenario:
+    from api.store import scenario_mesh_resolver
+    from planner.scenario.resolve import resolve_scenario
+    from planner.scenario.schema import scenario_from_dict
+
     spec = scenario_from_dict(source.input, source="plan")
     return resolve_scenario(
         spec, base_dir=Path(source.empty_dir), mesh_resolver=scenario_mesh_resolver(source.meshes)
@@ -147,6 +152,10 @@ def _resolved(source: FileSource) -> ResolvedScenario:
 
 def profile_csv(source: FileSource) -> bytes:
     """The drive profile of a succeeded plan as CSV (``t_s``, then position, velocity, ... per drive)."""
+    from planner.robots import load_robot
+    from planner.robots.cabin8 import Cabin8
+    from planner.timing.profile import DriveProfile
+
     robot = load_robot(str(source.document["robot"]))
     if not isinstance(robot, Cabin8):  # planning jobs are cabin8 plans
         raise ValueError(f"no drive profile CSV for robot {robot.name!r}")
@@ -161,6 +170,8 @@ def plot_png(source: FileSource) -> bytes:
     the last); the deflection is the report's predicted series (``report.deflection.along``, model
     predictions at up to 100 samples) drawn through the profile's samples.
     """
+    from planner.timing.profile import DriveProfile
+
     sc = _resolved(source)
     doc = source.document
     profile = DriveProfile.from_dict(doc, sc.robot)
@@ -169,6 +180,11 @@ def plot_png(source: FileSource) -> bytes:
 
 
 def _plot(sc: ResolvedScenario, doc: dict[str, Any], profile: DriveProfile) -> bytes:
+    import numpy as np
+
+    from planner.collision.world import CollisionWorld
+    from planner.documents.plot import profile_png
+
     q = profile.joints
     idx = np.unique(np.concatenate([np.arange(0, len(q), max(1, len(q) // 200)), [len(q) - 1]]))
     clearance = None

@@ -126,3 +126,28 @@ def test_the_cycle_finder_finds_module_and_function_level_circles() -> None:
 def test_no_import_circles() -> None:
     found = cycles(import_graph())
     assert not found, "import circles:\n" + "\n".join(" <-> ".join(c) for c in found)
+
+
+#: The only modules that import by name: the lazy public API (``planner.X`` resolved on first use) and the
+#: stand-in that defers toppra's eager matplotlib import. Everything else names what it runs by the
+#: object itself (job kinds, pool workers, sweep tasks), so a reader can follow it and a checker sees it.
+IMPORT_BY_NAME = {"planner", "planner.core.lazy"}
+
+
+def test_nothing_imports_by_name_outside_the_lazy_modules() -> None:
+    offenders = set()
+    for name, path in _modules().items():
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            called = node.func if isinstance(node, ast.Call) else None
+            spelled = (
+                called.attr
+                if isinstance(called, ast.Attribute)
+                else getattr(called, "id", None)
+                if called
+                else None
+            )
+            if spelled in {"import_module", "__import__", "resolve_name"}:
+                offenders.add(name)
+    assert offenders <= IMPORT_BY_NAME, sorted(offenders - IMPORT_BY_NAME)
+    assert offenders == IMPORT_BY_NAME  # the allowed ones still do (else the set above is stale)

@@ -22,7 +22,6 @@ finished are the caller's (the worker's ``handle`` function and the caller's rea
 
 from __future__ import annotations
 
-import importlib
 import logging
 import os
 import sys
@@ -47,24 +46,16 @@ SINGLE_THREAD_ENV = {
 }
 
 #: ``handle(task, conn)``: run one task in the worker and send its messages (its outcome last) on ``conn``;
-#: a module-level function, or its name ``"module:function"`` (imported in the worker only, so the pool's
-#: owner need not import what the workers run).
-Handler = Callable[[Any, Connection], None] | str
-
-
-def _resolve(fn: Callable[..., Any] | str) -> Callable[..., Any]:
-    if callable(fn):
-        return fn
-    module, _, name = fn.partition(":")
-    resolved: Callable[..., Any] = getattr(importlib.import_module(module), name)
-    return resolved
+#: a module-level function (pickled by reference: the worker imports its module, so a module whose
+#: heavy imports sit inside its functions keeps the pool's owner light).
+Handler = Callable[[Any, Connection], None]
 
 
 def serve(
     conn: Connection,
     handle: Handler,
     tasks: int,
-    setup: Callable[..., None] | str | None = None,
+    setup: Callable[..., None] | None = None,
     setup_args: tuple[Any, ...] = (),
 ) -> None:
     """Body of a worker process: ``setup(*setup_args)`` once, then ``handle`` each task received.
@@ -73,8 +64,7 @@ def serve(
     pool closed, or its owner died).
     """
     if setup is not None:
-        _resolve(setup)(*setup_args)
-    run = _resolve(handle)
+        setup(*setup_args)
     done = 0
     while tasks <= 0 or done < tasks:
         try:
@@ -83,7 +73,7 @@ def serve(
             return
         if task is None:
             return
-        run(task, conn)
+        handle(task, conn)
         done += 1
     conn.close()
 
@@ -150,7 +140,7 @@ class WarmPool:
         slots: int,
         tasks_per_process: int,
         max_rss_bytes: int | None = None,
-        setup: Callable[..., None] | str | None = None,
+        setup: Callable[..., None] | None = None,
         setup_args: tuple[Any, ...] = (),
         name: str = "cabinplan-worker",
         on_retire: Callable[[str], None] | None = None,

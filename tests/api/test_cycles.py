@@ -170,8 +170,8 @@ def _problem(r: Any, field: str) -> dict[str, Any]:
     return body
 
 
-def test_bad_cycles_and_campaigns_are_422_naming_the_field(svc: Service) -> None:
-    c, h = svc.client, svc.h()
+def test_bad_cycles_and_campaigns_are_422_naming_the_field(svc: Service, planned: Planned) -> None:
+    c, h = svc.client, svc.h()  # ``planned``: the one cycle job the counts below must find
     overlap = aisle_cycle()
     a2 = overlap["installed"][0]
     shifted = {**a2["pose"], "position": [a2["pose"]["position"][0], 0.7, a2["pose"]["position"][2] + 0.1]}

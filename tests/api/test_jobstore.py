@@ -12,6 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from sqlalchemy import select
 
+from api.cycles import campaign_job, cycle_job
 from api.db import ACTIVE_STATES, JOB_STATES, TERMINAL_STATES, Database, Job
 from api.jobkinds import PLAN, JobKind, ResultFile, kind_of, kinds, register
 from api.jobstore import (
@@ -23,6 +24,7 @@ from api.jobstore import (
     new_job,
 )
 from api.routes.jobroutes import job_document
+from api.worker import plan_job, profile_csv
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -172,9 +174,9 @@ def test_the_quota_counts_every_active_job_of_the_tenant(store: JobStore) -> Non
 def test_kinds_are_one_entry_each_and_a_new_kind_gets_the_shared_job_document(monkeypatch) -> None:
     assert kind_of(None) is PLAN and kind_of("plan") is PLAN and PLAN in kinds()
     assert {f.name for f in PLAN.files} == {"profile.csv", "plot.png"}
-    assert PLAN.run().__name__ == "plan_job"
+    assert PLAN.runner is plan_job and PLAN.file("profile.csv").maker is profile_csv  # type: ignore[union-attr]
     with pytest.raises(ValueError, match="clashes"):
-        register(JobKind("plan2", "plans", "plan", "api.worker:plan_job"))
+        register(JobKind("plan2", "plans", "plan", plan_job))
     import api.jobkinds as jobkinds
 
     monkeypatch.setattr(jobkinds, "_KINDS", dict(jobkinds._KINDS))
@@ -183,9 +185,9 @@ def test_kinds_are_one_entry_each_and_a_new_kind_gets_the_shared_job_document(mo
             "inspection",
             "inspections",
             "inspection",
-            "api.worker:plan_job",
+            plan_job,
             input_key="inspection",
-            files=(ResultFile("profile.csv", "profile_csv", "text/csv", "api.worker:profile_csv"),),
+            files=(ResultFile("profile.csv", "profile_csv", "text/csv", profile_csv),),
         )
     )
     row = new_job(inspection, "t", {}, "dock-to-bay", "0" * 64, {}, {"inspection_sha256": "ab"}, 5.0)
@@ -199,10 +201,7 @@ def test_kinds_are_one_entry_each_and_a_new_kind_gets_the_shared_job_document(mo
     }
     # The cycle and campaign kinds are entries of the same registry.
     assert kind_of("cycle").collection == "cycles" and kind_of("campaign").collection == "campaigns"
-    assert (
-        kind_of("cycle").run().__name__ == "cycle_job"
-        and kind_of("campaign").run().__name__ == "campaign_job"
-    )
+    assert kind_of("cycle").runner is cycle_job and kind_of("campaign").runner is campaign_job
 
 
 def test_a_kind_lists_only_its_own_jobs_and_rows_without_a_kind_are_plans(
@@ -211,7 +210,7 @@ def test_a_kind_lists_only_its_own_jobs_and_rows_without_a_kind_are_plans(
     import api.jobkinds as jobkinds
 
     monkeypatch.setattr(jobkinds, "_KINDS", dict(jobkinds._KINDS))
-    other = register(JobKind("inspection", "inspections", "inspection", "api.worker:plan_job"))
+    other = register(JobKind("inspection", "inspections", "inspection", plan_job))
     tenant = uuid.uuid4().hex[:16]
     legacy = _add(store, tenant, "queued", None)
     with store.db.session() as s:
