@@ -8,23 +8,10 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import typer
 
-from planner.core.exceptions import (
-    GoalUnreachable,
-    InvalidInput,
-    LimitViolation,
-    OutsideWorkspace,
-    PlannerError,
-)
-from planner.robots import load_robot
-from planner.scenario import MAX_SEED
-from planner.tools import kinematics_tools
-
-if TYPE_CHECKING:
-    pass
 from planner.cli.common import (
     EXIT_INFEASIBLE,
     EXIT_INVALID,
@@ -38,7 +25,12 @@ from planner.cli.common import (
     _write,
     app,
     handle_errors,
+    refusal_to,
 )
+from planner.core.exceptions import InvalidInput
+from planner.robots import load_robot
+from planner.scenario import MAX_SEED
+from planner.tools import kinematics_tools
 
 
 @app.command()
@@ -161,23 +153,16 @@ def plan(
 
     The JSON written to --output is the profile on success and the refusal document otherwise.
     """
-    from planner.core.exceptions import PlanRefused
     from planner.documents.output import clearance_phrase, document_bytes, refusal_document, result_document
     from planner.plan.pipeline import Planner
 
     sc = _load(scenario)
-    try:
-        with _Progress(sys.stderr.isatty()) as progress:
-            planner = Planner(sc, progress)
-            result = planner.plan()
-    except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
-        _write(output, json.dumps(refusal_document(exc, sc), indent=1) + "\n", "--output")
-        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
-    except InvalidInput:
-        raise
-    except PlannerError as exc:  # any other failure still leaves its reason in --output, never a stale file
-        _write(output, json.dumps(refusal_document(exc, sc), indent=1) + "\n", "--output")
-        _fail(f"{exc.reason}: {exc.message}", 1)
+    with (
+        refusal_to(output, lambda exc: refusal_document(exc, sc)),
+        _Progress(sys.stderr.isatty()) as progress,
+    ):
+        planner = Planner(sc, progress)
+        result = planner.plan()
     _write(output, document_bytes(result_document(sc, result, arrays=True)) + b"\n", "--output")
     if csv is not None:
         _write(csv, result.profile.to_csv(), "--csv")

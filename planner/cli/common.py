@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from functools import wraps
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
+from typing import Annotated, Any, NoReturn, ParamSpec, Self, TypeVar
 
 import typer
 from pydantic import ValidationError
@@ -18,13 +19,10 @@ from planner.core.exceptions import (
     LimitViolation,
     OutsideWorkspace,
     PlannerError,
+    PlanRefused,
 )
 from planner.robots import available_robots, load_robot
 from planner.robots.cabin8 import Cabin8
-
-if TYPE_CHECKING:
-    pass
-
 
 app = typer.Typer(
     add_completion=False,
@@ -113,6 +111,24 @@ def _write(path: Path, data: str | bytes, what: str) -> None:
             path.write_text(data, encoding="utf-8")
     except OSError as exc:
         _fail(f"{what}: cannot write {path} ({exc.strerror})", 1)
+
+
+@contextmanager
+def refusal_to(output: Path, refusal: Callable[[PlannerError], dict[str, Any]]) -> Iterator[None]:
+    """A planning command's refusals: the refusal document to --output, one line, the exit code.
+
+    A refusal (no admissible answer) exits 3, any other planner failure 1, each after writing
+    ``refusal(exc)`` to ``output`` so that --output never holds a stale profile; invalid input goes on to
+    :func:`handle_errors` (exit 2, nothing written).
+    """
+    try:
+        yield
+    except InvalidInput:
+        raise
+    except PlannerError as exc:
+        _write(output, json.dumps(refusal(exc), indent=1) + "\n", "--output")
+        infeasible = isinstance(exc, PlanRefused | GoalUnreachable | OutsideWorkspace | LimitViolation)
+        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE if infeasible else 1)
 
 
 class _Bar:

@@ -2,33 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated, Any
 
 import typer
 
-from planner.core.exceptions import (
-    GoalUnreachable,
-    InvalidInput,
-    LimitViolation,
-    OutsideWorkspace,
-    PlannerError,
-)
-
-if TYPE_CHECKING:
-    pass
-from planner.cli.common import (
-    EXIT_INFEASIBLE,
-    _Bar,
-    _fail,
-    _Progress,
-    _write,
-    app,
-    handle_errors,
-)
+from planner.cli.common import EXIT_INFEASIBLE, _Bar, _fail, _Progress, _write, app, handle_errors, refusal_to
 
 
 @app.command()
@@ -48,24 +29,17 @@ def cycle(
 
     The JSON written to --output is the cycle profile on success and the refusal document otherwise.
     """
-    from planner.core.exceptions import PlanRefused
     from planner.documents.cycle import cycle_document, cycle_png, cycle_refusal_document
     from planner.documents.output import clearance_phrase, document_bytes
     from planner.task.cycle import plan_cycle
     from planner.task.resolve import load_cycle
 
     cyc = load_cycle(cycle_file)
-    try:
-        with _Progress(sys.stderr.isatty()) as progress:
-            result = plan_cycle(cyc, progress)
-    except (PlanRefused, GoalUnreachable, OutsideWorkspace, LimitViolation) as exc:
-        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
-        _fail(f"{exc.reason}: {exc.message}", EXIT_INFEASIBLE)
-    except InvalidInput:
-        raise
-    except PlannerError as exc:
-        _write(output, json.dumps(cycle_refusal_document(exc, cyc), indent=1) + "\n", "--output")
-        _fail(f"{exc.reason}: {exc.message}", 1)
+    with (
+        refusal_to(output, lambda exc: cycle_refusal_document(exc, cyc)),
+        _Progress(sys.stderr.isatty()) as progress,
+    ):
+        result = plan_cycle(cyc, progress)
     _write(output, document_bytes(cycle_document(cyc, result, arrays=True)) + b"\n", "--output")
     if csv is not None:
         _write(csv, result.profile.to_csv(), "--csv")
