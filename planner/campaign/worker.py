@@ -3,23 +3,16 @@
 The runner the sweep executors call for a campaign's cycles (:data:`planner.campaign.run.CYCLE_RUNNER`,
 through :func:`planner.sweep.task.run_task`), in an embedded warm worker or a Ray task alike. It is the
 cycle's own planning (:func:`planner.task.cycle.plan_cycle`) with the outcome shape of a sweep's plan
-(:func:`planner.sweep.task.plan_outcome`), so the driver records both the same way.
+(:func:`planner.sweep.task.task_outcome`), so the driver records both the same way.
 """
 
 from __future__ import annotations
 
-import json
-import logging
-import os
 import time
 from pathlib import Path
 from typing import Any
 
-from planner.core.exceptions import PlannerError
-from planner.sweep.results import evidence_text
-from planner.sweep.task import deliver, mesh_resolver
-
-_LOG = logging.getLogger(__name__)
+from planner.sweep.task import mesh_resolver, task_outcome
 
 __all__ = ["cycle_outcome"]
 
@@ -39,55 +32,34 @@ def cycle_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) ->
         "planning_time_s", "task_time_s", "document", "profile_written", "pid"}``.
     """
     from planner.documents.cycle import cycle_document, cycle_refusal_document
-    from planner.documents.output import document_bytes, refusal_document
+    from planner.documents.output import document_bytes
     from planner.task.cycle import plan_cycle
     from planner.task.resolve import ResolvedCycle, resolve_cycle
     from planner.task.schema import cycle_from_dict
 
     t0 = time.perf_counter()
-    out: dict[str, Any] = {
-        "status": "failed",
-        "reason": None,
-        "message": None,
-        "evidence": None,
-        "duration_s": None,
-        "min_clearance_m": None,
-        "planning_time_s": None,
-        "task_time_s": None,
-        "document": None,
-        "profile_written": False,
-        "pid": os.getpid(),
-    }
-    name = task["cycle"].get("name")
-    cyc: ResolvedCycle | None = None
-    try:
+
+    def resolve() -> ResolvedCycle:
         spec = cycle_from_dict(task["cycle"], source="campaign cycle")
         base_dir = Path(task["base_dir"]) if task.get("base_dir") else None
-        cyc = resolve_cycle(spec, base_dir=base_dir, mesh_resolver=mesh_resolver(meshes))
+        return resolve_cycle(spec, base_dir=base_dir, mesh_resolver=mesh_resolver(meshes))
+
+    def plan(cyc: ResolvedCycle) -> tuple[dict[str, Any], str]:
         result = plan_cycle(cyc)
-    except PlannerError as exc:
-        if cyc is not None:
-            doc = cycle_refusal_document(exc, cyc)
-        else:  # refused before it was resolved (its input): the plan document's refusal, named
-            doc = {"kind": "cycle", **refusal_document(exc, None, name=name)}
-            doc["cycle"] = doc.pop("scenario")
-        out.update(reason=exc.reason, message=exc.message, evidence=evidence_text(doc.get("details", {})))
-        deliver(out, task, json.dumps(doc))
-        out["task_time_s"] = time.perf_counter() - t0
-        return out
-    except Exception as exc:  # a bug: recorded as the cycle's outcome, the campaign goes on
-        _LOG.exception("campaign cycle %s crashed", name)
-        out.update(reason="internal_error", message=f"internal error: {type(exc).__name__}: {exc}")
-        out["task_time_s"] = time.perf_counter() - t0
-        return out
-    doc = cycle_document(cyc, result, arrays=True)
-    out.update(
-        status="succeeded",
-        message=f"{result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
-        duration_s=float(result.profile.duration_s),
-        min_clearance_m=float(result.gate.min_clearance_m),
-        planning_time_s=float(result.report.get("planning_time_s", time.perf_counter() - t0)),
+        fields = {
+            "message": f"{result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
+            "duration_s": float(result.profile.duration_s),
+            "min_clearance_m": float(result.gate.min_clearance_m),
+            "planning_time_s": float(result.report.get("planning_time_s", time.perf_counter() - t0)),
+        }
+        return fields, document_bytes(cycle_document(cyc, result, arrays=True)).decode("utf-8")
+
+    name = task["cycle"].get("name")
+    return task_outcome(
+        task,
+        f"campaign cycle {name}",
+        resolve,
+        plan,
+        lambda exc, cyc: cycle_refusal_document(exc, cyc, name=name),
+        ("duration_s", "min_clearance_m"),
     )
-    deliver(out, task, document_bytes(doc).decode("utf-8"))
-    out["task_time_s"] = time.perf_counter() - t0
-    return out

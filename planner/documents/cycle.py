@@ -67,8 +67,20 @@ def cycle_document(cyc: ResolvedCycle, result: CycleResult, *, arrays: bool = Fa
     return {**_head(cyc, "succeeded"), **samples, "leg": leg, **_jsonable(tail)}
 
 
-def cycle_refusal_document(exc: PlannerError, cyc: ResolvedCycle) -> dict[str, Any]:
-    """The refusal document of a cycle: status ``failed``, the reason and its evidence (the leg named)."""
+def cycle_refusal_document(
+    exc: PlannerError, cyc: ResolvedCycle | None, name: str | None = None
+) -> dict[str, Any]:
+    """The refusal document of a cycle: status ``failed``, the reason and its evidence (the leg named).
+
+    Args:
+        exc: The refusal.
+        cyc: The resolved cycle; None when its input was refused before it resolved (no robot, hash or
+            provenance then).
+        name: The cycle's name as submitted, for an unresolved cycle.
+    """
+    if cyc is None:
+        head = {"kind": "cycle", "robot": None, "cycle": {"name": name}, "status": "failed"}
+        return _jsonable({**head, **exc.to_dict()})
     return _jsonable({**_head(cyc, "failed"), **exc.to_dict(), "provenance": cycle_provenance(cyc)})
 
 

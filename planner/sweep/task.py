@@ -14,12 +14,14 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 from planner.core.exceptions import PlannerError
 from planner.sweep.results import atomic_write, evidence_text
 
 _LOG = logging.getLogger(__name__)
+
+R = TypeVar("R")
 
 
 def mesh_resolver(meshes: dict[str, Any] | None) -> Any:
@@ -59,55 +61,93 @@ def plan_outcome(task: dict[str, Any], meshes: dict[str, Any] | None = None) -> 
     from planner.plan.pipeline import Planner
     from planner.scenario import ResolvedScenario, resolve_scenario, scenario_from_dict
 
+    def resolve() -> ResolvedScenario:
+        spec = scenario_from_dict(task["scenario"], source="sweep plan")
+        base_dir = Path(task["base_dir"]) if task.get("base_dir") else None
+        return resolve_scenario(spec, base_dir=base_dir, mesh_resolver=mesh_resolver(meshes))
+
+    def plan(sc: ResolvedScenario) -> tuple[dict[str, Any], str]:
+        planner = Planner(sc)
+        t_plan = time.perf_counter()
+        result = planner.plan()
+        report = result.report
+        fields = {
+            "message": f"{result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
+            "duration_s": float(result.profile.duration_s),
+            "lower_bound_ratio": float(report["duration_ratio"]),
+            "min_clearance_m": float(result.gate.min_clearance_m),
+            "min_clearance_bound_m": _float_or_none(result.gate.min_clearance_bound_m),
+            "peak_force_ratio": float(result.gate.peak_ratios["effort"]),
+            "planning_time_s": float(report.get("planning_time_s", time.perf_counter() - t_plan)),
+        }
+        return fields, json.dumps(result_document(sc, result))
+
+    name = task["scenario"].get("name")
+    return task_outcome(
+        task,
+        f"sweep plan {name}",
+        resolve,
+        plan,
+        lambda exc, sc: refusal_document(exc, sc, name=name),
+        ("duration_s", "lower_bound_ratio", "min_clearance_m", "min_clearance_bound_m", "peak_force_ratio"),
+    )
+
+
+def task_outcome(
+    task: dict[str, Any],
+    what: str,
+    resolve: Callable[[], R],
+    plan: Callable[[R], tuple[dict[str, Any], str]],
+    refusal: Callable[[PlannerError, R | None], dict[str, Any]],
+    numbers: tuple[str, ...],
+) -> dict[str, Any]:
+    """The outcome of one task, success or refusal, never an exception: the shape every runner returns.
+
+    One shape for a sweep's plans and a campaign's cycles, so the driver records both the same way:
+    ``{"status": "succeeded" | "failed", "reason", "message", "evidence" (JSON text of the refusal's
+    details), *numbers, "planning_time_s", "task_time_s" (resolution + planning, this process), "document"
+    (JSON text; ``None`` once written to the task's ``profile_path``, :func:`deliver`), "profile_written",
+    "pid"}``. A refusal (:class:`PlannerError`) leaves the numbers ``None`` and delivers its refusal
+    document; any other exception is an ``internal_error`` outcome without a document (logged).
+
+    Args:
+        task: The task (its ``profile_path``, if any).
+        what: The task in the log's line of a crash ("sweep plan <name>").
+        resolve: Validates and resolves the task's input.
+        plan: Plans the resolved input: the outcome's fields (``message``, the numbers,
+            ``planning_time_s``) and the document's JSON text.
+        refusal: The refusal document of an error and the resolved input (None: it did not resolve).
+        numbers: The runner's own numeric fields, in the order the outcome lists them.
+    """
     t0 = time.perf_counter()
     out: dict[str, Any] = {
         "status": "failed",
         "reason": None,
         "message": None,
         "evidence": None,
-        "duration_s": None,
-        "lower_bound_ratio": None,
-        "min_clearance_m": None,
-        "min_clearance_bound_m": None,
-        "peak_force_ratio": None,
+        **dict.fromkeys(numbers),
         "planning_time_s": None,
         "task_time_s": None,
         "document": None,
         "profile_written": False,
         "pid": os.getpid(),
     }
-    sc: ResolvedScenario | None = None
+    resolved: R | None = None
     try:
-        spec = scenario_from_dict(task["scenario"], source="sweep plan")
-        base_dir = Path(task["base_dir"]) if task.get("base_dir") else None
-        sc = resolve_scenario(spec, base_dir=base_dir, mesh_resolver=mesh_resolver(meshes))
-        planner = Planner(sc)
-        t_plan = time.perf_counter()
-        result = planner.plan()
+        resolved = resolve()
+        fields, document = plan(resolved)
     except PlannerError as exc:
-        doc = refusal_document(exc, sc, name=task["scenario"].get("name"))
+        doc = refusal(exc, resolved)
         out.update(reason=exc.reason, message=exc.message, evidence=evidence_text(doc.get("details", {})))
-        deliver(out, task, json.dumps(doc))
-        out["task_time_s"] = time.perf_counter() - t0
-        return out
-    except Exception as exc:  # a bug: recorded as the plan's outcome, the sweep goes on
-        _LOG.exception("sweep plan %s crashed", task["scenario"].get("name"))
+        document = json.dumps(doc)
+    except Exception as exc:  # a bug: recorded as the task's outcome, the sweep or campaign goes on
+        _LOG.exception("%s crashed", what)
         out.update(reason="internal_error", message=f"internal error: {type(exc).__name__}: {exc}")
         out["task_time_s"] = time.perf_counter() - t0
         return out
-    doc = result_document(sc, result)
-    report = result.report
-    out.update(
-        status="succeeded",
-        message=f"{result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
-        duration_s=float(result.profile.duration_s),
-        lower_bound_ratio=float(report["duration_ratio"]),
-        min_clearance_m=float(result.gate.min_clearance_m),
-        min_clearance_bound_m=_float_or_none(result.gate.min_clearance_bound_m),
-        peak_force_ratio=float(result.gate.peak_ratios["effort"]),
-        planning_time_s=float(report.get("planning_time_s", time.perf_counter() - t_plan)),
-    )
-    deliver(out, task, json.dumps(doc))
+    else:
+        out.update(status="succeeded", **fields)
+    deliver(out, task, document)
     out["task_time_s"] = time.perf_counter() - t0
     return out
 
@@ -201,6 +241,7 @@ __all__ = [
     "mesh_resolver",
     "plan_outcome",
     "run_task",
+    "task_outcome",
     "task_runner",
     "warm_up",
 ]
