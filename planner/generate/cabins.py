@@ -32,6 +32,7 @@ from planner.meshes.generate import (
     deck,
     duct,
     end_walls,
+    merge,
     prism,
     tube,
     wall_tube,
@@ -104,16 +105,6 @@ class CabinLayout:
     def with_bulkhead(self, spec: Bulkhead) -> CabinLayout:
         """The same cabin with a bulkhead hatch."""
         return replace(self, bulkhead=spec)
-
-
-def merge(name: str, parts: Sequence[Part]) -> Part:
-    """One part of several (vertices stacked, faces re-indexed)."""
-    vertices, faces, offset = [], [], 0
-    for part in parts:
-        vertices.append(part.vertices)
-        faces.append(part.faces + offset)
-        offset += len(part.vertices)
-    return Part(name, np.concatenate(vertices), np.concatenate(faces).astype(np.int64))
 
 
 def aabb(R: Array, p: Array, lo: Sequence[float] | Array, hi: Sequence[float] | Array) -> tuple[Array, Array]:

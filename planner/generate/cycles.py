@@ -39,7 +39,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.obstacles import Obstacle
@@ -47,9 +46,9 @@ from planner.collision.world import CollisionWorld
 from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.generate.cabins import PANEL_M, BayLayout, CabinLayout, RingFrame, bay_boxes, cabin_parts, merge
-from planner.generate.cases.common import draw_payload, draw_section, ring_depth_max
+from planner.generate.cases.common import Redraw, draw_payload, draw_section, first_valid, ring_depth_max
 from planner.generate.families import FAMILIES
-from planner.generate.files import loaded_cabin, pose_doc
+from planner.generate.files import commented_yaml, loaded_cabin, pose_doc, write_generated
 from planner.generate.options import FREE_RANGE_M, GRID_STEP_M, ROBOT_RAIL_M
 from planner.generate.reach import exact_solutions, payload_rotation, pose, robot_of
 from planner.generate.sections import Section
@@ -107,10 +106,6 @@ ROWS_Y_M = ((0.55, 1.2),)
 #: Exact IK solutions drawn before the force filter (a 60 kg unit held along +x at 0.6-0.8 m height: 1 of
 #: 8-10 solutions is holdable, none of the first 3; measured with the generator's IK and force check).
 HELD_SOLUTIONS = 10
-
-
-class _Redraw(Exception):
-    """A draw that does not make a valid campaign or unit; the caller draws again."""
 
 
 @dataclass(frozen=True)
@@ -257,7 +252,7 @@ def _side_bay(
         if _panels_clear(robot, u, p, f, recess, "bay-side", clearance):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
-    raise _Redraw("no reachable side bay at this station")
+    raise Redraw("no reachable side bay at this station")
 
 
 def _front_of(rng: np.random.Generator, robot: Cabin8, deep: _Unit, u: _Unit) -> None:
@@ -269,11 +264,11 @@ def _front_of(rng: np.random.Generator, robot: Cabin8, deep: _Unit, u: _Unit) ->
     x = face - gap - u.size[2] / 2
     pre_far = deep.p_bay[0] - deep.approach_m - deep.size[2] / 2  # the deep unit's pre-insertion back face
     if not x + u.size[2] / 2 > pre_far + 0.02:  # it must overlap the deep unit's pre-insertion pose
-        raise _Redraw("front unit does not reach the deep unit's corridor")
+        raise Redraw("front unit does not reach the deep unit's corridor")
     p = np.array([x, deep.p_bay[1], deep.p_bay[2]])
     u.approach_m = float(np.round(rng.uniform(0.05, 0.10), 3))
     if not (_reachable(robot, u, p) and _reachable(robot, u, p - u.approach_m * e)):
-        raise _Redraw("front unit not reachable")
+        raise Redraw("front unit not reachable")
     u.p_bay, u.deep_of = p, deep.uid
 
 
@@ -287,7 +282,7 @@ def _end_bay(rng: np.random.Generator, robot: Cabin8, u: _Unit, rail_max: float,
         if _panels_clear(robot, u, p, f, recess, "bay-end-far", clearance):
             u.p_bay, u.free_m, u.recess_m = p, f, recess
             return
-    raise _Redraw("no reachable end bay")
+    raise Redraw("no reachable end bay")
 
 
 def _dock_pose(u: _Unit) -> Array:
@@ -316,7 +311,7 @@ def _dock(rng: np.random.Generator, robot: Cabin8, u: _Unit, clearance: float) -
             and _reachable(robot, u, p - u.grasp_line_m * e, held=False)
         ):
             return
-    raise _Redraw("no reachable dock")
+    raise Redraw("no reachable dock")
 
 
 def _robustly_held(robot: Cabin8, u: _Unit, p: Array) -> bool:
@@ -366,11 +361,11 @@ def _place_units(
                 _end_bay(rng, robot, u, rail_max, clearance)
                 _dock(rng, robot, u, clearance)
                 units.append(u)
-            except _Redraw:
+            except Redraw:
                 pass
             continue
         if k >= len(slots):
-            raise _Redraw("more units than bay stations")
+            raise Redraw("more units than bay stations")
         z, row = slots[k]
         k += 1
         if any(v.kind == "side" and abs(v.p_bay[2] - z) < STATION_SPACING_M / 2 for v in units):
@@ -379,7 +374,7 @@ def _place_units(
         try:
             _side_bay(rng, robot, section, u, z + rng.uniform(-0.05, 0.05), row, clearance)
             _dock(rng, robot, u, clearance)
-        except _Redraw:
+        except Redraw:
             continue
         units.append(u)
         if len(units) < n and rng.uniform() < opts.pair_probability:
@@ -389,7 +384,7 @@ def _place_units(
                     _front_of(rng, robot, u, front)
                     _dock(rng, robot, front, clearance)
                     units.append(front)
-                except _Redraw:
+                except Redraw:
                     pass
     return units
 
@@ -413,7 +408,7 @@ def _layout(rng: np.random.Generator, section: Section, units: list[_Unit], rail
             lo_c, hi_c = cavity
             end_opening = ("far", wall_z, (lo_c[0], hi_c[0], lo_c[1], hi_c[1]))
             if wall_z - 0.26 < rail_max:
-                raise _Redraw("the end wall cuts the rail")
+                raise Redraw("the end wall cuts the rail")
     section = section.over(section.shell.z_min_m, z_max)
     rings: list[RingFrame] = []
     if rng.uniform() < 0.4:
@@ -433,18 +428,18 @@ def _witnesses(robot: Cabin8, layout: CabinLayout, u: _Unit, clearance: float, b
     # In its bay the unit has the drawn free space (12-40 mm) to the panels: the requested clearance there.
     for what, p in (("bay", u.p_bay), ("pre-insertion", u.p_bay - u.approach_m * e)):
         if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p)):
-            raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
+            raise Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     need = clearance + WITNESS_EXTRA_M
     dock = loaded_cabin(replace(layout, plates=(_pedestal(u, layout.shell.deck_top_y_m, clearance),)))
     held = CollisionWorld(robot, dock, payload, grid_step_m=GRID_STEP_M)
     p_dock = _dock_pose(u)
     for what, p in (("dock", p_dock), ("lift-off", p_dock + LIFT_M * up)):
         if not any(held.is_valid(q, need) for q in _reachable(robot, u, p)):
-            raise _Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
+            raise Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     empty = CollisionWorld(robot, dock, None, grid_step_m=GRID_STEP_M)
     pre = _reachable(robot, u, p_dock - u.grasp_line_m * e, 3, held=False)
     if not any(empty.is_valid(q, need) for q in pre):
-        raise _Redraw(f"{u.kind} unit: no clear pre-grasp configuration")
+        raise Redraw(f"{u.kind} unit: no clear pre-grasp configuration")
 
 
 def _park(robot: Cabin8, d1: float) -> Array:
@@ -476,7 +471,7 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
         (q for q in (_park(robot, d1) for d1 in PARK_D1_M) if bays.is_valid(q, clearance + 0.02)), None
     )
     if park is None:
-        raise _Redraw("no clear park posture")
+        raise Redraw("no clear park posture")
     name = f"camp-{seed}-{index:03d}"
     mesh_name = f"{name}-cabin.stl"
     whole = merge(name, cabin_parts(layout))
@@ -553,16 +548,9 @@ def generate_campaign(
     """
     opts = options or CycleGeneratorOptions()
     rng = np.random.default_rng([seed, index, STREAM])
-    reasons: dict[str, int] = {}
-    for _ in range(opts.max_attempts):
-        try:
-            case = _draw(seed, index, rng, opts)
-        except _Redraw as exc:
-            reasons[str(exc)] = reasons.get(str(exc), 0) + 1
-            continue
-        case.meta["redraws"] = reasons
-        return case
-    raise RuntimeError(f"campaign {index} of seed {seed}: no valid draw in {opts.max_attempts} ({reasons})")
+    return first_valid(
+        lambda: _draw(seed, index, rng, opts), opts.max_attempts, f"campaign {index} of seed {seed}"
+    )
 
 
 def generate_campaigns(
@@ -590,14 +578,9 @@ def campaign_yaml(case: GeneratedCampaign) -> str:
     """The campaign file's text: a comment line describing the case, then the campaign as YAML."""
     m = {k: v for k, v in case.meta.items() if k not in ("redraws", "units")}
     kinds = ",".join(f"{u['id']}:{u['kind']}" for u in case.meta["units"])
-    head = f"# Generated campaign ({kinds}): {json.dumps(m)}\n"
-    return head + yaml.safe_dump(case.campaign, sort_keys=False, default_flow_style=None, width=110)
+    return commented_yaml(f"Generated campaign ({kinds}): {json.dumps(m)}", case.campaign)
 
 
 def write_campaign(case: GeneratedCampaign, out_dir: Path) -> Path:
     """Write the campaign (``<name>.yaml``) and its cabin mesh into ``out_dir``; the campaign's path."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / case.mesh_name).write_bytes(case.mesh_bytes)
-    path = out_dir / f"{case.name}.yaml"
-    path.write_text(campaign_yaml(case), encoding="utf-8")
-    return path
+    return write_generated(case, campaign_yaml(case), out_dir)

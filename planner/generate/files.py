@@ -2,9 +2,10 @@
 
 The mesh is STL, OBJ, PLY or GLB, in m or mm, authored in its own frame.
 
-Everything here returns bytes, text or dicts, except :func:`write_case` and :func:`write_manifest` at the
-edge. A scenario is an ordinary one (``cabinplan plan``): the mesh path is relative to the scenario file,
-the cabin's ``pose`` maps the file's frame to the base frame, lengths in metres.
+Everything here returns bytes, text or dicts, except :func:`write_generated` (:func:`write_case`) and
+:func:`write_manifest` at the edge. A scenario is an ordinary one (``cabinplan plan``): the mesh path is
+relative to the scenario file, the cabin's ``pose`` maps the file's frame to the base frame, lengths in
+metres.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import yaml
 from planner.core.schemas import Pose
 from planner.core.types import Array
 from planner.generate.cabins import CabinLayout, cabin_parts, merge
-from planner.generate.options import GeneratedCase, MeshFormat
+from planner.generate.options import Generated, GeneratedCase, MeshFormat
 from planner.meshes.generate import Part, binary_stl_bytes, glb_bytes
 from planner.meshio.load import LoadedMesh, load_mesh
 
@@ -65,20 +66,32 @@ def pose_doc(T: Array) -> dict[str, Any]:
     }
 
 
+def commented_yaml(comment: str, document: dict[str, Any]) -> str:
+    """A generated file's text: one comment line (what was drawn), then the document as YAML."""
+    return f"# {comment}\n" + yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=110)
+
+
 def scenario_yaml(case: GeneratedCase) -> str:
     """The scenario file's text: a comment line describing the case, then the scenario as YAML."""
     m = case.meta
-    head = f"# Generated ({m['goal']}): {json.dumps({k: v for k, v in m.items() if k != 'redraws'})}\n"
-    return head + yaml.safe_dump(case.scenario, sort_keys=False, default_flow_style=None, width=110)
+    return commented_yaml(
+        f"Generated ({m['goal']}): {json.dumps({k: v for k, v in m.items() if k != 'redraws'})}",
+        case.scenario,
+    )
+
+
+def write_generated(case: Generated, text: str, out_dir: Path) -> Path:
+    """Write a generated document (``<name>.yaml``: ``text``) and its mesh into ``out_dir``; its path."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / case.mesh_name).write_bytes(case.mesh_bytes)
+    path = out_dir / f"{case.name}.yaml"
+    path.write_text(text, encoding="utf-8")
+    return path
 
 
 def write_case(case: GeneratedCase, out_dir: Path) -> Path:
     """Write the case's scenario (``<name>.yaml``) and mesh file into ``out_dir``; the scenario's path."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / case.mesh_name).write_bytes(case.mesh_bytes)
-    path = out_dir / f"{case.name}.yaml"
-    path.write_text(scenario_yaml(case), encoding="utf-8")
-    return path
+    return write_generated(case, scenario_yaml(case), out_dir)
 
 
 def write_manifest(cases: Sequence[GeneratedCase], out_dir: Path, seed: int) -> Path:
@@ -96,4 +109,13 @@ def write_manifest(cases: Sequence[GeneratedCase], out_dir: Path, seed: int) -> 
     return path
 
 
-__all__ = ["loaded_cabin", "mesh_bytes", "pose_doc", "scenario_yaml", "write_case", "write_manifest"]
+__all__ = [
+    "commented_yaml",
+    "loaded_cabin",
+    "mesh_bytes",
+    "pose_doc",
+    "scenario_yaml",
+    "write_case",
+    "write_generated",
+    "write_manifest",
+]

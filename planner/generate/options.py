@@ -10,7 +10,7 @@ Every range here is drawn by the case's own generator (:mod:`planner.generate.ca
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from planner.core.types import Array
 from planner.generate.families import FAMILIES, GOAL_KINDS, GoalKind
@@ -79,6 +79,26 @@ class GeneratorOptions:
             )
 
 
+class Generated(Protocol):
+    """What every generated document has (a case's scenario, a campaign): a name, a mesh file, features."""
+
+    @property
+    def name(self) -> str:
+        """The document's name (its file is ``<name>.yaml``)."""
+
+    @property
+    def mesh_name(self) -> str:
+        """File name of the cabin mesh."""
+
+    @property
+    def mesh_bytes(self) -> bytes:
+        """The mesh file's content."""
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """Features of the draw, JSON-able (``redraws``: the reasons of the draws before it, counted)."""
+
+
 @dataclass(frozen=True)
 class GeneratedCase:
     """One generated scenario: the scenario dict, the mesh file and what it was made of.
@@ -115,6 +135,7 @@ __all__ = [
     "ROBOT_RAIL_M",
     "SHELL_DIAMETERS_M",
     "START_EXTRA_M",
+    "Generated",
     "GeneratedCase",
     "GeneratorOptions",
     "GoalKind",

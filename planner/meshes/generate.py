@@ -273,7 +273,8 @@ class Part:
     faces: IntArray
 
 
-def _merge(name: str, parts: Sequence[Part]) -> Part:
+def merge(name: str, parts: Sequence[Part]) -> Part:
+    """One part of several (vertices stacked, faces re-indexed)."""
     vertices, faces, offset = [], [], 0
     for part in parts:
         vertices.append(part.vertices)
@@ -432,7 +433,7 @@ def bulkhead(shell: Shell, spec: Bulkhead, outline: Array | None = None) -> Part
         for i, p in enumerate(pieces)
         if len(p) >= 3
     ]
-    return _merge("bulkhead", parts)
+    return merge("bulkhead", parts)
 
 
 def rack(spec: Rack) -> Part:
@@ -464,7 +465,7 @@ def rack(spec: Rack) -> Part:
         boxes.append(box("above", (fx - p, y1, z0), (fx, y_hi, z1)))
         z_edge = z1
     boxes.append(box("post", (fx - p, y_lo, z_edge), (fx, y_hi, z_edge + p + spec.margin_m)))
-    return _merge("rack", boxes)
+    return merge("rack", boxes)
 
 
 def duct(i: int, spec: Duct) -> Part:
@@ -647,7 +648,7 @@ def generate(out_dir: Path) -> dict[str, Any]:
         "cabins": [],
     }
     for spec in CABINS:
-        whole = _merge(spec.name, build(spec))
+        whole = merge(spec.name, build(spec))
         stl = binary_stl_bytes(whole.vertices, whole.faces, f"cabinplan reference cabin {spec.name} [m]")
         files = {"stl": f"{spec.name}.stl"}
         (out_dir / files["stl"]).write_bytes(stl)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.generate.cases.common import Redraw
+from planner.generate.cases.common import first_valid
 from planner.generate.cases.draw import draw_case, goal_kind
 from planner.generate.families import FAMILIES
 from planner.generate.options import GeneratedCase, GeneratorOptions
@@ -36,17 +36,10 @@ def generate_case(seed: int, index: int, options: GeneratorOptions | None = None
         if family.tag is None
         else goal_kind(np.random.default_rng([seed, index, family.tag, 1]), opts, family)
     )
-    reasons: dict[str, int] = {}
     attempts = family.max_attempts if opts.max_attempts is None else opts.max_attempts
-    for _ in range(attempts):
-        try:
-            case = draw_case(seed, index, rng, opts, family, kind)
-        except Redraw as exc:
-            reasons[str(exc)] = reasons.get(str(exc), 0) + 1
-            continue
-        case.meta["redraws"] = reasons
-        return case
-    raise RuntimeError(f"case {index} of seed {seed}: no valid draw in {attempts} ({reasons})")
+    return first_valid(
+        lambda: draw_case(seed, index, rng, opts, family, kind), attempts, f"case {index} of seed {seed}"
+    )
 
 
 def generate_cases(seed: int, count: int, options: GeneratorOptions | None = None) -> list[GeneratedCase]:

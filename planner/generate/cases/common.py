@@ -2,25 +2,46 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
 from planner.core.types import Array
 from planner.generate.families import Family
-from planner.generate.options import PAYLOAD_BOXES_M, SHELL_DIAMETERS_M
+from planner.generate.options import PAYLOAD_BOXES_M, SHELL_DIAMETERS_M, Generated
 from planner.generate.sections import RoundSection, Section, box_section, octagon, shell_over
 from planner.meshes.generate import Shell
 from planner.robots.cabin8 import Cabin8
+
+G = TypeVar("G", bound=Generated)
 
 #: The carriage box corners in the cross-section (x, y) [m] (``planner/meshes/README.md``).
 CARRIAGE_CORNERS = np.array([[0.85, -0.12], [0.85, 0.0], [-0.85, -0.12], [-0.85, 0.0]])
 
 
 class Redraw(Exception):
-    """A draw that does not make a valid case; the caller draws again."""
+    """A draw that does not make a valid case (or campaign, or unit); the caller draws again."""
+
+
+def first_valid(draw: Callable[[], G], attempts: int, what: str) -> G:
+    """The first of ``attempts`` draws that is not redrawn, its ``meta["redraws"]`` the reasons counted.
+
+    Raises:
+        RuntimeError: every draw raised :class:`Redraw` (``what`` and the reasons named).
+    """
+    reasons: dict[str, int] = {}
+    for _ in range(attempts):
+        try:
+            case = draw()
+        except Redraw as exc:
+            reasons[str(exc)] = reasons.get(str(exc), 0) + 1
+            continue
+        case.meta["redraws"] = reasons
+        return case
+    raise RuntimeError(f"{what}: no valid draw in {attempts} ({reasons})")
 
 
 @dataclass
@@ -132,6 +153,7 @@ __all__ = [
     "clutter_ok",
     "draw_payload",
     "draw_section",
+    "first_valid",
     "keep_clear",
     "ring_depth_max",
 ]
