@@ -66,6 +66,19 @@ Matrix3 = tuple[Vector3, Vector3, Vector3]
 #: a test keeps the two lists equal).
 PlannerName = Literal["RRTConnect", "RRT", "RRTstar", "AORRTC"]
 
+#: What a name in a document may hold (a scenario's, a cycle's, a campaign's, a sweep's, a unit's id):
+#: letters, digits, '.', '_' and '-'.
+NAME_PATTERN = r"^[A-Za-z0-9._-]+$"
+#: The name of a scenario, a cycle or a campaign.
+DocumentName = Annotated[str, Field(min_length=1, max_length=100, pattern=NAME_PATTERN)]
+#: The robot a scenario, a cycle or a campaign names (a registry name).
+RobotName = Annotated[str, Field(min_length=1, max_length=100, description="Registry name of the robot.")]
+#: The rail length a scenario, a cycle or a campaign may set [m].
+RailLength = Annotated[
+    Annotated[Number, Field(gt=0.0, le=50.0)] | None,
+    Field(description="Rail length in m; replaces the upper limit of drive d1 (default: the model's)."),
+]
+
 _IDENTITY_POSE = Pose(position=(0.0, 0.0, 0.0))
 _MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 ModelT = TypeVar("ModelT", bound=BaseModel)
@@ -314,13 +327,8 @@ class Scenario(BaseModel):
 
     model_config = _MODEL_CONFIG
 
-    name: str = Field(
-        min_length=1,
-        max_length=100,
-        pattern=r"^[A-Za-z0-9._-]+$",
-        description="Scenario name: letters, digits, '.', '_' and '-'.",
-    )
-    robot: str = Field("cabin8", min_length=1, max_length=100, description="Registry name of the robot.")
+    name: DocumentName = Field(description="Scenario name: letters, digits, '.', '_' and '-'.")
+    robot: RobotName = "cabin8"
     robot_description: str | None = Field(
         None,
         min_length=1,
@@ -328,9 +336,7 @@ class Scenario(BaseModel):
         description="A cabin8-type description file (e.g. from `cabinplan stiffness calibrate`) to use "
         "instead of the registry's; a path relative to the scenario file. Read from files only by the CLI.",
     )
-    rail_length: Annotated[Number, Field(gt=0.0, le=50.0)] | None = Field(
-        None, description="Rail length in m; replaces the upper limit of drive d1 (default: the model's)."
-    )
+    rail_length: RailLength = None
     cabin: CabinSpec | None = Field(None, description="The cabin mesh; omitted = free space.")
     payload: PayloadSpec | None = Field(None, description="The carried payload; omitted = none.")
     start: ConfigurationSpec = Field(description="Start configuration.")

@@ -26,14 +26,14 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from planner.core.schemas import Limits, Pose, Quaternion
 from planner.scenario.files import MAX_SCENARIO_BYTES, read_document
-from planner.scenario.schema import ConfigurationSpec, Number, PositiveNumber, validate_document
+from planner.scenario.schema import NAME_PATTERN, ConfigurationSpec, Number, PositiveNumber, validate_document
 
 _CONFIG = ConfigDict(extra="forbid", frozen=True)
 
 #: Most plans one sweep may expand to (a cross product grows fast; split larger studies).
 MAX_PLANS = 100_000
 
-Name = Annotated[str, Field(min_length=1, max_length=60, pattern=r"^[A-Za-z0-9._-]+$")]
+Name = Annotated[str, Field(min_length=1, max_length=60, pattern=NAME_PATTERN)]
 Vector3 = tuple[Number, Number, Number]
 
 

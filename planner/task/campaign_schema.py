@@ -29,14 +29,22 @@ campaign's units and the installed ones); every failure is an `InvalidInput` nam
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from planner.core.exceptions import InvalidInput
 from planner.core.schemas import Limits
 from planner.scenario.files import read_document
-from planner.scenario.schema import CabinSpec, ConfigurationSpec, Number, PlanOptions, describe_error
+from planner.scenario.schema import (
+    CabinSpec,
+    ConfigurationSpec,
+    DocumentName,
+    PlanOptions,
+    RailLength,
+    RobotName,
+    describe_error,
+)
 from planner.task.schema import BayGoal, DockSpec, DwellSpec, GripperSpec, InstalledUnit, LineSpec, UnitSpec
 
 __all__ = [
@@ -101,16 +109,9 @@ class Campaign(BaseModel):
 
     model_config = _CONFIG
 
-    name: str = Field(
-        min_length=1,
-        max_length=100,
-        pattern=r"^[A-Za-z0-9._-]+$",
-        description="Campaign name: letters, digits, '.', '_' and '-'.",
-    )
-    robot: str = Field("cabin8", min_length=1, max_length=100, description="Registry name of the robot.")
-    rail_length: Annotated[Number, Field(gt=0.0, le=50.0)] | None = Field(
-        None, description="Rail length in m; replaces the upper limit of drive d1 (default: the model's)."
-    )
+    name: DocumentName = Field(description="Campaign name: letters, digits, '.', '_' and '-'.")
+    robot: RobotName = "cabin8"
+    rail_length: RailLength = None
     cabin: CabinSpec = Field(description="The cabin mesh, as in a cycle.")
     installed: tuple[InstalledUnit, ...] = Field(
         (), max_length=200, description="Units in the cabin before the campaign (each an obstacle)."

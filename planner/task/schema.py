@@ -30,21 +30,25 @@ from planner.core.schemas import Pose
 from planner.scenario.schema import (
     MAX_BOX_SIDE_M,
     MAX_PAYLOAD_MASS_KG,
+    NAME_PATTERN,
     ApproachSpec,
     CabinSpec,
     ConfigurationSpec,
+    DocumentName,
     Matrix3,
     Number,
     OrientedPose,
     PlanOptions,
+    RailLength,
     RealisableInertia,
+    RobotName,
     Vector3,
     validate_document,
 )
 
 _MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 _IDENTITY_POSE = Pose(position=(0.0, 0.0, 0.0))
-UnitId = Annotated[str, Field(min_length=1, max_length=50, pattern=r"^[A-Za-z0-9._-]+$")]
+UnitId = Annotated[str, Field(min_length=1, max_length=50, pattern=NAME_PATTERN)]
 Side = Annotated[Number, Field(gt=0.0)]
 #: Longest dwell [s] (a grasp or a release is seconds, not minutes).
 MAX_DWELL_S = 60.0
@@ -177,11 +181,9 @@ class Cycle(BaseModel):
 
     model_config = _MODEL_CONFIG
 
-    name: str = Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9._-]+$", description="Cycle name.")
-    robot: str = Field("cabin8", min_length=1, max_length=100, description="Registry name of the robot.")
-    rail_length: Annotated[Number, Field(gt=0.0, le=50.0)] | None = Field(
-        None, description="Rail length in m; replaces the upper limit of drive d1 (default: the model's)."
-    )
+    name: DocumentName = Field(description="Cycle name.")
+    robot: RobotName = "cabin8"
+    rail_length: RailLength = None
     cabin: CabinSpec = Field(description="The cabin mesh, as in a scenario.")
     installed: tuple[InstalledUnit, ...] = Field((), max_length=200, description="Units already installed.")
     unit: UnitSpec = Field(description="The unit to install.")
