@@ -16,10 +16,10 @@ from planner.gate.requirements import GateRequirements
 from planner.plan.context import PlanContext
 from planner.timing.path import JointPath
 from planner.timing.profile import DriveProfile, sample_legs
-from planner.timing.stage import TimedPath
+from planner.timing.stage import DEFAULT_SAFETY, TimedPath
 
 #: Limit scalings (velocity, acceleration, force) tried when the gate finds a limit exceeded.
-SAFETY_LEVELS = ((0.995, 0.97, 0.97), (0.98, 0.92, 0.92), (0.95, 0.85, 0.85))
+SAFETY_LEVELS = (DEFAULT_SAFETY, (0.98, 0.92, 0.92), (0.95, 0.85, 0.85))
 #: The gate checks whose failure a re-timing can cure.
 LIMIT_CHECKS = {"velocity", "acceleration", "effort", "consistency", "jerk"}
 

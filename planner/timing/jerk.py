@@ -75,6 +75,7 @@ from planner.dynamics.payload import RigidPayload
 from planner.robots.base import RobotModel
 from planner.timing.acc_reference import acceleration_limited
 from planner.timing.path import JointPath, LinePiece
+from planner.timing.stage import DEFAULT_SAFETY, Safety
 from planner.timing.toppra import ToppraStage, ToppraTimedPath
 
 log = logging.getLogger(__name__)
@@ -255,7 +256,7 @@ class JerkLimitedStage:
 
     robot: RobotModel
     payload: RigidPayload | None = None
-    safety: tuple[float, float, float] = (0.995, 0.97, 0.97)
+    safety: Safety = DEFAULT_SAFETY
     sample_period_s: float = 0.004
     grid_step: float = 0.15
     min_points: int = 24
@@ -276,7 +277,8 @@ class JerkLimitedStage:
                 raise overload
         coef = self._coefficients(path, s)
         sv, sa, sf = self.safety
-        frac = [sv, sa, sf, JERK_TARGET * sa / 0.97]
+        j_target = JERK_TARGET * sa / DEFAULT_SAFETY[1]  # the jerk target tightens with the acceleration
+        frac = [sv, sa, sf, j_target]
         targets = (min(1.005, sv + 0.01), min(1.0, sa + 0.02), min(1.0, sf + 0.02))
         last: _Sampled | None = None
         for _ in range(MAX_ITERATIONS):
@@ -302,14 +304,14 @@ class JerkLimitedStage:
                 )
             ratios = (last.velocity, last.acceleration, last.effort)
             over = [r > tgt for r, tgt in zip(ratios, targets, strict=True)]
-            j_over = last.jerk > JERK_TARGET * sa / 0.97 + JERK_SLACK
+            j_over = last.jerk > j_target + JERK_SLACK
             if not any(over) and not j_over:
                 return timed
             for k, r in enumerate(ratios):
                 if over[k]:
                     frac[k] *= 0.998 * targets[k] / r
             if j_over:
-                frac[3] *= 0.998 * (JERK_TARGET * sa / 0.97 + JERK_SLACK) / last.jerk
+                frac[3] *= 0.998 * (j_target + JERK_SLACK) / last.jerk
         assert last is not None
         raise RetimingFailed(
             f"no jerk-limited time law within the drive limits after {MAX_ITERATIONS} re-timings (peak "

@@ -49,6 +49,12 @@ class TimingStage(Protocol):
         ...
 
 
+#: Fractions of the (velocity, acceleration, force) limits a stage's time law may use.
+Safety = tuple[float, float, float]
+#: The fractions of a first timing, every stage's default (a re-timing after a limit failure tightens
+#: them: :data:`planner.plan.retime.SAFETY_LEVELS`).
+DEFAULT_SAFETY: Safety = (0.995, 0.97, 0.97)
+
 #: Builds the timing stage of a plan: ``(robot, payload, safety) -> TimingStage``, ``safety`` the fractions
 #: of the (velocity, acceleration, force) limits the stage may use.
-TimingFactory = Callable[[Any, Any, tuple[float, float, float]], TimingStage]
+TimingFactory = Callable[[Any, Any, Safety], TimingStage]

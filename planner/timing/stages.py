@@ -26,10 +26,8 @@ from planner.core.timing_names import ACCELERATION_LIMITED, JERK_LIMITED, Timing
 from planner.dynamics.payload import RigidPayload
 from planner.robots.base import RobotModel
 from planner.timing.jerk import JerkLimitedStage
-from planner.timing.stage import TimingFactory, TimingStage
+from planner.timing.stage import Safety, TimingFactory, TimingStage
 from planner.timing.toppra import ToppraStage
-
-Safety = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -68,7 +66,7 @@ class StageEntry:
             robot: The robot model.
             payload: The carried payload (None: empty gripper).
             safety: Fractions of the (velocity, acceleration, force) limits the stage may use (None: the
-                stage's own default, (0.995, 0.97, 0.97) for both stages).
+                stage's own default, :data:`~planner.timing.stage.DEFAULT_SAFETY` for both stages).
             sample_period_s: The controller period the profile is sampled at [s].
             grid_points: A fixed number of grid intervals per leg (None: the stage's spacing rule).
         """

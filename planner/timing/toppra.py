@@ -43,6 +43,7 @@ from planner.dynamics.models import DriveDynamics, drive_dynamics  # noqa: E402
 from planner.dynamics.payload import RigidPayload  # noqa: E402
 from planner.robots.base import RobotModel  # noqa: E402
 from planner.timing.path import BlendPiece, JointPath, SplinePiece  # noqa: E402
+from planner.timing.stage import DEFAULT_SAFETY, Safety  # noqa: E402
 
 log = logging.getLogger(__name__)
 logging.getLogger("toppra").setLevel(logging.ERROR)
@@ -191,7 +192,7 @@ class ToppraStage:
 
     robot: RobotModel
     payload: RigidPayload | None = None
-    safety: tuple[float, float, float] = (0.995, 0.97, 0.97)
+    safety: Safety = DEFAULT_SAFETY
     grid_step: float = 0.08
     min_points: int = 60
     max_points: int = 3000
