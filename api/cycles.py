@@ -37,7 +37,7 @@ from typing import Any
 
 from api.compact import pack_value, unpack_document
 from api.jobtypes import KEEP_PREFIX, FileSource
-from api.worker import failed_outcome
+from api.worker import failed_outcome, succeeded_outcome
 
 _LOG = logging.getLogger(__name__)
 
@@ -59,7 +59,6 @@ def cycle_job(job: dict[str, Any], progress: Any) -> dict[str, Any]:
     """
     from planner.core.exceptions import PlannerError
     from planner.documents.cycle import cycle_document, cycle_refusal_document
-    from planner.documents.output import refusal_document
     from planner.task.cycle import plan_cycle
     from planner.task.resolve import ResolvedCycle, resolve_cycle
     from planner.task.schema import cycle_from_dict
@@ -72,21 +71,12 @@ def cycle_job(job: dict[str, Any], progress: Any) -> dict[str, Any]:
         )
         result = plan_cycle(cyc, progress)
     except PlannerError as exc:
-        if cyc is not None:
-            doc = cycle_refusal_document(exc, cyc)
-        else:
-            doc = {"kind": "cycle", **refusal_document(exc, None, name=job["scenario"].get("name"))}
-            doc["cycle"] = doc.pop("scenario")
-        return failed_outcome(exc, doc)
-    doc = cycle_document(cyc, result)
-    return {
-        "status": "succeeded",
-        "reason": None,
-        "message": f"{spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples, "
-        f"min clearance {1e3 * result.gate.min_clearance_m:.1f} mm",
-        "document": doc,
-        "provenance": doc["provenance"],
-    }
+        return failed_outcome(exc, cycle_refusal_document(exc, cyc, name=job["scenario"].get("name")))
+    message = (
+        f"{spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples, "
+        f"min clearance {1e3 * result.gate.min_clearance_m:.1f} mm"
+    )
+    return succeeded_outcome(cycle_document(cyc, result), message)
 
 
 # --------------------------------------------------------------------------------------------- campaigns

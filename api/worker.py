@@ -72,14 +72,8 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
     except PlannerError as exc:
         name = job["scenario"].get("name") if isinstance(job["scenario"], dict) else None
         return failed_outcome(exc, refusal_document(exc, sc, name=name))
-    doc = result_document(sc, result)
-    return {
-        "status": "succeeded",
-        "reason": None,
-        "message": f"{sc.spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples",
-        "document": doc,
-        "provenance": doc["provenance"],
-    }
+    message = f"{sc.spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples"
+    return succeeded_outcome(result_document(sc, result), message)
 
 
 def worker_setup(server_pid: int | None, nice: int) -> None:
@@ -208,6 +202,17 @@ def _plot(sc: ResolvedScenario, doc: dict[str, Any], profile: DriveProfile) -> b
 
 
 __all__ = ["plan_job", "plot_png", "profile_csv", "run_job", "worker_setup"]
+
+
+def succeeded_outcome(document: dict[str, Any], message: str) -> dict[str, Any]:
+    """A job's outcome for a result: its one-line message, and its result document (with provenance)."""
+    return {
+        "status": "succeeded",
+        "reason": None,
+        "message": message,
+        "document": document,
+        "provenance": document["provenance"],
+    }
 
 
 def failed_outcome(exc: PlannerError, document: dict[str, Any]) -> dict[str, Any]:

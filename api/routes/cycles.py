@@ -31,11 +31,10 @@ import threading
 from collections import OrderedDict
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Header, Query, Request, Response
+from fastapi import APIRouter, Query, Response
 from starlette.concurrency import run_in_threadpool
 
 from api.auth import CurrentPrincipal
-from api.bodies import parse_body
 from api.context import AppContext
 from api.db import ACTIVE_STATES, Job
 from api.examples import aisle_campaign, aisle_cycle
@@ -130,25 +129,11 @@ def _campaign_job(ctx: AppContext, tenant: str, body: Any, key: str | None, sha:
     return new_job(CAMPAIGN, tenant, doc, campaign.name, sha, meshes, provenance, limit, key)
 
 
-def _submit(
-    kind: JobKind, ctx: AppContext, tenant: str, response: Response, body: Any, key: str | None
-) -> dict[str, Any]:
-    sha = jobroutes.canonical_sha256(body)
-    replay = jobroutes.replay(ctx, kind, response, tenant, key, sha)
-    if replay is not None:
-        return replay
-    make = _cycle_job if kind is CYCLE else _campaign_job
-    return jobroutes.submit(ctx, kind, response, make(ctx, tenant, body, key, sha))
-
-
-_KEY_HEADER = Header(alias="Idempotency-Key", max_length=200, description="Same key + same body = same job.")
-
-
 @router.post(
     "/cycles",
     status_code=202,
     summary="Submit an assembly cycle (JSON or YAML) for planning",
-    responses={200: {"description": "Idempotent replay: the job of an earlier request with this key"}},
+    responses=jobroutes.REPLAY_RESPONSE,
     openapi_extra={
         "requestBody": _request_body(
             "Cycle",
@@ -159,11 +144,7 @@ _KEY_HEADER = Header(alias="Idempotency-Key", max_length=200, description="Same 
     },
 )
 async def submit_cycle(
-    request: Request,
-    ctx: Ctx,
-    principal: CurrentPrincipal,
-    response: Response,
-    idempotency_key: Annotated[str | None, _KEY_HEADER] = None,
+    ctx: Ctx, principal: CurrentPrincipal, submission: jobroutes.SubmissionDep
 ) -> dict[str, Any]:
     """Queue a cycle job: 202 with the job document and ``Location``.
 
@@ -171,15 +152,16 @@ async def submit_cycle(
     occupied bay names the unit there, a dock in collision with its fixture names ``dock.pose``); 429 over
     the tenant's quota.
     """
-    body = parse_body(await request.body(), request.headers.get("content-type"))
-    return await run_in_threadpool(_submit, CYCLE, ctx, principal.tenant, response, body, idempotency_key)
+    return await run_in_threadpool(
+        jobroutes.submit_request, ctx, CYCLE, principal.tenant, submission, _cycle_job
+    )
 
 
 @router.post(
     "/campaigns",
     status_code=202,
     summary="Submit a campaign (JSON or YAML): units installed one cycle each, in a given or found order",
-    responses={200: {"description": "Idempotent replay: the job of an earlier request with this key"}},
+    responses=jobroutes.REPLAY_RESPONSE,
     openapi_extra={
         "requestBody": _request_body(
             "Campaign",
@@ -190,11 +172,7 @@ async def submit_cycle(
     },
 )
 async def submit_campaign(
-    request: Request,
-    ctx: Ctx,
-    principal: CurrentPrincipal,
-    response: Response,
-    idempotency_key: Annotated[str | None, _KEY_HEADER] = None,
+    ctx: Ctx, principal: CurrentPrincipal, submission: jobroutes.SubmissionDep
 ) -> dict[str, Any]:
     """Queue a campaign job: 202 with the job document (its ``units`` appear as they start) and ``Location``.
 
@@ -203,8 +181,9 @@ async def submit_campaign(
     at their installed poses, ``units[k].<field>`` for a unit's own bad cycle (a dock in collision with
     its fixture), or the campaign's own field.
     """
-    body = parse_body(await request.body(), request.headers.get("content-type"))
-    return await run_in_threadpool(_submit, CAMPAIGN, ctx, principal.tenant, response, body, idempotency_key)
+    return await run_in_threadpool(
+        jobroutes.submit_request, ctx, CAMPAIGN, principal.tenant, submission, _campaign_job
+    )
 
 
 # ------------------------------------------------------------------------------ the shared job routes

@@ -4,9 +4,11 @@ A kind's routes (:mod:`api.routes.plans` for plans) parse and check their own in
 helpers with their :class:`~api.jobkinds.JobKind`; the helpers call :class:`~api.jobstore.JobStore` and
 turn its outcomes into answers:
 
-* :func:`submit` queues a job under the tenant's quota (429 ``quota_exceeded`` with ``Retry-After``),
-  replays an ``Idempotency-Key`` (200, ``Idempotent-Replayed: true``; 422 ``idempotency_key_reused``
-  for another body), and answers 202 with the job document and ``Location``;
+* :func:`submit_request` answers a submit route's :class:`Submission` (the parsed body, JSON or YAML, and
+  its ``Idempotency-Key``): it replays the key's job (200, ``Idempotent-Replayed: true``; 422
+  ``idempotency_key_reused`` for another body), or has the kind's route check the body and make the job,
+  which :func:`submit` queues under the tenant's quota (429 ``quota_exceeded`` with ``Retry-After``),
+  answering 202 with the job document and ``Location``;
 * :func:`job_answer` is the job document with its result document spliced in (unpacked once, a few
   recent ones kept decoded, so that polling stays cheap);
 * :func:`file_answer` is a download of a succeeded job (:class:`~api.jobkinds.ResultFile`), made from
@@ -22,10 +24,13 @@ import json
 import threading
 import time
 from collections import OrderedDict
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Annotated, Any
 
-from fastapi import Response
+from fastapi import Depends, Header, Request, Response
 
+from api.bodies import parse_body
 from api.compact import unpack_text
 from api.context import AppContext
 from api.db import ACTIVE_STATES, TERMINAL_STATES, Job
@@ -34,6 +39,40 @@ from api.jobstore import IdempotencyKeyReused, QuotaExceeded
 from api.problems import Problem
 from api.routes.inputs import empty_dir
 from planner.core.exceptions import InvalidInput, InvalidMesh
+
+#: A submit route's answer besides its 202: the replay of an earlier request with the same key.
+REPLAY_RESPONSE: dict[int | str, dict[str, Any]] = {
+    200: {"description": "Idempotent replay: the job of an earlier request with this key"}
+}
+
+
+@dataclass(frozen=True)
+class Submission:
+    """A submit request: its parsed body, its ``Idempotency-Key`` (if any), the response it is answered in."""
+
+    body: Any
+    key: str | None
+    response: Response
+
+
+async def _submission(
+    request: Request,
+    response: Response,
+    idempotency_key: Annotated[
+        str | None,
+        Header(alias="Idempotency-Key", max_length=200, description="Same key + same body = same job."),
+    ] = None,
+) -> Submission:
+    """The body parsed as JSON or YAML (400 / 415 otherwise: :func:`api.bodies.parse_body`) and the key."""
+    body = parse_body(await request.body(), request.headers.get("content-type"))
+    return Submission(body, idempotency_key, response)
+
+
+#: The submission of a submit route (a dependency).
+SubmissionDep = Annotated[Submission, Depends(_submission)]
+#: Checks a kind's request body and makes its job: ``(ctx, tenant, body, key, request_sha256) -> Job``
+#: (a :class:`~api.problems.Problem` for a bad body).
+JobMaker = Callable[[AppContext, str, Any, str | None, str], Job]
 
 
 def canonical_sha256(data: Any) -> str:
@@ -122,6 +161,21 @@ def replay(
     response.headers["Location"] = job_url(kind, row.id)
     response.headers["Idempotent-Replayed"] = "true"
     return job_document(kind, row)
+
+
+def submit_request(
+    ctx: AppContext, kind: JobKind, tenant: str, submission: Submission, make: JobMaker
+) -> dict[str, Any]:
+    """The answer of a submit route: the replay of the key's job, else ``make``'s job queued (:func:`submit`).
+
+    The replay is looked up before the body is checked (it answers what the first request got, cheaply).
+    """
+    request_sha256 = canonical_sha256(submission.body)
+    replayed = replay(ctx, kind, submission.response, tenant, submission.key, request_sha256)
+    if replayed is not None:
+        return replayed
+    job = make(ctx, tenant, submission.body, submission.key, request_sha256)
+    return submit(ctx, kind, submission.response, job)
 
 
 def submit(ctx: AppContext, kind: JobKind, response: Response, job: Job) -> dict[str, Any]:
@@ -272,6 +326,10 @@ def cancel_or_delete(ctx: AppContext, kind: JobKind, tenant: str, job_id: str) -
 
 
 __all__ = [
+    "REPLAY_RESPONSE",
+    "JobMaker",
+    "Submission",
+    "SubmissionDep",
     "cancel_or_delete",
     "canonical_sha256",
     "file_answer",
@@ -283,6 +341,7 @@ __all__ = [
     "replay",
     "result_text",
     "submit",
+    "submit_request",
     "succeeded",
     "tenant_job",
 ]

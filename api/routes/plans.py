@@ -18,11 +18,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Body, Header, Query, Request, Response
+from fastapi import APIRouter, Body, Query, Response
 from starlette.concurrency import run_in_threadpool
 
 from api.auth import CurrentPrincipal
-from api.bodies import parse_body
 from api.context import AppContext
 from api.db import Job
 from api.examples import docked
@@ -81,18 +80,11 @@ def _resolve(ctx: AppContext, tenant: str, body: Any) -> tuple[Scenario, Resolve
     "/plans",
     status_code=202,
     summary="Submit a scenario (JSON or YAML) for planning",
-    responses={200: {"description": "Idempotent replay: the job of an earlier request with this key"}},
+    responses=jobroutes.REPLAY_RESPONSE,
     openapi_extra={"requestBody": scenario_request_body(_SCENARIO_DESCRIPTION, _SCENARIO_EXAMPLE)},
 )
 async def submit(
-    request: Request,
-    ctx: Ctx,
-    principal: CurrentPrincipal,
-    response: Response,
-    idempotency_key: Annotated[
-        str | None,
-        Header(alias="Idempotency-Key", max_length=200, description="Same key + same body = same job."),
-    ] = None,
+    ctx: Ctx, principal: CurrentPrincipal, submission: jobroutes.SubmissionDep
 ) -> dict[str, Any]:
     """Queue a planning job: 202 with the job document and ``Location``.
 
@@ -101,21 +93,16 @@ async def submit(
     naming ``options.time_limit_s``; a tenant with too many queued + running jobs gets 429 with
     ``Retry-After``.
     """
-    body = parse_body(await request.body(), request.headers.get("content-type"))
-    return await run_in_threadpool(_submit, ctx, principal.tenant, response, body, idempotency_key)
+    return await run_in_threadpool(
+        jobroutes.submit_request, ctx, PLAN, principal.tenant, submission, _plan_job
+    )
 
 
-def _submit(
-    ctx: AppContext, tenant: str, response: Response, body: Any, idempotency_key: str | None
-) -> dict[str, Any]:
-    request_sha256 = jobroutes.canonical_sha256(body)
-    replay = jobroutes.replay(ctx, PLAN, response, tenant, idempotency_key, request_sha256)
-    if replay is not None:
-        return replay
-    spec, resolved, meshes = _resolve(ctx, tenant, body)
+def _plan_job(ctx: AppContext, tenant: str, body: Any, key: str | None, request_sha256: str) -> Job:
     from planner.documents.output import provenance
 
-    job = new_job(
+    spec, resolved, meshes = _resolve(ctx, tenant, body)
+    return new_job(
         PLAN,
         tenant,
         spec.model_dump(mode="json"),
@@ -124,9 +111,8 @@ def _submit(
         meshes,
         provenance(resolved),
         spec.options.time_limit_s,
-        idempotency_key,
+        key,
     )
-    return jobroutes.submit(ctx, PLAN, response, job)
 
 
 @router.get("/plans", summary="List the tenant's plans (paged, newest first)")
