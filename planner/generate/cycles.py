@@ -13,9 +13,12 @@ install:
   pre-insertion pose overlaps the front unit), while the deep unit installed first leaves the front
   unit's mount free (a 30-50 mm gap to the bay's face plate). So some orders fail and others succeed,
   for a reason the generator knows (``meta["precedence"]``: deep before front).
-* **Dock**: every unit waits on its transport fixture at the cabin entrance (a pedestal on the deck beside
-  the rail's start, 0.8-1.4 m along it), in the orientation it is installed in, a gap of clearance + 8 mm
-  above the pedestal; the tool approaches along the insertion direction and lifts off upwards.
+* **Dock**: every unit waits on its transport fixture at the cabin entrance (a pedestal beside the rail's
+  lane, 0.8-1.4 m along it), a gap of clearance + 8 mm above the pedestal, held along +x as a side unit is
+  installed (an end-wall unit too: the robot turns it on the way; held along the rail it can be reached
+  only from the lane, where its fixture would stop the robot from ever passing the dock); the tool
+  approaches along the held unit's axis and lifts off upwards. No fixture comes within the clearance of
+  the robot's park posture anywhere along the rail (the lane stays open: a dock never blocks the way in).
 * **Park**: the robot's home posture at the rail's start (clear by the clearance + 20 mm).
 
 Every key configuration of every unit alone in the cabin has an exact, admissible inverse-kinematics
@@ -81,12 +84,15 @@ FIXTURE_BOTTOM_M = 0.05
 #: Gap between a docked unit and its fixture beyond the clearance [m] (more than the witnesses' extra).
 DOCK_EXTRA_M = 0.008
 #: Where a dock's unit centre is across the cabin [m]: the arm reaches a unit held along +x from x = 0.5 m
-#: on, one held along +z up to 0.3 m (measured with the generator's IK on its units).
-DOCK_X_SIDE_M = (0.6, 0.95)
-DOCK_X_END_M = (-0.2, 0.3)
-#: The docked unit centre's height [m] (held along +z the arm reaches no higher than 0.9 m).
-DOCK_Y_SIDE_M = (0.6, 1.1)
-DOCK_Y_END_M = (0.55, 0.85)
+#: on, one held along +z only up to x = 0.3-0.45 m (measured with the generator's IK on its units), inside
+#: the lane the robot's park posture sweeps above the fixtures' bottom (up to x = 0.564 m, its sphere
+#: cover): so every unit is docked held along +x, its fixture (half footprint 0.13 m) beyond the lane by
+#: more than the clearance (0.564 + 0.13 + 0.02 < 0.72).
+DOCK_X_M = (0.72, 0.95)
+#: The docked unit centre's height [m].
+DOCK_Y_M = (0.6, 1.1)
+#: Spacing of the rail positions at which the park posture is checked against each fixture [m].
+LANE_STEP_M = 0.05
 #: Largest force ratio (of the drive limits) of a generated dock's grasp: below the planner's 95% by a
 #: margin for the robot's own deflection and the grasp line's other end.
 DOCK_FORCE_FRACTION = 0.85
@@ -173,6 +179,8 @@ class _Unit:
     dock_xz: tuple[float, float] = (0.0, 0.0)
     dock_y: float = 1.0
     grasp_line_m: float = 0.06
+    #: The unit's orientation on its dock: held along +x (a side bay's orientation, same roll).
+    R_dock: Array = field(default_factory=lambda: np.eye(3))
 
     def payload(self) -> PayloadGeometry:
         T = np.eye(4)
@@ -187,14 +195,21 @@ def _tool(T_base_unit: Array, grasp: Array) -> Array:
 
 
 def _reachable(
-    robot: Cabin8, u: _Unit, p: Array, count: int = HELD_SOLUTIONS, held: bool = True
+    robot: Cabin8,
+    u: _Unit,
+    p: Array,
+    count: int = HELD_SOLUTIONS,
+    held: bool = True,
+    R: Array | None = None,
 ) -> list[Array]:
     """Exact, admissible IK solutions holding unit ``u`` at ``p`` (holdable within the force limits).
 
-    ``count`` solutions are drawn before the force filter: the holdable ones of a heavy unit held sideways
-    are rarely among the three of the largest margin.
+    ``R``: the unit's orientation (default: as installed). ``count`` solutions are drawn before the force
+    filter: the holdable ones of a heavy unit held sideways are rarely among the three of the largest
+    margin.
     """
-    sols = exact_solutions(robot, _tool(pose(u.R, p), u.grasp), robot.home_drives, count)
+    rotation = u.R if R is None else R
+    sols = exact_solutions(robot, _tool(pose(rotation, p), u.grasp), robot.home_drives, count)
     if not held:
         return sols
     forces = StaticForceCheck(Cabin8Dynamics.of(robot), u.payload().rigid_payload())
@@ -207,7 +222,8 @@ def _draw_unit(rng: np.random.Generator, uid: str, kind: str) -> _Unit:
     mass, grasp = float(payload.mass), payload.T_tool_payload[:3, 3].copy()
     roll = int(rng.integers(2))
     R = payload_rotation("bay-end-far" if kind == "end" else "bay-side", roll)
-    return _Unit(uid, kind, size, mass, grasp, R, np.zeros(3), 0.0)
+    R_dock = payload_rotation("bay-side", roll)
+    return _Unit(uid, kind, size, mass, grasp, R, np.zeros(3), 0.0, R_dock=R_dock)
 
 
 def _size3(v: Array) -> tuple[float, float, float]:
@@ -292,23 +308,22 @@ def _dock_pose(u: _Unit) -> Array:
 
 def _pedestal_top(u: _Unit, clearance: float) -> float:
     """The fixture's top [m]: clearance + 8 mm below the docked unit's lowest face."""
-    half_y = float((np.abs(u.R) @ (np.array(u.size) / 2))[1])
+    half_y = float((np.abs(u.R_dock) @ (np.array(u.size) / 2))[1])
     return float(np.round(u.dock_y - half_y - clearance - DOCK_EXTRA_M, 6))
 
 
 def _dock(rng: np.random.Generator, robot: Cabin8, u: _Unit, clearance: float) -> None:
     """A reachable dock at the entrance: grasp, pre-grasp and lift-off end with exact IK, holdable."""
     u.grasp_line_m = float(np.round(rng.uniform(0.05, 0.08), 3))
-    e, up = u.R[:, 2], np.array([0.0, 1.0, 0.0])
+    e, up = u.R_dock[:, 2], np.array([0.0, 1.0, 0.0])
     for _ in range(16):
-        x_range, y_range = (DOCK_X_END_M, DOCK_Y_END_M) if u.kind == "end" else (DOCK_X_SIDE_M, DOCK_Y_SIDE_M)
-        u.dock_xz = (float(np.round(rng.uniform(*x_range), 3)), float(np.round(rng.uniform(0.8, 1.4), 3)))
-        u.dock_y = float(np.round(rng.uniform(*y_range), 3))
+        u.dock_xz = (float(np.round(rng.uniform(*DOCK_X_M), 3)), float(np.round(rng.uniform(0.8, 1.4), 3)))
+        u.dock_y = float(np.round(rng.uniform(*DOCK_Y_M), 3))
         p = _dock_pose(u)
         if (
             _robustly_held(robot, u, p)
             and _robustly_held(robot, u, p + LIFT_M * up)
-            and _reachable(robot, u, p - u.grasp_line_m * e, held=False)
+            and _reachable(robot, u, p - u.grasp_line_m * e, held=False, R=u.R_dock)
         ):
             return
     raise Redraw("no reachable dock")
@@ -322,7 +337,7 @@ def _robustly_held(robot: Cabin8, u: _Unit, p: Array) -> bool:
     dock held by one solution in ten is one it refuses (``unit_not_holdable``, measured on the first
     generated campaigns), so a generated dock is one most solutions hold.
     """
-    sols = _reachable(robot, u, p, held=False)
+    sols = _reachable(robot, u, p, held=False, R=u.R_dock)
     forces = StaticForceCheck(Cabin8Dynamics.of(robot), u.payload().rigid_payload())
     held = [q for q in sols if float(forces.ratios(q)[0]) <= DOCK_FORCE_FRACTION]
     return len(held) >= max(2, (len(sols) + 1) // 2)
@@ -421,8 +436,21 @@ def _layout(rng: np.random.Generator, section: Section, units: list[_Unit], rail
     return CabinLayout(section=section, rings=tuple(rings), bay_boxes=tuple(boxes), end_opening=end_opening)
 
 
-def _witnesses(robot: Cabin8, layout: CabinLayout, u: _Unit, clearance: float, bays: CollisionWorld) -> None:
-    """Every key configuration of unit ``u`` alone in the cabin: exact IK, clear, holdable (or redraw)."""
+def _witnesses(
+    robot: Cabin8,
+    layout: CabinLayout,
+    u: _Unit,
+    clearance: float,
+    bays: CollisionWorld,
+    bare: CollisionWorld,
+    rail_max: float,
+) -> None:
+    """Every key configuration of unit ``u`` alone in the cabin: exact IK, clear, holdable (or redraw).
+
+    ``bays`` is the cabin with the unit held, ``bare`` without it; and the lane past the unit's fixture:
+    wherever along the rail the park posture keeps the clearance in the cabin, it keeps it with the
+    fixture there too.
+    """
     e, up = u.R[:, 2], np.array([0.0, 1.0, 0.0])
     payload = u.payload()
     # In its bay the unit has the drawn free space (12-40 mm) to the panels: the requested clearance there.
@@ -434,12 +462,16 @@ def _witnesses(robot: Cabin8, layout: CabinLayout, u: _Unit, clearance: float, b
     held = CollisionWorld(robot, dock, payload, grid_step_m=GRID_STEP_M)
     p_dock = _dock_pose(u)
     for what, p in (("dock", p_dock), ("lift-off", p_dock + LIFT_M * up)):
-        if not any(held.is_valid(q, need) for q in _reachable(robot, u, p)):
+        if not any(held.is_valid(q, need) for q in _reachable(robot, u, p, R=u.R_dock)):
             raise Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
     empty = CollisionWorld(robot, dock, None, grid_step_m=GRID_STEP_M)
-    pre = _reachable(robot, u, p_dock - u.grasp_line_m * e, 3, held=False)
+    pre = _reachable(robot, u, p_dock - u.grasp_line_m * u.R_dock[:, 2], 3, held=False, R=u.R_dock)
     if not any(empty.is_valid(q, need) for q in pre):
         raise Redraw(f"{u.kind} unit: no clear pre-grasp configuration")
+    for d1 in np.arange(PARK_D1_M[0], rail_max + 1e-9, LANE_STEP_M):
+        q = _park(robot, float(d1))
+        if bare.is_valid(q, clearance) and not empty.is_valid(q, clearance):
+            raise Redraw(f"{u.kind} unit: its fixture blocks the lane at d1 = {d1:.2f} m")
 
 
 def _park(robot: Cabin8, d1: float) -> Array:
@@ -465,7 +497,7 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
     bays = CollisionWorld(robot, cabin, None, grid_step_m=GRID_STEP_M)
     for u in units:
         bays_u = CollisionWorld(robot, cabin, u.payload(), grid_step_m=GRID_STEP_M)
-        _witnesses(robot, layout, u, clearance, bays_u)
+        _witnesses(robot, layout, u, clearance, bays_u, bays, rail_max)
     # Park: home at the rail's start, clear by the clearance + 20 mm without a unit.
     park = next(
         (q for q in (_park(robot, d1) for d1 in PARK_D1_M) if bays.is_valid(q, clearance + 0.02)), None
@@ -479,6 +511,7 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
     doc_units = []
     for u in units:
         e = [float(v) for v in u.R[:, 2]]
+        e_dock = [float(v) for v in u.R_dock[:, 2]]
         p_lo, p_hi = _pedestal(u, shell.deck_top_y_m, clearance)
         centre = (np.array(p_lo) + np.array(p_hi)) / 2
         doc_units.append(
@@ -490,12 +523,12 @@ def _draw(seed: int, index: int, rng: np.random.Generator, opts: CycleGeneratorO
                     "grasp": pose_doc(pose(np.eye(3), u.grasp)),
                 },
                 "dock": {
-                    "pose": pose_doc(pose(u.R, _dock_pose(u))),
+                    "pose": pose_doc(pose(u.R_dock, _dock_pose(u))),
                     "fixture": {
                         "box": [float(v) for v in np.round(np.array(p_hi) - np.array(p_lo), 6)],
                         "pose": pose_doc(pose(np.eye(3), centre)),
                     },
-                    "approach": {"direction": e, "distance": u.grasp_line_m},
+                    "approach": {"direction": e_dock, "distance": u.grasp_line_m},
                     "lift": {"direction": [0.0, 1.0, 0.0], "distance": LIFT_M},
                 },
                 "bay": {

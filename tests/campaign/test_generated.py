@@ -8,17 +8,19 @@ import numpy as np
 import pytest
 
 from planner.collision.obstacles import Obstacle
+from planner.collision.world import CollisionWorld
 from planner.core.schemas import Pose
 from planner.generate.cycles import CycleGeneratorOptions, GeneratedCampaign, generate_campaign
+from planner.robots.cabin8 import Cabin8
 from planner.task.campaign import check_campaign, cycle_document
 from planner.task.campaign_schema import Campaign, campaign_from_dict
 from planner.task.resolve import resolve_cycle
 from planner.task.schema import cycle_from_dict
 
-OPTIONS = CycleGeneratorOptions(units=(3, 3), end_bay_probability=0.0, pair_probability=1.0)
-#: Case 4 of seed 0 with these options has a blocking pair (a front unit is placed only where it reaches
-#: the deep unit's corridor and the arm reaches it: most draws with pair_probability 1 have none).
-INDEX = 4
+OPTIONS = CycleGeneratorOptions(units=(3, 3), end_bay_probability=1.0, pair_probability=1.0)
+#: Case 2 of seed 0 with these options has an end-wall unit and a blocking pair (a front unit is placed
+#: only where it reaches the deep unit's corridor and the arm reaches it: most draws have none).
+INDEX = 2
 
 
 @pytest.fixture(scope="module")
@@ -53,6 +55,31 @@ def test_the_blocking_pair_is_true_by_geometry(generated: tuple) -> None:
         pre = _box(camp, deep, camp.unit(deep).bay.approach.distance)
         assert pre.distance_to(_box(camp, front)) <= 0.0
         assert _box(camp, deep).distance_to(_box(camp, front)) > 0.03 + camp.options.clearance_m
+
+
+def test_every_unit_docks_held_along_x_beside_the_lane(generated: tuple) -> None:
+    """The end-wall unit too is docked held along +x; no fixture comes near the park posture's ride.
+
+    On the lane a fixture would stop the robot from ever passing the dock (an end-wall unit docked held
+    along the rail, in the lane, made every cycle beyond its dock unplannable).
+    """
+    case, camp, folder = generated
+    assert "end" in [u["kind"] for u in case.meta["units"]]
+    robot = Cabin8(rail_length=case.meta["rail_length_m"])
+    assert camp.park.drives is not None
+    park = robot.joints_from_drives(np.array([camp.park.drives[d] for d in robot.drive_names], dtype=float))
+    for u in camp.ids:
+        unit = camp.unit(u)
+        assert np.allclose(unit.dock.approach.direction, [1.0, 0.0, 0.0])
+        assert np.allclose(Pose.model_validate(unit.dock.pose).matrix()[:3, 2], [1.0, 0.0, 0.0])
+        fixture = Obstacle.box(
+            f"fixture {u}", tuple(unit.dock.fixture.box), Pose.model_validate(unit.dock.fixture.pose).matrix()
+        )
+        world = CollisionWorld(robot, None, None, obstacles=(fixture,))
+        for d1 in np.arange(float(park[0]), case.meta["rail_length_m"], 0.05):
+            q = park.copy()
+            q[0] = d1
+            assert world.is_valid(q, camp.options.clearance_m), (u, d1)
 
 
 def test_the_witnesses_hold_in_the_cycle_each_unit_plans(generated: tuple) -> None:
