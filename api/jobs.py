@@ -37,7 +37,7 @@ at its next heartbeat, whichever instance received the request. On a clean shutd
 killed and re-queued without counting the attempt.
 
 Job workers die with the service: each arms a parent-death signal when it starts, busy or idle, and the
-forkserver watches the server (:mod:`api.lifeline`), so a SIGKILLed server leaves no process behind.
+forkserver watches the server (:mod:`planner.core.lifeline`), so a SIGKILLed server leaves no process behind.
 Before it claims the first job the runner starts the forkserver and its workers and waits for the warm-up
 (imports, the collision kernels
 loaded from their ahead-of-time build, or built first on a fresh install -- numba's JIT without a C
@@ -71,11 +71,11 @@ from api.jobstore import (
     recover_jobs,
     rows_matched,
 )
-from api.lifeline import SERVER_PID_ENV
 from api.metrics import ServiceMetrics
 from api.settings import Settings
 from api.store import local_mesh_file
 from api.worker import run_job, worker_setup
+from planner.core.lifeline import SERVER_PID_ENV
 from planner.core.procpool import SINGLE_THREAD_ENV, WarmPool, Worker
 
 _LOG = logging.getLogger(__name__)
@@ -145,7 +145,7 @@ def _mp_context(preload: bool) -> ForkServerContext:
     """The forkserver context; it watches this server, and with ``preload`` warms up the planner once.
 
     The forkserver inherits this process's environment when it starts, so the single-thread settings
-    and the server's pid (:data:`api.lifeline.SERVER_PID_ENV`) are put in place first.
+    and the server's pid (:data:`planner.core.lifeline.SERVER_PID_ENV`) are put in place first.
     """
     with _context_lock:
         for name, value in SINGLE_THREAD_ENV.items():

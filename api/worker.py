@@ -2,7 +2,7 @@
 
 A job worker is a reused process (:class:`planner.core.procpool.WarmPool`, see :mod:`api.jobs`): it arms
 its parent-death signal and lowers its priority once (:func:`worker_setup`), so it ends with the service
-(:mod:`api.lifeline`) and yields the CPU to the event loop; then it runs one job after another
+(:mod:`planner.core.lifeline`) and yields the CPU to the event loop; then it runs one job after another
 (:func:`run_job`). The parent sends the job description (its kind's function, the scenario as submitted
 and the tenant's mesh files it names) on the pipe. The worker runs that function (``runner``,
 :mod:`api.jobkinds`; :func:`plan_job` for plans), sends ``("progress", stage, fraction, detail)``
@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 from api.compact import pack_value
 from api.jobtypes import FileSource
-from api.lifeline import die_with_parent
+from planner.core.lifeline import die_with_parent
 
 if TYPE_CHECKING:
     from planner.core.exceptions import PlannerError
@@ -80,7 +80,7 @@ def worker_setup(server_pid: int | None, nice: int) -> None:
     """Once in each job worker, before its first job: die with the service, and lower the priority.
 
     Args:
-        server_pid: The service's pid (:func:`api.lifeline.die_with_parent`).
+        server_pid: The service's pid (:func:`planner.core.lifeline.die_with_parent`).
         nice: Niceness added to the process (once: :func:`os.nice` adds up), so planning yields the CPU
             to the service's event loop.
     """

@@ -1,6 +1,8 @@
 """Preloaded by the sweep's forkserver: imports the planner and plans one warm-up plan, once.
 
-Every plan process forks from the forkserver and inherits what this loaded (compiled kernels, the
+It first watches the driver (:func:`planner.core.lifeline.watch_server_from_env`: it exits when the
+driver is gone, even SIGKILLed, and its plan processes with it). Every plan process forks from the
+forkserver and inherits what this loaded (compiled kernels, the
 cabin's clearance grid), so it starts planning at once. The warm-up task is a JSON file named by the
 environment variable ``CABINPLAN_SWEEP_WARMUP`` (set by :class:`planner.sweep.run.EmbeddedExecutor`
 before the forkserver starts); without it only the imports are done. Importing this module has that side
@@ -16,6 +18,7 @@ import os
 import pickle
 import sys
 
+from planner.core.lifeline import watch_server_from_env
 from planner.sweep.task import warm_up
 
 _LOG = logging.getLogger(__name__)
@@ -42,4 +45,5 @@ def _warm() -> None:
         atexit.register(os._exit, 0)
 
 
+watch_server_from_env()  # first: a driver killed during the warm-up takes the forkserver with it
 _warm()

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
 
 from planner.core.exceptions import InvalidInput
+from planner.core.lifeline import SERVER_PID_ENV, die_with_parent
 from planner.core.procpool import SINGLE_THREAD_ENV, WarmPool, Worker
 from planner.sweep.expand import SweepPlan
 from planner.sweep.results import Journal, TaskKey, make_row, write_tables
@@ -167,6 +168,9 @@ class EmbeddedExecutor:
                 pickle.dump(warm_task, fh)
             # Read by planner.sweep._preload when the forkserver starts (the first plan process).
             os.environ["CABINPLAN_SWEEP_WARMUP"] = self._warm_file
+        # The plan processes end with this process, even SIGKILLed (planner.core.lifeline): the forkserver
+        # watches it (its pid inherited), each plan process arms its parent-death signal.
+        os.environ[SERVER_PID_ENV] = str(os.getpid())
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(["planner.sweep._preload"])
         self._pool = WarmPool(
@@ -174,6 +178,8 @@ class EmbeddedExecutor:
             _plan_and_send,
             slots=self.workers,
             tasks_per_process=self.plans_per_process,
+            setup=die_with_parent,
+            setup_args=(os.getpid(),),
             name="cabinplan-sweep-plan",
         )
         self._running: dict[int, Worker] = {}

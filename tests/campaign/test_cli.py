@@ -17,6 +17,7 @@ from typer.testing import CliRunner
 
 from planner.cli import app
 from tests.campaign.conftest import Searched, deep_front
+from tests.processes import session_processes
 
 
 def invoke(*args: str | Path) -> Any:
@@ -60,7 +61,7 @@ def test_bad_campaigns_exit_2_with_one_line_naming_the_field(tmp_path: Path) -> 
 
 @pytest.mark.slow
 def test_a_campaign_killed_midway_keeps_its_cycles_and_resumes(tmp_path: Path, searched: Searched) -> None:
-    """SIGKILL of the CLI (its process group: workers too) after the first cycle; the rerun plans the rest."""
+    """SIGKILL of the CLI alone after the first cycle: its workers end with it; the rerun plans the rest."""
     spec = write(tmp_path, {**deep_front(order="given"), "units": list(reversed(deep_front()["units"]))})
     out = tmp_path / "out"
     journal = out / "cycles" / "results.jsonl"
@@ -77,9 +78,15 @@ def test_a_campaign_killed_midway_keeps_its_cycles_and_resumes(tmp_path: Path, s
                 break
             time.sleep(0.05)
         assert proc.poll() is None, "the campaign ended before it could be killed"
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
+        os.kill(proc.pid, signal.SIGKILL)  # the CLI only, as kill -9 or the OOM killer would
         proc.wait(timeout=10)
+        deadline = time.monotonic() + 10  # its forkserver and plan processes notice and end
+        while time.monotonic() < deadline and session_processes(proc.pid):
+            time.sleep(0.1)
+        assert not session_processes(proc.pid), "processes of the killed campaign still run"
+    finally:
+        if session_processes(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
     before = [json.loads(x) for x in journal.read_text().splitlines()]
     assert len(before) == 1 and before[0]["unit"] == "D" and before[0]["status"] == "succeeded"
     assert not (out / "summary.json").exists()  # killed: no summary yet

@@ -17,6 +17,7 @@ from planner.sweep.expand import expand_sweep
 from planner.sweep.results import COLUMN_NAMES, JOURNAL, read_parquet
 from planner.sweep.run import Counts, EmbeddedExecutor, run_sweep, warm_task
 from planner.sweep.spec import sweep_from_dict
+from tests.processes import session_processes
 from tests.sweep.conftest import SCENARIOS, bay_sweep, invoke, stuck_base, write_spec
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -110,6 +111,42 @@ def test_a_sweep_killed_midway_resumes_without_replanning_or_duplicating(tmp_pat
     again = invoke("sweep", spec, "-o", out, "--no-plots")
     assert again.exit_code == 0 and "6 already done" in again.stderr, again.stderr
     assert read_parquet(out / "results.parquet") == rows
+
+
+def test_a_killed_sweep_takes_its_running_plans_with_it(tmp_path: Path) -> None:
+    """SIGKILL of the CLI alone while a plan searches: the plan process and the forkserver end at once.
+
+    Nobody is left to enforce the plan's wall-clock limit or read its result, so it must not plan on (a
+    plan stuck in native code would run for ever): they end with the CLI (planner.core.lifeline).
+    """
+    spec = stuck_sweep("killed", 120.0)
+    spec["plans"] = [spec["plans"][1], spec["plans"][2], spec["plans"][0]]  # the 20 s search last
+    path = write_spec(tmp_path, spec)
+    journal = tmp_path / "out" / JOURNAL
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planner.cli", "sweep", str(path), "-o", str(tmp_path / "out"), "--workers=1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if journal.exists() and journal.read_text().count("\n") >= 2:
+                break  # the two quick plans are done: the one worker is in the long search
+            time.sleep(0.05)
+        assert proc.poll() is None, "the sweep ended before it could be killed"
+        time.sleep(0.5)
+        assert len(session_processes(proc.pid)) >= 3  # the CLI, its forkserver, the searching plan
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 5.0  # well before the search's 20 s
+        while time.monotonic() < deadline and session_processes(proc.pid):
+            time.sleep(0.05)
+        assert not session_processes(proc.pid), "processes of the killed sweep still run"
+    finally:
+        if session_processes(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
 
 
 def stuck_sweep(name: str, wall_time_limit_s: float) -> dict:

@@ -1,13 +1,15 @@
-"""Child processes die with the service: a parent-death signal and a parent watcher.
+"""Worker processes die with their owner: a parent-death signal and a parent watcher.
 
-A SIGKILLed server runs no clean-up, so its job processes must notice by themselves:
+The owner of a pool of worker processes (:mod:`planner.core.procpool`: the HTTP service's job workers, a
+CLI sweep's or campaign's plan workers) may be SIGKILLed (``kill -9``, the OOM killer) and then runs no
+clean-up, so its workers must notice by themselves, or they plan on for nobody:
 
-* each job process asks the kernel for SIGKILL when its parent (the forkserver's main thread, which
-  forked it) goes away: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (Linux, see prctl(2));
-* the forkserver itself was started by whichever server thread launched the first job, and a
+* each worker asks the kernel for SIGKILL when its parent (the forkserver's main thread, which forked
+  it) goes away: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (Linux, see prctl(2));
+* the forkserver itself was started by whichever owner thread launched the first worker, and a
   parent-death signal fires when that *thread* ends, not the process; so the forkserver instead runs a
-  small watcher thread that polls ``getppid()`` and exits as soon as it changes (the server died and the
-  forkserver was re-parented). Its job processes then receive their parent-death signal.
+  small watcher thread that polls ``getppid()`` and exits as soon as it changes (the owner died and the
+  forkserver was re-parented). Its workers then receive their parent-death signal.
 
 Both close the race of a parent that dies before the child is set up: the child compares its parent
 with the process it expects and exits at once if they differ.
@@ -28,7 +30,7 @@ _LOG = logging.getLogger(__name__)
 #: prctl(2) option number of PR_SET_PDEATHSIG (linux/prctl.h).
 PR_SET_PDEATHSIG = 1
 
-#: Environment variable naming the server's pid, inherited by the forkserver.
+#: Environment variable naming the owner's pid (the service's, or a CLI run's), inherited by the forkserver.
 SERVER_PID_ENV = "CABINPLAN_SERVER_PID"
 
 #: Period of the forkserver's parent watcher [s].
@@ -63,11 +65,12 @@ def process_alive(pid: int) -> bool:
 
 
 def die_with_parent(server_pid: int | None = None) -> None:
-    """Arm the parent-death signal of a job process; exit now if the service is already gone.
+    """Arm the parent-death signal of a worker process; exit now if its owner is already gone.
 
     Args:
-        server_pid: The service's pid: when given and no longer alive, the process exits at once (the
-            parent died between the fork and this call, so the signal would never come).
+        server_pid: The owner's pid (the service's, or a CLI run's): when given and no longer alive, the
+            process exits at once (the parent died between the fork and this call, so the signal would
+            never come).
     """
     set_parent_death_signal()
     if server_pid is not None and not process_alive(server_pid):
@@ -95,7 +98,7 @@ def watch_parent(expected_parent: int, period_s: float = WATCH_PERIOD_S) -> thre
 
 
 def watch_server_from_env() -> None:
-    """In the forkserver: watch the server named by :data:`SERVER_PID_ENV` (no-op when unset)."""
+    """In the forkserver: watch the owner named by :data:`SERVER_PID_ENV` (no-op when unset)."""
     value = os.environ.get(SERVER_PID_ENV)
     if value and value.isdigit():
         watch_parent(int(value))
