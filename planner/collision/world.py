@@ -154,7 +154,9 @@ class CollisionWorld(Generic[RobotT]):
         self._fine_r = self._kernel.fine.radii
         #: The obstacles added to the cabin, with the pairs this world allows (None: no obstacles).
         self.obstacles: ObstacleSet | None = (
-            ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed)) if obstacles else None
+            ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed), self.kernels)
+            if obstacles
+            else None
         )
         if allowed and not obstacles:
             raise InvalidInput("allowed: pairs given without obstacles", field="allowed")
