@@ -31,7 +31,6 @@ them: a planner builds such a world only for the short straight motions where th
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass, field
 from functools import cache
 
@@ -42,7 +41,7 @@ from planner.collision.bodies import BodySet
 from planner.collision.kernels.buffers import cover, obstacle_data
 from planner.collision.kernels.entries import DEFAULT as DEFAULT_KERNELS
 from planner.collision.kernels.entries import Kernels
-from planner.collision.probes import GrownShapes
+from planner.collision.probes import Probes
 from planner.collision.reports import Contact
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
@@ -239,8 +238,8 @@ class ObstacleSet:
         self.kernels = kernels
         self._objects = [o.collision_object() for o in obstacles]
         self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
-        self._grown = GrownShapes(bodies.shapes)
-        self._local_state = threading.local()
+        # The bodies' FCL objects: grown shapes cached, objects reused per thread and only moved.
+        self._probes = Probes(bodies, None)
         self.queries = 0
 
     def __len__(self) -> int:
@@ -287,20 +286,14 @@ class ObstacleSet:
 
     # ----------------------------------------------------------------- FCL
     def _body(self, flat: Array, b: int, margin: float) -> fcl.CollisionObject:
+        """Body b grown by ``margin`` at the poses ``flat`` (a reused object of the thread, moved there)."""
         R = flat[b, :9].reshape(3, 3).T
-        return fcl.CollisionObject(
-            self._grown(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12])
-        )
+        return self._probes.object(b, R, flat[b, 9:12], float(flat[b, 12]), margin)
 
     def hit(self, flat: Array, b: int, o: int, margin: float) -> bool:
         """Body b grown by ``margin`` touches obstacle o (one FCL collision query)."""
         self.queries += 1
-        return bool(
-            fcl.collide(
-                self._body(flat, b, margin), self._objects[o], fcl.CollisionRequest(), fcl.CollisionResult()
-            )
-            > 0
-        )
+        return self._probes.collide(self._body(flat, b, margin), self._objects[o])
 
     def distance(self, flat: Array, b: int, o: int) -> tuple[float, Array, Array]:
         """Exact distance of body b to obstacle o on the un-grown shapes: (d, witness on b, on o).

@@ -272,7 +272,8 @@ class CollisionWorld(Generic[RobotT]):
         """True when limits, margins, cabin clearance and self-clearance all hold at q.
 
         The verdict of :meth:`check_state`, without building a report: one kernel call, then FCL queries
-        only for what the bounds cannot prove clear.
+        only for what the bounds cannot prove clear. The obstacles are checked at the body poses that call
+        computed (the closed-form kernel's, equal to :meth:`flat_poses` to rounding, ~1e-15 m).
         """
         _check_clearance(clearance)
         q = _joints(q, self.model.n_joints)
@@ -282,7 +283,7 @@ class CollisionWorld(Generic[RobotT]):
         if code != codes.UNDECIDED:
             if code != codes.CLEAR:
                 return False  # a certain contact is as invalid as an FCL-found one
-            return self.obstacles is None or self.obstacles.clear(self.flat_poses(q), clearance)
+            return self.obstacles is None or self.obstacles.clear(flat, clearance)
         st = BodyState(flat, cabin, pairs, True)
         for b, lb in enumerate(cabin.tolist()):
             if lb <= clearance and self._probes.cabin_hit(st, b, clearance):
@@ -290,7 +291,7 @@ class CollisionWorld(Generic[RobotT]):
         for k, lb in enumerate(pairs.tolist()):
             if lb <= own and self._probes.pair_hit(st, k, own):
                 return False
-        return self.obstacles is None or self.obstacles.clear(self.flat_poses(q), clearance)
+        return self.obstacles is None or self.obstacles.clear(flat, clearance)
 
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
         """Poses and certified bounds at one configuration (8,), contiguous float64: one kernel call.
