@@ -153,6 +153,10 @@ class ReferenceWorld(CollisionWorld):
         flat, c = (np.asarray(o.full(), dtype=float).T for o in outs)
         return np.ascontiguousarray(flat.reshape(q2.shape[0], self._n_bodies, 13)), c
 
+    def flat_poses(self, q: Array) -> Array:
+        """Poses by the CasADi function."""
+        return self._evaluate(q)[0][0]
+
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
         """Poses by the CasADi function, then the bound kernel."""
         slot = self._pose_fast._slot()  # shared by every world of this model: the payload box each time
