@@ -267,7 +267,7 @@ class AlongPath:
         assert self.obstacles is not None
         b = self.obstacle_tasks[t - self.n_kernel][0]
         cols, obs = self._body_tasks[b]
-        fine = self.obstacles.fine_bounds_batch(self.poses[rows, b], b)[:, obs]  # (n, tasks of b)
+        fine = self.obstacles.fine_bounds_batch(self.poses, rows, b)[:, obs]  # (n, tasks of b)
         lower, state = self.lower[np.ix_(rows, cols)], self.state[np.ix_(rows, cols)]
         fresh = state == SPREAD
         self.lower[np.ix_(rows, cols)] = np.where(fresh, np.maximum(lower, fine), lower)

@@ -20,6 +20,10 @@ Certification follows the cabin's rules (:mod:`planner.collision.world`):
 * **Distances**: exact FCL distances on the un-grown shapes (the obstacle always first, as a mesh: FCL's
   box-box distance is wrong in face-parallel cases and its shape-vs-mesh witnesses come swapped).
 
+The sphere bounds are compiled (:mod:`planner.collision.kernels.obstacles`, from the set's constant arrays
+packed once, :attr:`ObstacleSet.kernel_data`); their numpy route is the tests' reference
+(:class:`planner.collision.oracle.ReferenceObstacles`).
+
 **Allowed pairs** ``(body, obstacle)`` are left out of every check and distance of the world that allows
 them: a planner builds such a world only for the short straight motions where the pair must come close
 (a gripper closing on the unit it grasps); every other world keeps the clearance for that pair.
@@ -27,7 +31,6 @@ them: a planner builds such a world only for the short straight motions where th
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass, field
 from functools import cache
 
@@ -35,8 +38,10 @@ import fcl
 import numpy as np
 
 from planner.collision.bodies import BodySet
-from planner.collision.kernels.buffers import cover
-from planner.collision.probes import GrownShapes
+from planner.collision.kernels.buffers import cover, obstacle_data
+from planner.collision.kernels.entries import DEFAULT as DEFAULT_KERNELS
+from planner.collision.kernels.entries import Kernels
+from planner.collision.probes import Probes
 from planner.collision.reports import Contact
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
@@ -183,15 +188,6 @@ def _overlap_depth(a: Obstacle, b: Obstacle) -> float:
     return max(0.0, float(min(overlaps)))
 
 
-def _rows_times(local: Array, M: Array) -> Array:
-    """Local (S, 3) times each M (n, 3, 3): (n, S, 3), written out (no threaded BLAS call for 3 x 3)."""
-    return (
-        local[None, :, 0, None] * M[:, None, 0, :]
-        + local[None, :, 1, None] * M[:, None, 1, :]
-        + local[None, :, 2, None] * M[:, None, 2, :]
-    )
-
-
 def obstacle_contact(body: str, obstacle: str, margin: float) -> Contact:
     """The contact of a body with an obstacle within ``margin`` [m] (kind ``"obstacle"``)."""
     return Contact("obstacle", (body, obstacle), f"{body} within {margin:.4g} m of {obstacle}")
@@ -204,6 +200,7 @@ class ObstacleSet:
         obstacles: The obstacles (names unique).
         bodies: The world's bodies.
         allowed: ``(body name, obstacle name)`` pairs left out of every check and distance.
+        kernels: The compiled kernels' entries (the world's).
     """
 
     def __init__(
@@ -211,6 +208,7 @@ class ObstacleSet:
         obstacles: tuple[Obstacle, ...],
         bodies: BodySet,
         allowed: frozenset[tuple[str, str]] = frozenset(),
+        kernels: Kernels = DEFAULT_KERNELS,
     ) -> None:
         names = [o.name for o in obstacles]
         if len(set(names)) != len(names):
@@ -230,87 +228,57 @@ class ObstacleSet:
         for b_name, o_name in allowed:
             self.active[bodies.names.index(b_name), names.index(o_name)] = False
         bounds = [o.bound for o in obstacles]
-        self._R_bound = np.array([T[:3, :3] for T, _ in bounds]).reshape(n_o, 3, 3)
-        self._p_bound = np.array([T[:3, 3] for T, _ in bounds]).reshape(n_o, 3)
-        self._half = np.array([h for _, h in bounds]).reshape(n_o, 3)
-        self._origin_local = np.einsum("oi,oij->oj", self._p_bound, self._R_bound)  # p_o R_o (O, 3)
+        T_bound = np.array([T for T, _ in bounds], dtype=float).reshape(n_o, 4, 4)
+        half = np.array([h for _, h in bounds], dtype=float).reshape(n_o, 3)
+        # The bodies' fine sphere covers: box bodies by local centre, capsules by a fraction of the length.
+        self._cover = cover(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii)
+        #: The packed constant data of the compiled bounds (:mod:`.kernels.obstacles`), built once.
+        self.kernel_data = obstacle_data(T_bound, half, bodies.shapes, self._cover, self.active)
+        #: The compiled kernels' entries (the world's: the ahead-of-time build or numba's JIT).
+        self.kernels = kernels
         self._objects = [o.collision_object() for o in obstacles]
         self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
-        # The bodies' fine sphere covers: box bodies by local centre, capsules by a fraction of the length.
-        spheres = cover(bodies.shapes, bodies.sphere_centres, bodies.sphere_radii)
-        self._sphere_body, self._local, self._frac = spheres.table
-        self._radii = spheres.radii
-        self._capsule = np.array([s.kind == "capsule" for s in bodies.shapes])
-        self._capsule_r = np.array([s.radius for s in bodies.shapes])
-        self._box_r = np.array([0.5 * float(np.linalg.norm(s.size)) for s in bodies.shapes])
-        self._grown = GrownShapes(bodies.shapes)
-        self._local_state = threading.local()
+        # The bodies' FCL objects: grown shapes cached, objects reused per thread and only moved.
+        self._probes = Probes(bodies, None)
         self.queries = 0
 
     def __len__(self) -> int:
         return len(self.obstacles)
 
     # ---------------------------------------------------------------- bounds
-    def _box_distance(self, points: Array) -> Array:
-        """Distances (P, O) of points (P, 3) to every obstacle's bounding box (0 inside)."""
-        # In each box's axes: (x - p_o) R_o = x R_o - p_o R_o, one batched product for all boxes.
-        R = self._R_bound  # written out, not matmul: a threaded BLAS call costs more than these sums
-        local = (
-            points[None, :, 0, None] * R[:, None, 0, :]
-            + points[None, :, 1, None] * R[:, None, 1, :]
-            + points[None, :, 2, None] * R[:, None, 2, :]
-            - self._origin_local[:, None, :]
-        )  # (O, P, 3)
-        outside = np.maximum(np.abs(local) - self._half[:, None, :], 0.0)
-        return np.sqrt(np.sum(outside * outside, axis=2)).T
-
     def lower_bounds(self, flat: Array, threshold: float | Array = np.inf) -> Array:
         """Certified lower bounds (B, O) of each body's distance to each obstacle at one state.
 
         ``flat`` (B, 13) are the body poses (rotation column-major, centre, capsule length). First each
         body's bounding sphere (centre, half-diagonal or half-length + radius): its distance to the
-        obstacle's bounding box minus its radius. A pair whose bound is not above ``threshold`` (scalar or
-        (B, 1)) is refined with the body's fine sphere cover (the smallest of its spheres' bounds).
-        Allowed pairs are +inf.
+        obstacle's bounding box minus its radius. A body with a pair whose bound is not above ``threshold``
+        (scalar, (B,) or (B, 1)) has its pairs refined with its fine sphere cover (the smallest of its
+        spheres' bounds; the larger of the two bounds counts). Allowed pairs are +inf. One compiled call
+        (:func:`.kernels.obstacles.obstacle_bounds`).
         """
-        out = self.coarse_bounds_batch(flat[None])[0]
-        near = np.flatnonzero(np.any(out <= threshold, axis=1))
-        for b in near.tolist():  # both bound the distance from below: keep the larger
-            fine = self.fine_bounds_batch(flat[b][None], b)[0]
-            out[b] = np.where(self.active[b], np.maximum(out[b], fine), np.inf)
-        return out
+        n_b = self.kernel_data.n_bodies
+        if isinstance(threshold, float | int):
+            th = np.full(n_b, float(threshold))
+        else:
+            th = np.ascontiguousarray(np.asarray(threshold, dtype=float).reshape(n_b))
+        return self.kernels.obstacle_bounds(flat, self.kernel_data, th)
 
     def coarse_bounds_batch(self, poses: Array, allowed_too: bool = False) -> Array:
         """Certified lower bounds (N, B, O) of each body's distance to each obstacle at N states, coarse.
 
         ``poses`` (N, B, 13): each body's bounding sphere (centre, half-diagonal or half-length + radius)
-        against each obstacle's bounding box, in one vectorised pass. Allowed pairs are +inf unless
-        ``allowed_too`` (their bounds, for reports). :meth:`fine_bounds_batch` refines them.
+        against each obstacle's bounding box. Allowed pairs are +inf unless ``allowed_too`` (their bounds,
+        for reports). :meth:`fine_bounds_batch` refines them.
         """
-        n, n_b = poses.shape[0], poses.shape[1]
-        n_o = len(self.obstacles)
-        length = poses[:, :, 12]
-        capsule_r = self._capsule_r[None, :] + 0.5 * length
-        radius = np.where(self._capsule[None, :], capsule_r, self._box_r[None, :])
-        out = self._box_distance(poses[:, :, 9:12].reshape(-1, 3)).reshape(n, n_b, n_o) - radius[:, :, None]
-        active = np.ones_like(self.active) if allowed_too else self.active
-        return np.where(active[None], out, np.inf)
+        return self.kernels.obstacle_coarse_batch(poses, self.kernel_data, allowed_too)
 
-    def fine_bounds_batch(self, poses_b: Array, b: int) -> Array:
+    def fine_bounds_batch(self, poses: Array, rows: IntArray, b: int) -> Array:
         """Certified lower bounds (n, O) of body b's distance to each obstacle, from its fine sphere cover.
 
-        ``poses_b`` (n, 13) are body b's poses: the smallest of its spheres' distances to the obstacle's
-        bounding box minus their radii (every pair, allowed ones too).
+        ``poses`` (N, B, 13), ``rows`` (n,) the states to evaluate: the smallest of body b's spheres'
+        distances to the obstacle's bounding box minus their radii (every pair, allowed ones too).
         """
-        sel = np.flatnonzero(self._sphere_body == b)
-        Rt = poses_b[:, :9].reshape(-1, 3, 3)  # R^T (column-major storage), (n, 3, 3)
-        centres = (
-            poses_b[:, None, 9:12]
-            + _rows_times(self._local[sel], Rt)  # (R local)^T = local^T R^T
-            + Rt[:, None, 2, :] * (self._frac[sel][None, :] * poses_b[:, 12][:, None])[..., None]
-        )  # (n, S_b, 3)
-        d = self._box_distance(centres.reshape(-1, 3)).reshape(len(poses_b), len(sel), len(self.obstacles))
-        return np.min(d - self._radii[sel][None, :, None], axis=1)
+        return self.kernels.obstacle_fine_batch(poses, rows, b, self.kernel_data)
 
     def mesh_object(self, o: int) -> fcl.CollisionObject:
         """Obstacle o as a posed FCL triangle mesh (the target of exact distances and swept hulls)."""
@@ -318,20 +286,14 @@ class ObstacleSet:
 
     # ----------------------------------------------------------------- FCL
     def _body(self, flat: Array, b: int, margin: float) -> fcl.CollisionObject:
+        """Body b grown by ``margin`` at the poses ``flat`` (a reused object of the thread, moved there)."""
         R = flat[b, :9].reshape(3, 3).T
-        return fcl.CollisionObject(
-            self._grown(b, margin, float(flat[b, 12])), fcl.Transform(R, flat[b, 9:12])
-        )
+        return self._probes.object(b, R, flat[b, 9:12], float(flat[b, 12]), margin)
 
     def hit(self, flat: Array, b: int, o: int, margin: float) -> bool:
         """Body b grown by ``margin`` touches obstacle o (one FCL collision query)."""
         self.queries += 1
-        return bool(
-            fcl.collide(
-                self._body(flat, b, margin), self._objects[o], fcl.CollisionRequest(), fcl.CollisionResult()
-            )
-            > 0
-        )
+        return self._probes.collide(self._body(flat, b, margin), self._objects[o])
 
     def distance(self, flat: Array, b: int, o: int) -> tuple[float, Array, Array]:
         """Exact distance of body b to obstacle o on the un-grown shapes: (d, witness on b, on o).

@@ -4,24 +4,111 @@
 original, independent routes -- poses from the robot model's CasADi function
 (``CollisionModel.pose_functions``), the certified motion walk in plain Python with the original always-probe
 policy, the lower bounds also vectorised in numpy (:meth:`ReferenceWorld.cabin_lower_bounds`,
-:meth:`ReferenceWorld.pair_lower_bounds`) -- and must give the compiled route's verdicts and reports exactly
-(tests/collision/test_kernels.py). It is not used by the planner.
+:meth:`ReferenceWorld.pair_lower_bounds`, the obstacles' by :class:`ReferenceObstacles`) -- and must give
+the compiled route's verdicts and reports exactly (tests/collision/test_kernels.py,
+tests/collision/test_obstacles.py). It is not used by the planner.
 """
 
 from __future__ import annotations
 
 from functools import cached_property
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from planner.collision.bodies import segment_reach_bounds
+from planner.collision.bodies import BodySet, segment_reach_bounds
 from planner.collision.kernels.bounds import state_bounds
 from planner.collision.motion import limit_samples
+from planner.collision.obstacles import Obstacle, ObstacleSet
 from planner.collision.reports import BodyState, MotionReport, StateReport, body_contact, limit_contacts
 from planner.collision.world import DEFAULT_CLEARANCE_M, CollisionWorld
 from planner.core.types import Array, IntArray
 from planner.kinematics import chain
+
+
+def _rows_times(local: Array, M: Array) -> Array:
+    """Local (S, 3) times each M (n, 3, 3): (n, S, 3), written out (no threaded BLAS call for 3 x 3)."""
+    return (
+        local[None, :, 0, None] * M[:, None, 0, :]
+        + local[None, :, 1, None] * M[:, None, 1, :]
+        + local[None, :, 2, None] * M[:, None, 2, :]
+    )
+
+
+class ReferenceObstacles(ObstacleSet):
+    """:class:`ObstacleSet` with its lower bounds vectorised in numpy (the compiled kernels' reference).
+
+    The bounds of :mod:`planner.collision.kernels.obstacles` by whole-array operations, summed in the same
+    order; the FCL queries are the obstacle set's own.
+    """
+
+    def __init__(
+        self,
+        obstacles: tuple[Obstacle, ...],
+        bodies: BodySet,
+        allowed: frozenset[tuple[str, str]] = frozenset(),
+    ) -> None:
+        super().__init__(obstacles, bodies, allowed)
+        n_o = len(obstacles)
+        bounds = [o.bound for o in obstacles]
+        self._R_bound = np.array([T[:3, :3] for T, _ in bounds]).reshape(n_o, 3, 3)
+        self._p_bound = np.array([T[:3, 3] for T, _ in bounds]).reshape(n_o, 3)
+        self._half = np.array([h for _, h in bounds]).reshape(n_o, 3)
+        self._origin_local = np.einsum("oi,oij->oj", self._p_bound, self._R_bound)  # p_o R_o (O, 3)
+        self._sphere_body, self._local, self._frac = self._cover.table
+        self._radii = self._cover.radii
+        self._capsule = np.array([s.kind == "capsule" for s in bodies.shapes])
+        self._capsule_r = np.array([s.radius for s in bodies.shapes])
+        self._box_r = np.array([0.5 * float(np.linalg.norm(s.size)) for s in bodies.shapes])
+
+    def _box_distance(self, points: Array) -> Array:
+        """Distances (P, O) of points (P, 3) to every obstacle's bounding box (0 inside)."""
+        # In each box's axes: (x - p_o) R_o = x R_o - p_o R_o, one batched product for all boxes.
+        R = self._R_bound  # written out, not matmul: a threaded BLAS call costs more than these sums
+        local = (
+            points[None, :, 0, None] * R[:, None, 0, :]
+            + points[None, :, 1, None] * R[:, None, 1, :]
+            + points[None, :, 2, None] * R[:, None, 2, :]
+            - self._origin_local[:, None, :]
+        )  # (O, P, 3)
+        outside = np.maximum(np.abs(local) - self._half[:, None, :], 0.0)
+        return np.sqrt(np.sum(outside * outside, axis=2)).T
+
+    def lower_bounds(self, flat: Array, threshold: float | Array = np.inf) -> Array:
+        """:meth:`ObstacleSet.lower_bounds` in numpy."""
+        out = self.coarse_bounds_batch(flat[None])[0]
+        th = np.asarray(threshold, dtype=float)
+        th = th.reshape(-1, 1) if th.ndim else th
+        near = np.flatnonzero(np.any(out <= th, axis=1))
+        for b in near.tolist():  # both bound the distance from below: keep the larger
+            fine = self.fine_bounds_batch(flat[None], np.zeros(1, dtype=np.int64), b)[0]
+            out[b] = np.where(self.active[b], np.maximum(out[b], fine), np.inf)
+        return out
+
+    def coarse_bounds_batch(self, poses: Array, allowed_too: bool = False) -> Array:
+        """:meth:`ObstacleSet.coarse_bounds_batch` in numpy."""
+        n, n_b = poses.shape[0], poses.shape[1]
+        n_o = len(self.obstacles)
+        length = poses[:, :, 12]
+        capsule_r = self._capsule_r[None, :] + 0.5 * length
+        radius = np.where(self._capsule[None, :], capsule_r, self._box_r[None, :])
+        out = self._box_distance(poses[:, :, 9:12].reshape(-1, 3)).reshape(n, n_b, n_o) - radius[:, :, None]
+        active = np.ones_like(self.active) if allowed_too else self.active
+        return np.where(active[None], out, np.inf)
+
+    def fine_bounds_batch(self, poses: Array, rows: IntArray, b: int) -> Array:
+        """:meth:`ObstacleSet.fine_bounds_batch` in numpy."""
+        poses_b = poses[rows, b]
+        sel = np.flatnonzero(self._sphere_body == b)
+        Rt = poses_b[:, :9].reshape(-1, 3, 3)  # R^T (column-major storage), (n, 3, 3)
+        centres = (
+            poses_b[:, None, 9:12]
+            + _rows_times(self._local[sel], Rt)  # (R local)^T = local^T R^T
+            + Rt[:, None, 2, :] * (self._frac[sel][None, :] * poses_b[:, 12][:, None])[..., None]
+        )  # (n, S_b, 3)
+        d = self._box_distance(centres.reshape(-1, 3)).reshape(len(poses_b), len(sel), len(self.obstacles))
+        return np.min(d - self._radii[sel][None, :, None], axis=1)
 
 
 class ReferenceWorld(CollisionWorld):
@@ -29,6 +116,12 @@ class ReferenceWorld(CollisionWorld):
 
     #: The original always-probe policy of the motion walk.
     probe_when_proven = True
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.obstacles is not None:  # the obstacles' bounds in numpy
+            obs = self.obstacles
+            self.obstacles = ReferenceObstacles(obs.obstacles, self.bodies, obs.allowed)
 
     @cached_property
     def _pair_spheres(self) -> tuple[IntArray, IntArray, Array, list[IntArray]]:
@@ -59,6 +152,10 @@ class ReferenceWorld(CollisionWorld):
         outs = self._pose_fn(ca.DM(q2.T), ca.DM(self._T_tool_box))
         flat, c = (np.asarray(o.full(), dtype=float).T for o in outs)
         return np.ascontiguousarray(flat.reshape(q2.shape[0], self._n_bodies, 13)), c
+
+    def flat_poses(self, q: Array) -> Array:
+        """Poses by the CasADi function."""
+        return self._evaluate(q)[0][0]
 
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
         """Poses by the CasADi function, then the bound kernel."""
@@ -154,7 +251,16 @@ class ReferenceWorld(CollisionWorld):
     def _walk(
         self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
     ) -> MotionReport:
-        """The motion walk of ``check_motion`` in Python: the schedule the compiled walk follows."""
+        """The motion walk of ``check_motion``: the cabin's and the pairs' in Python, then the obstacles'."""
+        rep = self._cabin_walk(q_a, q_b, clearance, motion_margin, own, ratio)
+        if not rep.valid or self.obstacles is None:
+            return rep
+        return self._obstacle_walk(q_a, q_b, clearance, motion_margin, rep)
+
+    def _cabin_walk(
+        self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
+    ) -> MotionReport:
+        """The cabin's and the pairs' walk in Python: the schedule the compiled walk follows."""
         dq = q_b - q_a
         rho, pair_rho = self._segment_reach(q_a, q_b, ratio)
         reach = rho @ np.abs(dq)

@@ -154,7 +154,9 @@ class CollisionWorld(Generic[RobotT]):
         self._fine_r = self._kernel.fine.radii
         #: The obstacles added to the cabin, with the pairs this world allows (None: no obstacles).
         self.obstacles: ObstacleSet | None = (
-            ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed)) if obstacles else None
+            ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed), self.kernels)
+            if obstacles
+            else None
         )
         if allowed and not obstacles:
             raise InvalidInput("allowed: pairs given without obstacles", field="allowed")
@@ -253,8 +255,15 @@ class CollisionWorld(Generic[RobotT]):
         return StateReport(not contacts, tuple(contacts))
 
     def flat_poses(self, q: Array) -> Array:
-        """Body poses (B, 13) at one configuration (8,): rotation column-major, centre, capsule length."""
-        return self._evaluate(q)[0][0]
+        """Body poses (B, 13) at one configuration (8,): rotation column-major, centre, capsule length.
+
+        By the closed-form kernel (~3 us; CasADi's pose function costs ~15 us a call), as every state check
+        of the world computes them: the obstacles are checked at the poses the cabin is.
+        """
+        q2 = np.ascontiguousarray(np.asarray(q, dtype=float).reshape(1, -1))
+        poses, c = np.empty((1, self._n_bodies, 13)), np.empty((1, len(self._kernel.c_lo)))
+        self.kernels.packed_poses(q2, self._kernel, poses, c)
+        return poses[0]
 
     def _screen(self, q: Array, clearance: float) -> StateReport | BodyState:
         """The compiled part of :meth:`check_state`: a final report, or the state for the FCL probes."""
@@ -270,7 +279,7 @@ class CollisionWorld(Generic[RobotT]):
         """True when limits, margins, cabin clearance and self-clearance all hold at q.
 
         The verdict of :meth:`check_state`, without building a report: one kernel call, then FCL queries
-        only for what the bounds cannot prove clear.
+        only for what the bounds cannot prove clear (the obstacles at the poses that call computed).
         """
         _check_clearance(clearance)
         q = _joints(q, self.model.n_joints)
@@ -280,7 +289,7 @@ class CollisionWorld(Generic[RobotT]):
         if code != codes.UNDECIDED:
             if code != codes.CLEAR:
                 return False  # a certain contact is as invalid as an FCL-found one
-            return self.obstacles is None or self.obstacles.clear(self.flat_poses(q), clearance)
+            return self.obstacles is None or self.obstacles.clear(flat, clearance)
         st = BodyState(flat, cabin, pairs, True)
         for b, lb in enumerate(cabin.tolist()):
             if lb <= clearance and self._probes.cabin_hit(st, b, clearance):
@@ -288,7 +297,7 @@ class CollisionWorld(Generic[RobotT]):
         for k, lb in enumerate(pairs.tolist()):
             if lb <= own and self._probes.pair_hit(st, k, own):
                 return False
-        return self.obstacles is None or self.obstacles.clear(self.flat_poses(q), clearance)
+        return self.obstacles is None or self.obstacles.clear(flat, clearance)
 
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
         """Poses and certified bounds at one configuration (8,), contiguous float64: one kernel call.

@@ -1,12 +1,20 @@
-"""Obstacles added to a cabin: certified state and motion checks against exact FCL distances."""
+"""Obstacles added to a cabin: certified state and motion checks against exact FCL distances.
+
+The compiled obstacle bounds (:mod:`planner.collision.kernels.obstacles`) against their numpy route
+(:class:`~planner.collision.oracle.ReferenceObstacles`) and the exact distances they bound.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial import ConvexHull
 
-from planner.collision.bodies import PayloadGeometry
-from planner.collision.obstacles import Obstacle
+from planner.collision.bodies import BodySet, PayloadGeometry, robot_bodies
+from planner.collision.obstacles import Obstacle, ObstacleSet
+from planner.collision.oracle import ReferenceObstacles, ReferenceWorld
 from planner.collision.world import CollisionWorld
 from planner.robots.cabin8 import Cabin8
 from tests.conftest import admissible_joints
@@ -77,3 +85,122 @@ def test_an_allowed_pair_is_left_out_and_measured(robot: Cabin8) -> None:
     d = allowed.obstacle_distance(allowed.flat_poses(q), obstacle="unit Y", body="payload")
     assert d.distance_m == pytest.approx(0.005, abs=1e-6) and d.bodies == pair
     assert allowed.obstacle_distance(allowed.flat_poses(q)).bodies != pair  # left out of the world's own
+
+
+def _rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random rotation (QR of a Gaussian matrix, signs fixed, det +1)."""
+    Q, R = np.linalg.qr(rng.normal(size=(3, 3)))
+    Q = Q * np.sign(np.diag(R))
+    return Q if np.linalg.det(Q) > 0 else -Q
+
+
+def _random_obstacles(rng: np.random.Generator, n: int) -> tuple[Obstacle, ...]:
+    """Boxes and convex meshes at arbitrary rotations, around the robot's workspace."""
+    out = []
+    for i in range(n):
+        T = np.eye(4)
+        T[:3, :3] = _rotation(rng)
+        T[:3, 3] = rng.uniform([-0.5, -0.8, -0.2], [1.5, 0.8, 1.2])
+        if rng.random() < 0.7:
+            out.append(Obstacle.box(f"box {i}", tuple(rng.uniform(0.02, 0.6, 3)), T))
+        else:
+            points = rng.uniform(-0.3, 0.3, (10, 3)) * rng.uniform(0.1, 1.0, 3)
+            hull = ConvexHull(points)
+            out.append(Obstacle(f"mesh {i}", T, vertices=points, faces=hull.simplices.astype(np.int64)))
+    return tuple(out)
+
+
+def _random_poses(rng: np.random.Generator, n_states: int, bodies: BodySet) -> np.ndarray:
+    """Body poses (N, B, 13) at arbitrary rotations and places; capsules of random lengths up to their own.
+
+    (A capsule's fine cover serves every length up to the shape's, :meth:`Shape.sphere_cover`.)
+    """
+    n_b = len(bodies.names)
+    poses = np.zeros((n_states, n_b, 13))
+    for k in range(n_states):
+        for b, shape in enumerate(bodies.shapes):
+            poses[k, b, :9] = _rotation(rng).T.ravel()  # column-major R
+            poses[k, b, 9:12] = rng.uniform([-0.8, -1.0, -0.4], [1.8, 1.0, 1.4])
+            poses[k, b, 12] = rng.uniform(0.0, shape.length) if shape.kind == "capsule" else 0.0
+    return poses
+
+
+def _same_bounds(got: np.ndarray, ref: np.ndarray) -> None:
+    """Equal to the numpy route to float rounding, and never above it (bounds are certificates)."""
+    assert got.shape == ref.shape
+    np.testing.assert_array_equal(np.isinf(got), np.isinf(ref))
+    finite = np.isfinite(ref)
+    assert np.all(got[finite] <= ref[finite] + 1e-12 * (1.0 + np.abs(ref[finite])))
+    np.testing.assert_allclose(got[finite], ref[finite], rtol=0, atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_compiled_obstacle_bounds_equal_the_numpy_route(seed: int) -> None:
+    """The compiled bounds are the numpy route's at random poses, obstacles, allowed pairs and thresholds.
+
+    Rotated boxes and meshes, box and capsule bodies (random lengths), some pairs allowed (+inf), scalar and
+    per-body thresholds (the fine cover refines a body wherever a coarse bound is not above its threshold).
+    The bounds are also below the exact FCL distance of every pair checked.
+    """
+    rng = np.random.default_rng(seed)
+    bodies = _bodies()
+    obstacles = _random_obstacles(rng, int(rng.integers(1, 6)))
+    pairs = [(b, o.name) for b in bodies.names for o in obstacles]
+    allowed = frozenset(p for p in pairs if rng.random() < 0.15)
+    fast = ObstacleSet(obstacles, bodies, allowed)
+    ref = ReferenceObstacles(obstacles, bodies, allowed)
+    poses = _random_poses(rng, 6, bodies)
+    n_b = len(bodies.names)
+    for flat in poses:
+        for threshold in (-1.0, 0.0, float(rng.uniform(0.0, 0.6)), np.inf, rng.uniform(-0.2, 0.8, (n_b, 1))):
+            got = fast.lower_bounds(flat, threshold)
+            _same_bounds(got, ref.lower_bounds(flat, threshold))
+        lb = fast.lower_bounds(flat, np.inf)
+        for b, o in zip(*np.nonzero(np.isfinite(lb)), strict=True):
+            if rng.random() < 0.2:  # a sample of the pairs: FCL distances cost ~0.1 ms
+                d = fast.distance(flat, int(b), int(o))[0]  # overlapping: <= 0 (-1 without a depth)
+                assert lb[b, o] <= max(d, 0.0) + 1e-9, (b, o, lb[b, o], d)
+    for allowed_too in (False, True):
+        _same_bounds(
+            fast.coarse_bounds_batch(poses, allowed_too), ref.coarse_bounds_batch(poses, allowed_too)
+        )
+    rows = np.array([4, 0, 4, 2], dtype=np.int64)
+    for b in range(n_b):
+        _same_bounds(fast.fine_bounds_batch(poses, rows, b), ref.fine_bounds_batch(poses, rows, b))
+    assert fast.fine_bounds_batch(poses, np.zeros(0, dtype=np.int64), 0).shape == (0, len(obstacles))
+
+
+def _bodies() -> BodySet:
+    payload = PayloadGeometry(size=(0.45, 0.35, 0.5), T_tool_payload=np.eye(4))
+    return robot_bodies(Cabin8().collision_model(), payload)
+
+
+def test_the_numpy_route_gives_the_same_verdicts_and_reports(
+    worlds: tuple[CollisionWorld, CollisionWorld], robot: Cabin8
+) -> None:
+    """The numpy route decides states and motions as the compiled world does.
+
+    :class:`ReferenceWorld`: the obstacles' bounds by :class:`ReferenceObstacles`, poses by CasADi.
+    """
+    _, world = worlds
+    plan = world.obstacles
+    assert plan is not None
+    rng = np.random.default_rng(21)
+    obstacles = (*plan.obstacles, *_random_obstacles(rng, 3))
+    fast = CollisionWorld(robot, None, world.payload, obstacles=obstacles)
+    ref = ReferenceWorld(robot, None, world.payload, obstacles=obstacles)
+    assert isinstance(ref.obstacles, ReferenceObstacles)
+    qs = admissible_joints(robot, 80, seed=23)
+    verdicts, motions = set(), set()
+    for q_a, q_b in zip(qs[:-1], qs[1:], strict=True):
+        valid = fast.is_valid(q_a, 0.01)
+        verdicts.add(valid)
+        assert valid == ref.is_valid(q_a, 0.01)
+        assert fast.check_state(q_a, 0.01, all_contacts=True) == ref.check_state(q_a, 0.01, all_contacts=True)
+        q_b = q_a + 0.2 * (q_b - q_a)
+        got, want = fast.check_motion(q_a, q_b, 0.01), ref.check_motion(q_a, q_b, 0.01)
+        assert (got.valid, got.contacts) == (want.valid, want.contacts)
+        motions.add((got.valid, bool(got.contacts) and got.contacts[0].kind == "obstacle"))
+    assert verdicts == {True, False}
+    assert {(True, False), (False, True)} <= motions, motions  # valid ones, and ones an obstacle refuses

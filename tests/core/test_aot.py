@@ -19,6 +19,7 @@ import pytest
 
 from planner.collision.kernels import codes, entries
 from planner.collision.kernels.entries import EXTENSION, Kernels
+from planner.collision.obstacles import Obstacle
 from planner.collision.world import CollisionWorld
 from planner.core import aot
 from planner.robots.cabin8 import Cabin8
@@ -130,6 +131,69 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     assert any(r.valid for r in motions) and not all(r.valid for r in motions)
 
 
+def _obstacle_world(name: str) -> tuple[Any, CollisionWorld]:
+    """A suite scenario's world with obstacles about its start: rotated boxes and a mesh, a pair allowed."""
+    sc = load_scenario(SCENARIOS / f"{name}.yaml")
+    rng = np.random.default_rng(17)
+    T_tool = sc.robot.fk(sc.start_q)
+    obstacles = []
+    for i in range(4):
+        T = np.eye(4)
+        T[:3, :3] = np.linalg.qr(rng.normal(size=(3, 3)))[0] * [1.0, 1.0, -1.0]
+        T[:3, :3] *= np.sign(np.linalg.det(T[:3, :3]))
+        T[:3, 3] = T_tool[:3, 3] + rng.normal(0.0, 0.3, 3)
+        if i < 3:
+            obstacles.append(Obstacle.box(f"unit {i}", tuple(rng.uniform(0.05, 0.4, 3)), T))
+        else:
+            v = np.array([[0, 0, 0], [0.3, 0, 0], [0, 0.2, 0], [0, 0, 0.25]], dtype=float)
+            f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int64)
+            obstacles.append(Obstacle("fixture", T, vertices=v, faces=f))
+    allowed = frozenset({("payload", "unit 0")})
+    return sc, CollisionWorld(sc.robot, sc.cabin, sc.payload, obstacles=tuple(obstacles), allowed=allowed)
+
+
+def test_build_and_jit_give_the_same_obstacle_bounds(both: tuple[Kernels, Kernels]) -> None:
+    """The obstacle entries, and whole checks of a world with obstacles, equal on the build and the JIT."""
+    sc, world = _obstacle_world("tightbay-insert")
+    obs = world.obstacles
+    assert obs is not None
+    d = obs.kernel_data
+    qs = _states(sc, sc.robot, 30, seed=19)
+    n_b, m = len(world.names), len(world._kernel.c_lo)
+    poses, c = np.empty((len(qs), n_b, 13)), np.empty((len(qs), m))
+    world.kernels.packed_poses(qs, world._kernel, poses, c)
+    assert np.isnan(poses).any()  # the wild states: NaN where a link cannot close
+    built, jit = both
+    rng = np.random.default_rng(5)
+    refined = 0
+    for flat in poses:
+        for th in (np.full(n_b, -1.0), np.full(n_b, 0.05), np.full(n_b, np.inf), rng.uniform(0.0, 0.5, n_b)):
+            got = built.obstacle_bounds(flat, d, th)
+            _same(got, jit.obstacle_bounds(flat, d, th), "obstacle_bounds")
+            refined += int(np.any(got != built.obstacle_bounds(flat, d, np.full(n_b, -1.0))))
+    assert refined > 0  # the fine covers were used
+    for allowed_too in (False, True):
+        got = built.obstacle_coarse_batch(poses, d, allowed_too)
+        _same(got, jit.obstacle_coarse_batch(poses, d, allowed_too), "obstacle_coarse_batch")
+    rows = np.array([3, 0, 3, len(qs) - 1], dtype=np.int64)
+    for b in range(n_b):
+        _same(
+            built.obstacle_fine_batch(poses, rows, b, d), jit.obstacle_fine_batch(poses, rows, b, d), "fine"
+        )
+    reports: list[list[Any]] = []
+    for kernels in both:
+        world.kernels = world._motion.kernels = obs.kernels = kernels
+        got: list[Any] = []
+        for a, b in zip(qs[:-1], qs[1:], strict=True):
+            got.append(world.is_valid(a, 0.01))
+            got.append(world.check_state(a, 0.01, all_contacts=True))
+            got.append(world.check_motion(a, a + 0.2 * (b - a), 0.01))
+        reports.append(got)
+    world.kernels = world._motion.kernels = obs.kernels = entries.DEFAULT
+    assert reports[0] == reports[1]
+    assert any(c.kind == "obstacle" for r in reports[0] if hasattr(r, "contacts") for c in r.contacts)
+
+
 def test_build_and_jit_give_the_same_reference_speed() -> None:
     """The timing reference (forward-backward pass) on the rows of real jerk-limited stages: equal bits."""
     robot = Cabin8()
@@ -183,6 +247,19 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
     cases.append((lambda: built.packed_poses(q[None, :], d, poses, c), "poses"))
     flat = np.empty((1, len(world.names), 13))
     cases.append((lambda: built.cover_centres_batch(flat, d.fine.body), "cover"))
+    _, with_obstacles = _obstacle_world("aisle-transfer")
+    assert with_obstacles.obstacles is not None
+    od, th = with_obstacles.obstacles.kernel_data, np.zeros(len(with_obstacles.names))
+    at = np.zeros((1, len(with_obstacles.names), 13))
+    at[0, :, [0, 4, 8]] = 1.0
+    cases += [
+        (lambda: built.obstacle_bounds(at[0], od, th), None),  # the control: accepted
+        (lambda: built.obstacle_bounds(at[0], d, th), "d"),  # a world's data, not an obstacle set's
+        (lambda: built.obstacle_bounds(np.asfortranarray(at[0]), od, th), "poses"),
+        (lambda: built.obstacle_bounds(at[0], od, th.astype(np.float32)), "threshold"),
+        (lambda: built.obstacle_coarse_batch(at[0], od, False), "poses"),
+        (lambda: built.obstacle_fine_batch(at, np.zeros(1, dtype=np.int32), 0, od), "rows"),
+    ]
     for call, name in cases:
         if name is None:
             call()
@@ -297,6 +374,20 @@ def test_wrong_shapes_and_walk_states_are_refused_and_the_worlds_data_is_read_on
         (lambda: built.run_extent(np.stack([q, q]), 0, 1, np.ones(7), 0.1), "rho"),
         (lambda: built.first_inadmissible(q, 0.0 * q, 0, d), "first_inadmissible"),
     ]
+    _, with_obstacles = _obstacle_world("aisle-transfer")
+    assert with_obstacles.obstacles is not None
+    od, n_o = with_obstacles.obstacles.kernel_data, len(with_obstacles.names)
+    at = np.zeros((2, n_o, 13))
+    one = np.zeros(1, dtype=np.int64)
+    cases += [
+        (lambda: built.obstacle_bounds(at[0, :-1].copy(), od, np.zeros(n_o)), "poses"),  # a body short
+        (lambda: built.obstacle_bounds(at[0], od, np.zeros(n_o + 1)), "threshold"),
+        (lambda: built.obstacle_coarse_batch(np.zeros((2, 3, 13)), od, True), "poses"),
+        (lambda: built.obstacle_fine_batch(at, one + 2, 0, od), "obstacle_fine_batch"),  # no sample 2
+        (lambda: built.obstacle_fine_batch(at, one, n_o, od), "obstacle_fine_batch"),  # no body n_o
+    ]
+    for arr in (od.fbuf, od.ibuf):
+        assert not arr.flags.writeable
     for call, name in cases:
         with pytest.raises(ValueError, match=f"^{name}: "):
             call()

@@ -11,6 +11,8 @@ By concern, each module importing only those above it:
   buffers and read back by name (:class:`~.buffers.Packed`);
 * :mod:`.bounds` -- certified lower bounds from sphere covers (all at once or one by one) and certain
   contacts from the grid's upper bound;
+* :mod:`.obstacles` -- the obstacles' bounds (bounding spheres and fine covers against the obstacles'
+  bounding boxes), from an obstacle set's own packed data (:func:`~.buffers.obstacle_data`);
 * :mod:`.state` -- one state check in one call (poses, bounds, verdict code);
 * :mod:`.walk` -- the certified motion walk, resumable around the FCL probes that stay in Python.
 

@@ -307,3 +307,93 @@ def build(
         rho=np.ascontiguousarray(bodies.rho, dtype=np.float64),
         pair_rigid=np.ascontiguousarray(bodies.pair_rigid, dtype=np.bool_),
     )
+
+
+#: Integers before the obstacle data's int64 arrays: counts (bodies, obstacles, fine spheres).
+OBSTACLE_HEADER = 3
+
+
+class ObstaclePacked(NamedTuple):
+    """An obstacle set's kernel data by name (views of its packed buffers inside the kernels).
+
+    Each obstacle is bounded by a box (its own, or its mesh's bounding box); each body by its bounding
+    sphere (box: half-diagonal; capsule: radius + half its length) and by its fine sphere cover.
+    """
+
+    R: Array  # (O, 9) each bounding box's rotation in the base frame, row-major: R[o, 3 i + j] = R_ij
+    origin_local: Array  # (O, 3) the box centre p_o in its own axes, p_o R_o
+    half: Array  # (O, 3) half extents of the bounding boxes
+    capsule: IntArray  # (B,) 1: the body is a capsule
+    capsule_r: Array  # (B,) capsule radius (0 for boxes)
+    box_r: Array  # (B,) half the diagonal of a box body
+    active: IntArray  # (B, O) 1: the pair is checked, 0: allowed
+    local: Array  # (S, 3) fine cover: centre in the body frame (boxes)
+    frac: Array  # (S,) fraction of the capsule length along the body z axis (capsules)
+    radii: Array  # (S,)
+    start: IntArray  # (B + 1,) first sphere of each body, then S
+
+
+def pack_obstacles(data: ObstaclePacked) -> tuple[Array, IntArray]:
+    """(fbuf, ibuf) of an obstacle set's kernel data, in the layout ``packed.unpack_obstacles`` reads."""
+    d = data
+    header = [len(d.capsule), len(d.half), len(d.radii)]
+    ints = [np.array(header), d.capsule, d.active, d.start]
+    floats = [d.R, d.origin_local, d.half, d.capsule_r, d.box_r, d.local, d.frac, d.radii]
+    fbuf = np.ascontiguousarray(np.concatenate([np.asarray(f, dtype=np.float64).ravel() for f in floats]))
+    ibuf = np.ascontiguousarray(np.concatenate([np.asarray(i, dtype=np.int64).ravel() for i in ints]))
+    return fbuf, ibuf
+
+
+@dataclass(frozen=True, eq=False)
+class ObstacleKernelData:
+    """The packed constant data of an obstacle set, built once (:func:`obstacle_data`), read-only."""
+
+    fbuf: Array
+    ibuf: IntArray
+
+    def __post_init__(self) -> None:
+        """Both buffers have their entry types and the sizes their header implies, and are frozen."""
+        check_array(self.ibuf, "obstacle data ibuf", I8, 1)
+        b, o, s = (int(x) for x in self.ibuf[:OBSTACLE_HEADER])
+        check_array(self.ibuf, "obstacle data ibuf", I8, 1, shape=(OBSTACLE_HEADER + b + b * o + b + 1,))
+        check_array(self.fbuf, "obstacle data fbuf", F8, 1, shape=(15 * o + 2 * b + 5 * s,))
+        for arr in (self.fbuf, self.ibuf):
+            arr.setflags(write=False)
+
+    @cached_property
+    def n_bodies(self) -> int:
+        """B, the number of bodies."""
+        return int(self.ibuf[0])
+
+    @cached_property
+    def n_obstacles(self) -> int:
+        """O, the number of obstacles."""
+        return int(self.ibuf[1])
+
+
+def obstacle_data(
+    T_base_bound: Array, half: Array, shapes: tuple[Shape, ...], fine: Cover, active: BoolArray
+) -> ObstacleKernelData:
+    """The kernel data of obstacles bounded by boxes (T (O, 4, 4), half extents (O, 3)) and of the bodies.
+
+    ``fine``: the bodies' fine sphere cover (every body's spheres contiguous, in body order); ``active``
+    (B, O): the checked pairs.
+    """
+    R = np.ascontiguousarray(T_base_bound[:, :3, :3], dtype=np.float64)
+    p = np.ascontiguousarray(T_base_bound[:, :3, 3], dtype=np.float64)
+    fbuf, ibuf = pack_obstacles(
+        ObstaclePacked(
+            R=R.reshape(len(R), 9),
+            origin_local=np.einsum("oi,oij->oj", p, R),  # p_o R_o (O, 3)
+            half=np.asarray(half, dtype=np.float64).reshape(len(R), 3),
+            capsule=np.array([s.kind == "capsule" for s in shapes], dtype=np.int64),
+            capsule_r=np.array([s.radius for s in shapes], dtype=np.float64),
+            box_r=np.array([0.5 * float(np.linalg.norm(s.size)) for s in shapes], dtype=np.float64),
+            active=np.asarray(active, dtype=np.int64),
+            local=fine.local,
+            frac=fine.frac,
+            radii=fine.radii,
+            start=fine.bounds,
+        )
+    )
+    return ObstacleKernelData(fbuf, ibuf)

@@ -1,16 +1,18 @@
 """The collision kernels as Python calls: arguments checked, then the ahead-of-time build or numba's JIT.
 
-The kernels (:mod:`.state`, :mod:`.walk`, :mod:`.bounds`, compiled with the robot's pose kernel of
-:mod:`planner.robots.kernels`) are exported as one extension module, :data:`EXTENSION`, built once per
-install by :mod:`planner.core.aot` (``make`` runs ``python -m planner.collision.kernels.build``; a plan
-that finds no build makes it before its clock starts). A plan served by the build never imports numba;
-without a build (no cache folder, ``CABINPLAN_KERNELS=jit``, no C compiler) the same functions run under
-numba's JIT. Both give the same numbers, bit for bit (``tests/core/test_aot.py``).
+The kernels (:mod:`.state`, :mod:`.walk`, :mod:`.bounds`, :mod:`.obstacles`, compiled with the robot's
+pose kernel of :mod:`planner.robots.kernels`) are exported as one extension module, :data:`EXTENSION`,
+built once per install by :mod:`planner.core.aot` (``make`` runs ``python -m
+planner.collision.kernels.build``; a plan that finds no build makes it before its clock starts). A plan
+served by the build never imports numba; without a build (no cache folder, ``CABINPLAN_KERNELS=jit``, no C
+compiler) the same functions run under numba's JIT. Both give the same numbers, bit for bit
+(``tests/core/test_aot.py``).
 
 The build's entries do not check their arguments, so they are reached only through :class:`Kernels`: every
 array argument is checked for the dtype, number of dimensions, C order (and, for outputs, writability)
 of the entry's signature, every scalar converted; a world's constant arrays are checked once, when its
-:class:`~.buffers.KernelData` is built. A wrong argument raises ``TypeError`` naming it.
+:class:`~.buffers.KernelData` is built (an obstacle set's, its :class:`~.buffers.ObstacleKernelData`). A
+wrong argument raises ``TypeError`` naming it.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from planner.collision.kernels import codes
-from planner.collision.kernels.buffers import Cover, KernelData
+from planner.collision.kernels.buffers import Cover, KernelData, ObstacleKernelData
 from planner.core import aot
 from planner.core.aot import B1, F8, I8, Entry, check_array
 from planner.core.types import Array, BoolArray, IntArray
@@ -41,6 +43,8 @@ def _jit_module() -> ModuleType:
 #: Inputs of a world's constant data: packed buffers (floats, ints) and the flat clearance grid.
 _DATA = ("f8[1]", "i8[1]")
 _GRID = "f8[1]"
+#: Inputs of an obstacle set's constant data: its packed buffers (floats, ints).
+_OBSTACLES = ("f8[1]", "i8[1]")
 
 #: The collision kernels' extension: compiled from every module of this folder and the robots' kernels.
 EXTENSION = aot.Extension(
@@ -94,6 +98,9 @@ EXTENSION = aot.Extension(
             ("i8[1]w", "f8[1]w", *(["f8[1]"] * 5), *_DATA, _GRID, "i8[1]w", "f8[3]w", "f8[2]w", "f8[2]w"),
             "i8",
         ),
+        Entry("obstacle_bounds", ("f8[2]", *_OBSTACLES, "f8[1]"), "f8[2]w"),
+        Entry("obstacle_coarse_batch", ("f8[3]", *_OBSTACLES, "b1"), "f8[3]w"),
+        Entry("obstacle_fine_batch", ("f8[3]", "i8[1]", "i8", *_OBSTACLES), "f8[2]w"),
     ),
 )
 
@@ -101,6 +108,12 @@ EXTENSION = aot.Extension(
 def _data(d: object) -> KernelData:
     if not isinstance(d, KernelData):
         raise TypeError(f"d: KernelData expected, got {type(d).__name__}")
+    return d
+
+
+def _obstacles(d: object) -> ObstacleKernelData:
+    if not isinstance(d, ObstacleKernelData):
+        raise TypeError(f"d: ObstacleKernelData expected, got {type(d).__name__}")
     return d
 
 
@@ -319,6 +332,35 @@ class Kernels:
             check_array(cabin, "cabin", F8, 2, out=True, shape=(cap, b)),
             check_array(pairs, "pairs", F8, 2, out=True, shape=(cap, p)),
         )
+
+    def obstacle_bounds(self, poses: Array, d: ObstacleKernelData, threshold: Array) -> Array:
+        """:func:`.obstacles.obstacle_bounds`: bounds (B, O) at poses (B, 13), fine up to ``threshold``."""
+        d = _obstacles(d)
+        b = d.n_bodies
+        return self.module.obstacle_bounds(
+            check_array(poses, "poses", F8, 2, shape=(b, 13)),
+            d.fbuf,
+            d.ibuf,
+            check_array(threshold, "threshold", F8, 1, shape=(b,)),
+        )
+
+    def obstacle_coarse_batch(self, poses: Array, d: ObstacleKernelData, allowed_too: bool) -> Array:
+        """:func:`.obstacles.obstacle_coarse_batch`: coarse bounds (N, B, O) at poses (N, B, 13)."""
+        d = _obstacles(d)
+        poses = check_array(poses, "poses", F8, 3, shape=(None, d.n_bodies, 13))
+        return self.module.obstacle_coarse_batch(poses, d.fbuf, d.ibuf, bool(allowed_too))
+
+    def obstacle_fine_batch(self, poses: Array, rows: IntArray, b: int, d: ObstacleKernelData) -> Array:
+        """:func:`.obstacles.obstacle_fine_batch`: body b's fine bounds (n, O) at samples ``rows`` (n,)."""
+        d = _obstacles(d)
+        poses = check_array(poses, "poses", F8, 3, shape=(None, d.n_bodies, 13))
+        rows = check_array(rows, "rows", I8, 1)
+        n, b = poses.shape[0], int(b)
+        if len(rows) and not (0 <= int(rows.min()) and int(rows.max()) < n):
+            raise ValueError(f"obstacle_fine_batch: sample indices in [0, {n}) expected")
+        if not 0 <= b < d.n_bodies:
+            raise ValueError(f"obstacle_fine_batch: a body in [0, {d.n_bodies}) expected, got {b}")
+        return self.module.obstacle_fine_batch(poses, rows, b, d.fbuf, d.ibuf)
 
 
 #: The kernels every world uses: the ahead-of-time build when there is one, resolved on first use.

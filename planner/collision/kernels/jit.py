@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
+from planner.collision.kernels.obstacles import obstacle_bounds, obstacle_coarse_batch, obstacle_fine_batch
 from planner.collision.kernels.state import packed_check, packed_poses, packed_state
 from planner.collision.kernels.walk import (
     end_ratio,
@@ -24,6 +25,9 @@ __all__ = [
     "end_ratio",
     "first_inadmissible",
     "motion_walk",
+    "obstacle_bounds",
+    "obstacle_coarse_batch",
+    "obstacle_fine_batch",
     "packed_check",
     "packed_poses",
     "packed_state",

@@ -1,6 +1,7 @@
 """The compiled reading of a world's packed buffers (:func:`unpack`, the inverse of :func:`.buffers.pack`).
 
-The layout and the :class:`~.buffers.Packed` fields are in :mod:`.buffers`, which imports no numba.
+The layout and the :class:`~.buffers.Packed` fields are in :mod:`.buffers`, which imports no numba; so are
+an obstacle set's (:func:`unpack_obstacles`, the inverse of :func:`.buffers.pack_obstacles`).
 """
 
 from __future__ import annotations
@@ -9,7 +10,8 @@ import numpy as np
 from numba import njit
 
 from planner.collision.kernels.buffers import HEADER as _HEADER
-from planner.collision.kernels.buffers import Packed
+from planner.collision.kernels.buffers import OBSTACLE_HEADER as _OBSTACLE_HEADER
+from planner.collision.kernels.buffers import ObstaclePacked, Packed
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -82,4 +84,28 @@ def unpack(fbuf: np.ndarray, ibuf: np.ndarray) -> Packed:
         fbuf[f + 2 : f + 2 + n_con],
         fbuf[f + 2 + n_con : f + 2 + 2 * n_con],
         ratio_rows,
+    )
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def unpack_obstacles(fbuf: np.ndarray, ibuf: np.ndarray) -> ObstaclePacked:
+    """Views of an obstacle set's packed data (:func:`.buffers.pack_obstacles`'s layout), by name."""
+    n_b, n_o, n_s = ibuf[0], ibuf[1], ibuf[2]
+    o = _OBSTACLE_HEADER
+    capsule = ibuf[o : o + n_b]
+    active = ibuf[o + n_b : o + n_b + n_b * n_o].reshape((n_b, n_o))
+    start = ibuf[o + n_b + n_b * n_o : o + 2 * n_b + n_b * n_o + 1]
+    f = 15 * n_o
+    return ObstaclePacked(
+        fbuf[0 : 9 * n_o].reshape((n_o, 9)),
+        fbuf[9 * n_o : 12 * n_o].reshape((n_o, 3)),
+        fbuf[12 * n_o : f].reshape((n_o, 3)),
+        capsule,
+        fbuf[f : f + n_b],
+        fbuf[f + n_b : f + 2 * n_b],
+        active,
+        fbuf[f + 2 * n_b : f + 2 * n_b + 3 * n_s].reshape((n_s, 3)),
+        fbuf[f + 2 * n_b + 3 * n_s : f + 2 * n_b + 4 * n_s],
+        fbuf[f + 2 * n_b + 4 * n_s : f + 2 * n_b + 5 * n_s],
+        start,
     )
