@@ -7,7 +7,8 @@ install:
 * **Bays**: rack bays in the +x side wall (insertion along +x; the arm cannot point to -x) at distinct
   stations along the cabin (one per station), and with some probability one bay recessed into
   the far end wall (insertion along the rail, +z). Each bay is built around its unit's installed pose
-  with the drawn free space per side (12-40 mm), as the scenario generator builds its bays.
+  with the drawn free space per side (the clearance + 5 mm to 40 mm: the witnesses' extra, see
+  :func:`_free_range`), as the scenario generator builds its bays.
 * **Blocking pairs**: a *front* unit mounted in the aisle in front of a side bay, in the corridor its
   *deep* unit must pass through: installed first, the front unit blocks the deep unit's insertion (its
   pre-insertion pose overlaps the front unit), while the deep unit installed first leaves the front
@@ -250,11 +251,23 @@ def _panels_clear(
     )
 
 
+def _free_range(clearance: float) -> tuple[float, float]:
+    """The free space per side of a generated bay around its unit [m]: from the clearance + 5 mm on.
+
+    The scenario generator's range, cut below at the clearance + :data:`WITNESS_EXTRA_M`.
+    The planner keeps 2 mm beyond the requested clearance at a goal (its 1.5 mm slack and the 0.5 mm
+    motion margin) and a deflection-compensated goal's pose is exact to micrometres only: a bay with
+    12 mm free space for a 10 mm clearance sits on that edge (a generated cycle was refused at 11.9996 mm
+    of 12 mm required). The witnesses keep the same extra at the bay as at the dock.
+    """
+    return (max(FREE_RANGE_M[0], clearance + WITNESS_EXTRA_M), FREE_RANGE_M[1])
+
+
 def _side_bay(
     rng: np.random.Generator, robot: Cabin8, section: Section, u: _Unit, z: float, row: int, clearance: float
 ) -> None:
     """Place a side-wall bay at station ``z`` in ``row``: a reachable installed and pre-insertion pose."""
-    f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
+    f = tuple(float(np.round(rng.uniform(*_free_range(clearance)), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
     u.approach_m = float(np.round(recess + u.size[2] + rng.uniform(0.03, 0.08), 3))
     half = np.abs(u.R) @ (np.array(u.size) / 2 + 0.06)
@@ -290,7 +303,7 @@ def _front_of(rng: np.random.Generator, robot: Cabin8, deep: _Unit, u: _Unit) ->
 
 def _end_bay(rng: np.random.Generator, robot: Cabin8, u: _Unit, rail_max: float, clearance: float) -> None:
     """A bay recessed into the far end wall, insertion along +z, as far as the arm reaches."""
-    f = tuple(float(np.round(rng.uniform(*FREE_RANGE_M), 4)) for _ in range(5))
+    f = tuple(float(np.round(rng.uniform(*_free_range(clearance)), 4)) for _ in range(5))
     recess = float(np.round(rng.uniform(0.0, 0.03), 4))
     u.approach_m = float(np.round(recess + u.size[2] + rng.uniform(0.03, 0.08), 3))
     for _ in range(24):
@@ -453,7 +466,7 @@ def _witnesses(
     """
     e, up = u.R[:, 2], np.array([0.0, 1.0, 0.0])
     payload = u.payload()
-    # In its bay the unit has the drawn free space (12-40 mm) to the panels: the requested clearance there.
+    # In its bay the unit has the drawn free space (the clearance + 5 mm to 40 mm) to the panels.
     for what, p in (("bay", u.p_bay), ("pre-insertion", u.p_bay - u.approach_m * e)):
         if not any(bays.is_valid(q, clearance) for q in _reachable(robot, u, p)):
             raise Redraw(f"{u.kind} unit: no clear, holdable {what} configuration")
