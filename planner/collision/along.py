@@ -170,10 +170,13 @@ class AlongPath:
         #: Swept-hull queries of the figure (:mod:`.sweep`), and each task's body vertices (N, V, 3) for them.
         self.swept_queries = 0
         self._verts: dict[int, Array] = {}
-        #: The certificate's swept windows: each task's window length, and the sample before which a failed
-        #: window is not tried again.
+        #: The certificate's swept windows: each task's window length, the sample before which a failed
+        #: window is not tried again, and the (sample, task) entries a window was tried from: once each, so
+        #: that a piece a window leaves uncovered (its other end short) gets probes next, not the same
+        #: window again (which looped for ever on a generated cycle).
         self._window: dict[int, int] = {}
         self._no_sweep: dict[int, int] = {}
+        self._swept_from: set[tuple[int, int]] = set()
         self.probes_used = 0
         # Reach along each piece: the slope bound of the whole path (every piece's ratio stays below the
         # largest sample ratio plus the largest deviation of any piece), as the motion check computes it.
@@ -432,11 +435,12 @@ class AlongPath:
         bound of every sample's distance: the window's entries are raised to it; when v - need >= D_i / 2 for
         every piece i of the window, each is covered (the cover's test, s_i + s_{i+1} >= D_i). A window that
         does not cover is halved at once; when even the shortest fails, no window is tried again from a
-        sample inside it. Returns whether the window from k was covered.
+        sample inside it; and none twice from the same sample. Returns whether the window from k was covered.
         """
         w = self._window.get(t, MIN_SWEPT_RUN * 4)
-        if k < self._no_sweep.get(t, 0):
+        if k < self._no_sweep.get(t, 0) or (k, t) in self._swept_from:
             return False
+        self._swept_from.add((k, t))
         while True:
             j = min(self.n - 1, k + w - 1)
             if j - k + 1 < MIN_SWEPT_RUN:

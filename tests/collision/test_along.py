@@ -228,3 +228,45 @@ def test_an_obstacle_within_the_clearance_only_between_samples_is_refused(robot:
     assert not world.check_path(qs, clearance, GATE_MOTION_MARGIN_M).valid
     # Without the unit the same piece is certified.
     assert plain.along(qs).certify(clearance, plain.self_clearance, GATE_MOTION_MARGIN_M).valid
+
+
+def test_a_window_that_covers_its_own_pieces_but_not_the_one_before_it_ends_in_probes(
+    insertion: tuple[ResolvedScenario, CollisionWorld, np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A swept window from sample k + 1 that covers its pieces leaves piece k short: k + 1 is probed next.
+
+    The cover's loop once tried the same window again (and again): a generated cycle's gate never ended.
+    Here every window covers (a stubbed swept bound), piece k's own reach is larger than the window's
+    spare, and its start is probed already: the loop must move on to probes and exact distances and end.
+    """
+    from planner.collision.kernels.codes import BOUND, EXACT, PROBED
+
+    sc, plain, q = insertion
+    q = np.ascontiguousarray(q[:200])
+    unit = _beside(plain, q, 0.05, "unit X")[0]
+    world = CollisionWorld(sc.robot, sc.cabin, sc.payload, obstacles=(unit,))
+    along = world.along(q)
+    t, k, need = along.n_checked - 1, 50, 0.01
+    along.lower[:, t] = need + 1e-3
+    along.state[:, t] = BOUND
+    along.reach[:, t] = 1e-4
+    along.reach[k, t] = 0.01  # piece k needs 10 mm of spare between its ends
+    along.state[k, t] = PROBED
+    swept = []
+    monkeypatch.setattr(along, "swept_at", lambda i, j, task: swept.append(i) or need + 0.003)
+    probed: list[int] = []
+
+    def probe(s: int, task: int, need_m: float, arrays: object = None) -> None:
+        probed.append(s)
+        along.state[s, task] = PROBED
+
+    def exact(s: int, task: int, arrays: object = None) -> float:
+        along.state[s, task] = EXACT
+        along.lower[s, task] = need + 0.006  # both ends exact, 6 + 6 mm: piece k is covered
+        return need + 0.006
+
+    monkeypatch.setattr(along, "probe_at", probe)
+    monkeypatch.setattr(along, "exact_at", exact)
+    left = np.zeros(along.n - 1, dtype=bool)
+    along._cover_column(t, need, left)
+    assert swept.count(k + 1) == 1 and probed == [k + 1] and not left.any()
