@@ -129,7 +129,7 @@ def on_path_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     """``on_path``: every sample lies on the certified geometric path (when the planner gives it)."""
     if ctx.q is None or ctx.req.path_legs is None:
         return None
-    dev = path_deviation(ctx.q, ctx.req.path_legs)
+    dev = path_deviation(ctx.q, ctx.req.path_legs, ctx.req.path_leg_of)
     k = int(np.argmax(dev))
     return Check(
         "on_path",
@@ -426,7 +426,7 @@ def deflected_joints(
     from planner.kinematics.closed_form import redundant_family
 
     n = len(q)
-    idx = deflection_sample_indices(n)
+    idx = deflection_sample_indices(q)
     # Each distinct configuration once (a dwell repeats one): the same inputs give the same deflection.
     distinct, back = np.unique(q[idx], axis=0, return_inverse=True)
     x = stiffness_model(robot).deflection_along(distinct, payload, T_tool_payload)[back.ravel()]

@@ -59,7 +59,8 @@ def time_and_validate(
         )
         ctx.progress("validate", 0.9)
         with ctx.stage(f"validate_{attempt}"):
-            gate = validate_profile(profile, ctx.robot, ctx.world, req, ctx.dynamics)
+            sampled = dataclasses.replace(req, path_leg_of=ctx.leg_of)
+            gate = validate_profile(profile, ctx.robot, ctx.world, sampled, ctx.dynamics)
         if gate.passed:
             return profile, gate, timed
         last = gate

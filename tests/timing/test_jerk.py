@@ -168,6 +168,15 @@ def test_path_deviation_measures_the_distance_from_the_path(robot: Cabin8, gener
     off = q + 1e-5 * normal
     assert np.max(path_deviation(q, (generated,))) <= 1e-10
     np.testing.assert_allclose(path_deviation(off, (generated,)), 1e-5, rtol=1e-3)
+    # With each sample's leg: measured against that leg only (a sample of another leg is off the path).
+    other = JointPath((LinePiece(q[-1], q[-1] + 0.1, 0.1 * np.sqrt(8)),))
+    q_other = other.evaluate(np.linspace(0.0, other.length, 50))[0]
+    both = np.vstack([q, q_other])
+    mine = np.r_[np.zeros(len(q), dtype=np.int64), np.ones(len(q_other), dtype=np.int64)]
+    assert np.max(path_deviation(both, (generated, other), mine)) <= 1e-10
+    swapped = path_deviation(both, (generated, other), 1 - mine)
+    assert swapped[:100].min() > 1e-3 and swapped[-10:].min() > 1e-3
+    assert np.max(path_deviation(both, (generated, other))) <= 1e-10  # nearest leg: on the path
 
 
 def test_a_curvature_jump_is_crossed_within_the_jerk_limit(robot: Cabin8, home: np.ndarray) -> None:
