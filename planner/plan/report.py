@@ -47,14 +47,15 @@ def duration_report(ctx: PlanContext, profile: DriveProfile, line: GoalCandidate
 
 def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensation | None) -> Array | None:
     """Predicted payload-frame deflection along the profile into the report; (N, 6) or None."""
-    if ctx.robot.desc.stiffness is None:
-        return None
     sc = ctx.sc
+    if ctx.robot.desc.stiffness is None or not sc.deflection_series:
+        _goal_report(ctx, comp)
+        return None
     T_tool_payload = sc.payload.T_tool_payload if sc.payload is not None else np.eye(4)
     # The deflection is a smooth function of the configuration: predicted at a few hundred evenly spaced
     # samples (and the last) and interpolated in between, for the report and the plot.
     n = len(profile.joints)
-    idx = deflection_sample_indices(n)
+    idx = deflection_sample_indices(profile.joints)
     x_at = stiffness_model(ctx.robot).deflection_along(profile.joints[idx], ctx.payload, T_tool_payload)
     x = np.column_stack([np.interp(np.arange(n), idx, x_at[:, j]) for j in range(6)])
     tr, rot = np.linalg.norm(x[:, :3], axis=1), np.linalg.norm(x[:, 3:], axis=1)
@@ -73,6 +74,12 @@ def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensatio
             "rotation_rad": x_at[::every, 3:].tolist(),
         },
     }
+    _goal_report(ctx, comp)
+    return x
+
+
+def _goal_report(ctx: PlanContext, comp: Compensation | None) -> None:
+    """The compensated goal into the report (nominal and commanded poses, residuals), if compensated."""
     if comp is not None:
         doc = comp.to_dict()
         ctx.report["goal"] = {
@@ -82,4 +89,3 @@ def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensatio
             "residual_rad": comp.residual_rad,
             "iterations": doc["iterations"],
         }
-    return x

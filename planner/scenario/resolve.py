@@ -77,6 +77,9 @@ class ResolvedScenario:
             figure). False only for a cycle's legs inside :func:`planner.task.cycle.plan_cycle`, whose
             cycle gate certifies the same samples in the same world, with the same clearance and margin
             (:func:`planner.gate.cycle.validate_cycle`); True for every scenario a user gives.
+        deflection_series: Whether the plan predicts the deflection along its profile (the report's
+            ``deflection`` and :attr:`~planner.plan.pipeline.PlanResult.deflection`). False only for a
+            cycle's legs, whose results keep neither (the cycle gate predicts each leg's sag itself).
     """
 
     spec: Scenario
@@ -99,6 +102,7 @@ class ResolvedScenario:
     surface_deviation_m: float = 0.0
     payload_mesh: LoadedMesh | None = field(default=None, repr=False)
     gate_collision: bool = True
+    deflection_series: bool = True
 
     def world(self) -> CollisionWorld:
         """The collision world of this scenario: robot, payload, cabin and its obstacles."""

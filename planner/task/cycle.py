@@ -278,7 +278,9 @@ def _leg_of_cycle(cyc: ResolvedCycle, state: LegState, start_q: Array, **goal: A
     obstacles and allowed pair), with the same clearance and margin, rigid and sagging; the leg's own gate
     would certify them twice. A leg that fails there fails the cycle (never a weaker certificate).
     """
-    return dataclasses.replace(leg_scenario(cyc, state, start_q, **goal), gate_collision=False)
+    return dataclasses.replace(
+        leg_scenario(cyc, state, start_q, **goal), gate_collision=False, deflection_series=False
+    )
 
 
 def _leg_report(res: PlanResult) -> dict[str, Any]:

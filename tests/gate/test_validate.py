@@ -20,7 +20,7 @@ import pytest
 
 from planner.core.exceptions import InvalidInput
 from planner.gate.checks import GateReport, GateRequirements, validate_profile
-from planner.gate.requirements import requirements_for
+from planner.gate.requirements import DEFLECTION_STEP, deflection_sample_indices, requirements_for
 from planner.plan.pipeline import Planner, PlanResult
 from planner.robots.cabin8 import Cabin8
 from planner.scenario.resolve import ResolvedScenario, load_scenario
@@ -510,6 +510,29 @@ def test_deflected_joints_put_the_payload_where_it_sags_to(soft_dir: Path) -> No
         want = deflected_pose(sc.robot.fk(q[i]) @ sc.payload.T_tool_payload, x.twist)
         got = sc.robot.fk(q_def[i]) @ sc.payload.T_tool_payload
         np.testing.assert_allclose(got, want, atol=2e-6)
+    # Every sample: predicted at a subsample (by motion, not by index) and interpolated in between, the
+    # payload frame sits within 3 um of where the model puts it at that very sample.
+    x = stiffness_model(sc.robot).deflection_along(q, sc.payload.rigid_payload(), sc.payload.T_tool_payload)
+    T_pay = sc.robot.fk_batch(q) @ sc.payload.T_tool_payload
+    want_p = T_pay[:, :3, 3] + x[:, :3]
+    got_p = (sc.robot.fk_batch(q_def) @ sc.payload.T_tool_payload)[:, :3, 3]
+    assert float(np.linalg.norm(got_p - want_p, axis=1).max()) < 3e-6
+    assert len(deflection_sample_indices(q)) < len(q) / 4  # a subsample indeed
+
+
+def test_deflection_samples_follow_the_motion_not_the_clock() -> None:
+    rest = np.tile(np.linspace(0.0, 1.0, 8), (500, 1))
+    assert deflection_sample_indices(rest).tolist() == [0, 499]  # a dwell: its two ends
+    rail = rest.copy()
+    rail[:, 0] = np.linspace(0.0, 3.0, 500)  # the rail alone moves: the sag does not change
+    assert deflection_sample_indices(rail).tolist() == [0, 499]
+    line = rest.copy()
+    line[:, 4] += np.linspace(0.0, 0.02, 500)  # 20 mrad of theta3 in 500 samples: every 2 mrad
+    idx = deflection_sample_indices(line)
+    assert 10 <= len(idx) <= 12 and np.all(np.diff(line[idx, 4]) <= DEFLECTION_STEP + 0.02 / 499 + 1e-12)
+    long = rest.copy()
+    long[:, 4] += np.linspace(0.0, 3.0, 500)
+    assert len(deflection_sample_indices(long)) == 500  # fast motion: every sample (up to 300 even ones)
 
 
 def test_a_plate_the_rigid_robot_clears_but_the_sagging_payload_touches_is_refused(soft_dir: Path) -> None:
