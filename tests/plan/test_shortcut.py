@@ -99,3 +99,40 @@ def test_a_cut_that_is_not_certified_is_not_taken(scenario: ResolvedScenario) ->
     same, stats = cut_corners(scenario.robot, path, refuse)
     np.testing.assert_array_equal(same, path)
     assert stats.cuts == 0 and stats.checks == len(calls) > 0
+
+
+def test_an_optional_motion_gives_up_on_a_tight_walk_sooner_and_certifies_the_same_way() -> None:
+    """tightbay-insert's insertion approach needs the margin halved three times: an optional check refuses.
+
+    A cut is refused after OPTIONAL_RETRIES smaller margins (its refusal costs only time); the plan's own
+    motions keep every retry. Whatever passes is certified either way (the same walk, a margin >= 0.5 mm).
+    """
+    from planner.plan.context import PlanContext
+    from planner.plan.motion import MAX_RETRIES, MIN_MARGIN_M, OPTIONAL_RETRIES
+    from planner.plan.pipeline import Planner
+
+    sc = load_scenario(SCENARIOS / "tightbay-insert.yaml")
+    planner = Planner(sc)
+    res = planner.plan()
+    ctx: PlanContext = planner.ctx
+    c = ctx.clearances
+    w = res.waypoints
+    tight = [
+        (w[i], w[i + 1])
+        for i in range(len(w) - 1)
+        if certify_motion(ctx.world, w[i], w[i + 1], c.planner_m, c.motion_margin_m).margin_m
+        < c.motion_margin_m / 2**OPTIONAL_RETRIES
+    ]
+    assert tight, "no segment of the plan needed more than the optional retries"
+    for a, b in tight:
+        full = certify_motion(ctx.world, a, b, c.planner_m, c.motion_margin_m, MAX_RETRIES)
+        assert full.valid and full.margin_m >= MIN_MARGIN_M
+        assert not certify_motion(ctx.world, a, b, c.planner_m, c.motion_margin_m, OPTIONAL_RETRIES).valid
+        assert ctx.motion_ok(a, b) and not ctx.optional_motion_ok(a, b)
+    # A segment with room to spare passes both ways.
+    easy = next(
+        (w[i], w[i + 1])
+        for i in range(len(w) - 1)
+        if certify_motion(ctx.world, w[i], w[i + 1], c.planner_m, c.motion_margin_m, 0).valid
+    )
+    assert ctx.motion_ok(*easy) and ctx.optional_motion_ok(*easy)
