@@ -21,16 +21,17 @@ YAML_MEDIA_TYPES = ("application/yaml", "application/x-yaml", "text/yaml", "text
 JSON_MEDIA_TYPES = ("application/json",)
 
 
-class _NoAliasLoader(ScenarioYamlLoader):
-    """The scenario YAML loader without anchors or aliases."""
-
-    def compose_node(self, parent: Any, index: Any) -> Any:  # noqa: D102 (PyYAML's hook)
-        if self.check_event(yaml.AliasEvent):
-            event = self.peek_event()  # type: ignore[no-untyped-call]
+def _refuse_aliases(text: str) -> None:
+    """Raise a YAML error at the first alias of ``text`` (events only: libyaml's parser, nothing built)."""
+    for event in yaml.parse(text, Loader=ScenarioYamlLoader):
+        if isinstance(event, yaml.AliasEvent):
+            mark = event.start_mark  # libyaml's Mark: the same line and column as PyYAML's
             raise yaml.composer.ComposerError(
-                None, None, "aliases are not accepted in a scenario body", event.start_mark
+                None,
+                None,
+                "aliases are not accepted in a scenario body",
+                mark,  # type: ignore[arg-type]
             )
-        return super().compose_node(parent, index)
 
 
 def media_type(content_type: str | None) -> str:
@@ -60,7 +61,8 @@ def parse_body(raw: bytes, content_type: str | None) -> Any:
         raise malformed_body(f"request body: not UTF-8 text (invalid byte at offset {exc.start})") from None
     try:
         if is_yaml:
-            return yaml.load(text, Loader=_NoAliasLoader)  # a SafeLoader subclass
+            _refuse_aliases(text)
+            return yaml.load(text, Loader=ScenarioYamlLoader)  # a safe loader
         return json.loads(text, object_pairs_hook=unique_json_object)
     except json.JSONDecodeError as exc:
         raise malformed_body(

@@ -29,8 +29,13 @@ MAX_SCENARIO_BYTES = 1 << 20
 SCENARIO_EXTENSIONS: tuple[str, ...] = (".yaml", ".yml", ".json")
 
 
-class ScenarioYamlLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses duplicate keys and reads YAML 1.2 floats such as ``1e-3``."""
+#: libyaml's parser where PyYAML was built with it (the wheels are): 6-7x faster than the pure-Python one
+#: on a scenario-sized document; the constructor and resolver (duplicate keys, floats) stay Python's.
+_SAFE_LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class ScenarioYamlLoader(_SAFE_LOADER):  # type: ignore[valid-type,misc]
+    """Safe YAML loader that refuses duplicate keys and reads YAML 1.2 floats such as ``1e-3``."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Hashable, Any]:  # noqa: D102
         seen: set[Any] = set()
@@ -112,7 +117,7 @@ def read_document(path: Path, what: str = "scenario") -> object:
     try:
         if ext == ".json":
             return json.loads(text, object_pairs_hook=unique_json_object)
-        return yaml.load(text, Loader=ScenarioYamlLoader)  # a SafeLoader subclass
+        return yaml.load(text, Loader=ScenarioYamlLoader)  # a safe loader
     except json.JSONDecodeError as exc:
         why = f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
         raise _file_error(path, why, what) from None

@@ -179,11 +179,20 @@ def test_yaml_bodies_plan_the_same_scenario_as_json(idle: Service) -> None:
     )
     assert "invalid YAML at line" in bad["detail"]
     bomb = "a: &a [1, 2]\nb: [*a, *a]\n"
-    _problem(
+    refused = _problem(
         idle.client.post("/api/v1/plans", content=bomb, headers={**idle.h(), "Content-Type": "text/yaml"}),
         400,
         "malformed_body",
     )
+    assert "line 2, column 5: aliases are not accepted" in refused["detail"], refused["detail"]
+    twice = _problem(
+        idle.client.post(
+            "/api/v1/plans", content="name: a\nname: b\n", headers={**idle.h(), "Content-Type": "text/yaml"}
+        ),
+        400,
+        "malformed_body",
+    )
+    assert "duplicate key 'name'" in twice["detail"], twice["detail"]
     _problem(
         idle.client.post("/api/v1/plans", content=text, headers={**idle.h(), "Content-Type": "text/csv"}),
         415,
