@@ -409,7 +409,7 @@ def deflected_joints(
 ) -> tuple[Array, float]:
     """Configurations (N, 8) of the rigid robot whose payload frame sits where the real one sags to.
 
-    At up to :data:`DEFLECTION_SAMPLES` evenly spaced samples (and the last) the static gravity deflection
+    At the samples of :func:`deflection_sample_indices` (where the robot moves) the static gravity deflection
     of the payload frame (stiffness model, payload and links) displaces its pose; the closed-form
     redundant family on the sample's own (gamma, d5) gives the configuration that reaches the displaced
     pose, and the correction q' - q (smooth and millimetre-sized) is interpolated in between. The bodies

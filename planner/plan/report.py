@@ -52,8 +52,8 @@ def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensatio
         _goal_report(ctx, comp)
         return None
     T_tool_payload = sc.payload.T_tool_payload if sc.payload is not None else np.eye(4)
-    # The deflection is a smooth function of the configuration: predicted at a few hundred evenly spaced
-    # samples (and the last) and interpolated in between, for the report and the plot.
+    # The deflection is a smooth function of the configuration: predicted at up to a few hundred samples
+    # where the robot moves (deflection_sample_indices) and interpolated in between, for the report and plot.
     n = len(profile.joints)
     idx = deflection_sample_indices(profile.joints)
     x_at = stiffness_model(ctx.robot).deflection_along(profile.joints[idx], ctx.payload, T_tool_payload)
@@ -67,7 +67,7 @@ def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensatio
         "at_goal": StaticDeflection(x[-1, :3], x[-1, 3:]).to_dict(),
         "compensated": comp is not None,
         "stiffness": stiffness_provenance(sc),
-        # The predicted deflection along the trajectory, at up to 100 evenly spaced samples.
+        # The predicted deflection along the trajectory, at up to 100 of those samples.
         "along": {
             "t_s": profile.t[idx[::every]].round(4).tolist(),
             "translation_m": x_at[::every, :3].tolist(),
