@@ -51,8 +51,11 @@ def test_a_colliding_polished_point_does_not_hide_its_clear_neighbour(tmp_path: 
 
     Rejected candidates used to block their neighbours in the diversity rule, and with the clear points
     polished first the goal was refused as goal_in_collision although the generator's witness keeps 14.2
-    mm. The plan must find its goal and pass the gate.
+    mm. The plan must find its goal and pass the gate, and the goal candidates (the route the planner
+    takes when no approach line of fixed redundancy is clear, as on the machine where this was found: the
+    lines' polish depends on numpy's CPU-dispatched loops) must include a clear posture.
     """
+    from planner.plan.goals import goal_configurations
     from planner.plan.pipeline import run_stages
 
     sc, meta = _scenario(0, 7, tmp_path)
@@ -61,7 +64,13 @@ def test_a_colliding_polished_point_does_not_hide_its_clear_neighbour(tmp_path: 
     result = run_stages(ctx)
     assert result.gate.passed, result.gate.summary()
     assert result.gate.min_clearance_m >= sc.options.clearance_m
-    assert ctx.report["goal_candidates"]["found"] >= 1
+    assert sc.T_base_tool_goal is not None
+    cands, stats = goal_configurations(
+        ctx.world, sc.T_base_tool_goal, ctx.clearances.planner_m, ctx.forces, sc.start_u
+    )
+    assert cands, stats
+    for cand in cands:  # the exact distance, independently of the certified state check
+        assert ctx.world.min_distance(cand.q).distance_m >= ctx.clearances.planner_m
 
 
 def test_a_start_that_leaves_a_limit_when_sagging_is_refused_up_front(tmp_path: Path) -> None:
@@ -151,20 +160,39 @@ def test_an_insertion_inside_the_slack_band_is_refused_with_what_blocks_it(tmp_p
     witness keeps 10.8 mm. No motion can leave such a goal, so the approach is refused, and the refusal
     names the step that fails (the closest bodies against the 12 mm a motion needs), not a goal posture
     that was rejected anyway.
+
+    The goal postures' polish depends on the last bits of numpy's vector loops, which numpy picks by CPU:
+    on an AMD EPYC without AVX-512 (numpy's X86_V3 loops) one posture polishes to 12.0016 mm, just outside
+    the band, and its line is kept; with ``NPY_DISABLE_CPU_FEATURES=X86_V3`` the best keeps 11.96 mm and
+    the approach is refused. Either outcome is checked for what it claims: a kept line's goal keeps the
+    12 mm a motion needs (exact distance) and the plan passes the gate; a refusal names slide and cabin.
     """
     from planner.core.exceptions import ApproachInfeasible
+    from planner.plan.evidence import describe
     from planner.plan.motion import MIN_MARGIN_M
+    from planner.plan.pipeline import run_stages
 
     sc, meta = _scenario(1, 14, tmp_path)
     c = PlanContext.build(sc).clearances
     assert float(meta["witness_goal_distance_m"]) < c.requested_m + 0.002  # type: ignore[arg-type]
-    with pytest.raises(ApproachInfeasible) as info:
-        goal_targets(PlanContext.build(sc))
-    best = info.value.details["best"]
+    ctx = PlanContext.build(sc)
+    try:
+        _, lines = goal_targets(ctx)
+    except ApproachInfeasible as exc:
+        info = exc
+    else:
+        kept = [x.line for x in lines if x is not None and x.line is not None]
+        assert kept
+        for line in kept:
+            assert ctx.world.min_distance(line[-1]).distance_m >= c.planner_m + MIN_MARGIN_M
+        result = run_stages(PlanContext.build(sc))
+        assert result.gate.passed and result.gate.min_clearance_m >= c.requested_m
+        return
+    best = info.details["best"]
     assert best["cause"] == "clearance" and best["bodies"] == ["slide", "cabin"]
     assert best["required_m"] == pytest.approx(c.planner_m + MIN_MARGIN_M)
     assert c.planner_m <= best["distance_m"] < best["required_m"]
-    assert "slide 11.7 mm from the cabin at the goal, 12.0 mm required" in info.value.message
+    assert "at the goal" in describe(best) and describe(best) in info.message
 
 
 def test_a_compensation_refusal_names_what_blocks_each_rejected_goal(tmp_path: Path) -> None:
