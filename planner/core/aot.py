@@ -455,14 +455,27 @@ def check_array(
     raise TypeError(f"{name}: {what} C-contiguous {ndim}-D {dtype} array expected, got {got}")
 
 
-def main(ext: Extension) -> None:
-    """``python -m <builder module>``: build ``ext`` into the cache folder and print where.
+def main(ext: Extension, argv: list[str] | None = None) -> None:
+    """``python -m <builder module> [--reuse]``: build ``ext`` into the cache folder and print where.
 
-    Under the build lock of :func:`_build_in_subprocess` (which a plan's first-use build already holds
-    for its child, saying so in ``$CABINPLAN_AOT_LOCK_HELD``), so a build by hand and one at first use
-    never write at once.
+    ``--reuse`` (what ``make`` passes): a build of the same key already in the cache that loads is kept
+    (the key covers the kernel sources, the compiler, numpy, Python and the CPU: a new build would be the
+    same), and its path printed. Under the build lock of :func:`_build_in_subprocess` (which a plan's
+    first-use build already holds for its child, saying so in ``$CABINPLAN_AOT_LOCK_HELD``), so a build by
+    hand and one at first use never write at once.
     """
+    args = sys.argv[1:] if argv is None else argv
+    unknown = [a for a in args if a != "--reuse"]
+    if unknown:
+        raise SystemExit(f"usage: python -m <builder module> [--reuse] (unknown argument {unknown[0]!r})")
     place = native_build(ext)
+    if "--reuse" in args and place is not None:
+        try:
+            if load(ext) is not None:
+                sys.stdout.write(f"{place.path} (reused: built before with the same key)\n")
+                return
+        except ImportError as exc:  # a damaged file: built again below (the build replaces it)
+            log.warning("kernels %s: %s does not load (%s); building it again", ext.name, place.path, exc)
     if place is None or os.environ.get(LOCK_HELD_ENV) == "1":
         sys.stdout.write(f"{build(ext)}\n")
         return

@@ -337,7 +337,9 @@ def test_the_key_follows_the_sources(tmp_path: Path, monkeypatch: pytest.MonkeyP
     assert before != after and before is not None and before.parent == tmp_path / "native"
 
 
-def test_a_missing_build_is_built_at_first_use(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_missing_build_is_built_at_first_use(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     """No build in the cache folder: the first use builds it (a child process, under the lock), loads it."""
     monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("CABINPLAN_KERNELS", raising=False)
@@ -351,6 +353,26 @@ def test_a_missing_build_is_built_at_first_use(tmp_path: Path, monkeypatch: pyte
         np.full(2, 0.5), *rows, np.ones(3), implementation=aot.jit_kernels(acc_reference.EXTENSION)
     )
     assert x.tobytes() == jit.tobytes() and x[0] == x[-1] == 0.0
+
+    # ``make``'s build step (``--reuse``) keeps that build: same key, same file, nothing compiled.
+    mtime = lib.stat().st_mtime_ns
+    monkeypatch.setattr(aot, "build", lambda ext: pytest.fail("rebuilt a build of the same key"))
+    aot.main(acc_reference.EXTENSION, ["--reuse"])
+    assert "reused" in capsys.readouterr().out and lib.stat().st_mtime_ns == mtime
+    # A file of that key that does not load is built again; without --reuse the build always runs (this
+    # process has the file loaded: the dynamic loader would hand back the same library, so load raises).
+    built: list[str] = []
+    monkeypatch.setattr(aot, "build", lambda ext: built.append(ext.name) or lib)
+
+    def damaged(ext: aot.Extension, cpu: str | None = None) -> None:
+        raise ImportError("invalid ELF header")  # as a new process loading a damaged file would
+
+    monkeypatch.setattr(aot, "load", damaged)
+    aot.main(acc_reference.EXTENSION, ["--reuse"])
+    aot.main(acc_reference.EXTENSION, [])
+    assert built == [acc_reference.EXTENSION.name] * 2
+    with pytest.raises(SystemExit, match="unknown argument '--force'"):
+        aot.main(acc_reference.EXTENSION, ["--force"])
 
 
 def test_wrong_shapes_and_walk_states_are_refused_and_the_worlds_data_is_read_only(
