@@ -15,7 +15,7 @@ DEV_STAMP := $(VENV)/.installed-dev
 # in the cache -- same kernel sources, compiler, numpy, Python and CPU -- is reused; without a C compiler
 # plans use numba's JIT instead, README "Start-up").
 UV_VERSION := 0.13.9
-UV := $(BIN)/python -m uv pip install --quiet --python $(BIN)/python
+UV := $(BIN)/python -m uv pip install --quiet --compile-bytecode --python $(BIN)/python
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
