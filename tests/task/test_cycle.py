@@ -348,3 +348,35 @@ def test_a_cycle_passing_within_the_clearance_of_an_installed_unit_is_refused(
     assert not report.passed
     bad = [c for c in report.failures if c.name == "collision"]
     assert bad and "transit" in bad[0].detail and "unit X9" in bad[0].detail, bad
+
+
+def test_a_retract_leaving_a_tight_release_is_certified_as_walked_towards_it(
+    cycle: ResolvedCycle, planned: CycleResult
+) -> None:
+    """A certified walk needs its margin where it starts; a straight segment is certified either way.
+
+    A generated cycle's retract was refused: the slide 11.98 mm from the cabin at the release, 12 mm
+    needed to start a walk (the planner's clearance plus MIN_MARGIN_M), although the same segment walked
+    towards the release is certified with the full 5 mm margin. Here the example's retract, with the
+    clearance set 0.3 mm below the exact distance at its release (the slide and the installed unit, 20 mm),
+    which grows along the retract: a walk cannot start at the release, the segment is certified, and what
+    is certified holds at every one of 401 points by exact distances.
+    """
+    from planner.plan.motion import MIN_MARGIN_M, certify_motion
+
+    lt = next(x for x in planned.legs if x.name == "retract")
+    q_release, q_retract = (
+        planned.profile.joints[lt.sample_start - 1],
+        planned.profile.joints[lt.sample_end - 1],
+    )
+    world = leg_world(cycle, leg("retract"))
+    exact = world.clearance_profile(np.linspace(q_release, q_retract, 401), include_self=False)
+    clearance = float(exact[0]) - 0.0003
+    assert 0.0003 < MIN_MARGIN_M and int(np.argmin(exact)) == 0  # the release is the tightest point
+    leaving = world.check_motion(q_release, q_retract, clearance, 0.005)
+    assert not leaving.valid and leaving.t_fail == 0.0  # the walk cannot start there
+    assert certify_motion(world, q_release, q_retract, clearance, 0.005).valid
+    assert certify_motion(world, q_retract, q_release, clearance, 0.005).valid
+    # Closer than the clearance at the release: refused either way.
+    for a, b in ((q_release, q_retract), (q_retract, q_release)):
+        assert not certify_motion(world, a, b, float(exact[0]) + 0.0001, 0.005).valid
