@@ -17,12 +17,12 @@ the walk is run again with a margin below it, and so on: a motion whose true cle
 closer is refused with the state and the bodies that come closest.
 
 **Either way along.** The walk needs its margin at the state it leaves from; the state it arrives at is
-reached by the last step's bound and needs only the clearance. A segment that leaves a tight state (a
-retract from the release configuration an insertion arrived at, slide 11.98 mm from the cabin against the
-12 mm a walk leaving it needs) is therefore walked the other way when the walk fails at its very start:
-the segment is the same set of configurations, so a certificate of the reversed walk is a certificate of
-it. A generated cycle was refused that way (the insertion certified into the release configuration, the
-retract out of it not), while the reversed walk certifies it with the full 5 mm margin.
+reached by the last step's bound and needs only the clearance. A segment that no walk can leave (less than
+:data:`MIN_MARGIN_M` of spare clearance at its start) is walked the other way before it is refused: the
+segment is the same set of configurations, so a certificate of the reversed walk is a certificate of it.
+A generated cycle's retract was refused that way (slide 11.98 mm from the cabin at the release an
+insertion had arrived at, 12 mm needed to leave it), which the reversed walk certifies with the full 5 mm
+margin.
 """
 
 from __future__ import annotations
@@ -101,23 +101,24 @@ def certify_motion(
 ) -> AdaptiveMotion:
     """The certified walk q_a -> q_b with ``motion_margin``, retried with smaller margins near tight states.
 
-    See the module docstring (a walk that fails at its start is tried from ``q_b`` back to ``q_a``).
+    See the module docstring (a motion that no walk can leave ``q_a`` for, with less than MIN_MARGIN_M of
+    spare clearance there, is walked from ``q_b`` back to ``q_a`` before it is refused).
     Limits and margins of the parallel stage are never adapted: a limit failure is final. ``retries``:
     how many smaller margins at most (fewer for an optional motion; a motion certified with fewer is as
     certified, one refused may have been clear with a smaller margin).
     """
     margin = float(motion_margin)
-    for k in range(retries + 1):
+    for _ in range(retries + 1):
         rep = world.check_motion(q_a, q_b, clearance, margin)
         if rep.valid or rep.t_fail is None or any(c.kind == "limit" for c in rep.contacts):
             return AdaptiveMotion(rep, margin)
-        if k == 0 and rep.t_fail == 0.0:  # the start lacks the margin: walk towards it instead
-            back = world.check_motion(q_b, q_a, clearance, margin)
-            if back.valid:
-                return AdaptiveMotion(back, margin)
         q_fail = np.asarray(q_a, dtype=float) + rep.t_fail * (np.asarray(q_b, dtype=float) - q_a)
         spare = spare_clearance(world, q_fail, clearance)
         if spare <= MIN_MARGIN_M or margin <= MIN_MARGIN_M:
+            if rep.t_fail == 0.0 and spare >= 0.0:  # no walk can leave q_a: walk towards it instead
+                back = world.check_motion(q_b, q_a, clearance, float(motion_margin))
+                if back.valid:
+                    return AdaptiveMotion(back, float(motion_margin))
             return AdaptiveMotion(rep, margin, spare)
         margin = max(MIN_MARGIN_M, min(0.5 * margin, SPARE_FRACTION * spare))
     return AdaptiveMotion(rep, margin, spare)
