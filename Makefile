@@ -11,7 +11,7 @@ DEV_STAMP := $(VENV)/.installed-dev
 
 # The pins are installed by uv (pinned here; a wheel from PyPI, into the venv first): the same packages as
 # pip installs from the same lock files, in seconds instead of about a minute. Then the compiled kernels,
-# built ahead of time into the cache folder (about 60 s on a fresh machine; a build of the same key already
+# built ahead of time into the cache folder (about 65 s on a fresh machine; a build of the same key already
 # in the cache -- same kernel sources, compiler, numpy, Python and CPU -- is reused; without a C compiler
 # plans use numba's JIT instead, README "Start-up").
 UV_VERSION := 0.13.9
