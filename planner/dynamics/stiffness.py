@@ -57,6 +57,7 @@ stiffness document of the CLI and the API (payload and wrench inputs, the JSON r
 from __future__ import annotations
 
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -115,6 +116,19 @@ class LoadCase:
         """
         return _frame(self.T_tool_frame)
 
+    def key(self) -> bytes:
+        """The load case as bytes (payload inertia, frame, wrench, gravity): equal cases, equal keys."""
+        parts = [b"g1" if self.gravity else b"g0"]
+        if self.payload is not None:
+            pay = self.payload
+            parts += [np.float64(pay.mass).tobytes(), np.asarray(pay.com_tool, float).tobytes()]
+            parts.append(np.asarray(pay.inertia_tool, float).tobytes())
+        parts.append(b"T" + self.frame().tobytes())
+        if self.wrench is not None:
+            w = np.asarray(self.wrench, dtype=float)
+            parts.append(b"W" + repr(w.shape).encode() + w.tobytes())
+        return b"|".join(parts)
+
 
 # ------------------------------------------------------------------------------------------------ results
 @dataclass(frozen=True)
@@ -164,6 +178,10 @@ class StiffnessModel:
         self.k_drive = spec.drive_stiffness()
         self.masses = robot.desc.masses
         self.gravity = np.asarray(robot.desc.gravity_m_s2, dtype=float)
+        #: Deflections of single configurations already evaluated, by (q, load case): a cycle asks the same
+        #: ones several times (a load change's two sides in the plan, the gate and the events); the model
+        #: costs ~2 ms a call whatever the batch, so repeats are worth keeping (the last _MEMO of them).
+        self._memo: OrderedDict[bytes, Array] = OrderedDict()
 
     # ------------------------------------------------------------------ geometry
     def _beam(self, name: str, p0: Array, p1: Array, z_ref: Array, point: Array) -> Array:
@@ -305,6 +323,21 @@ class StiffnessModel:
             (N, 6): translation [m] and rotation [rad] of the frame origin, base frame.
         """
         q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        if q2.shape[0] != 1:
+            return self._deflections(q2, load)
+        key = q2.tobytes() + load.key()
+        hit = self._memo.get(key)
+        if hit is None:
+            hit = self._deflections(q2, load)
+            hit.flags.writeable = False
+            self._memo[key] = hit
+            if len(self._memo) > _MEMO:
+                self._memo.popitem(last=False)
+        else:
+            self._memo.move_to_end(key)
+        return hit.copy()
+
+    def _deflections(self, q2: Array, load: LoadCase) -> Array:
         n = q2.shape[0]
         P, elems, pts = self._elements(q2, load.frame())
         W = np.zeros((len(_LOAD_LEVEL_NAMES), n, 6))  # wrench at P of the loads at each level
@@ -351,6 +384,9 @@ class StiffnessModel:
         """Gravity deflection (N, 6) of the frame along a trajectory's joint samples (N, 8)."""
         return self.deflections(q_samples, LoadCase(payload, T_tool_frame))
 
+
+#: Single-configuration deflections a model keeps (:meth:`StiffnessModel.deflections`).
+_MEMO = 64
 
 #: Load levels, tip first; an element carries the loads at its own level and every more distal one.
 _LOAD_LEVEL_NAMES = ("rail", "O", "o3", "o4", "o6", "tip")

@@ -45,7 +45,7 @@ whole joint-space polyline, between samples included (:mod:`planner.collision.al
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -419,25 +419,47 @@ def deflected_joints(
     Returns:
         (q', the largest predicted payload-frame translation [m]).
     """
+    return deflected_joints_of(robot, [q], payload, T_tool_payload)[0]
+
+
+def deflected_joints_of(
+    robot: Cabin8, paths: Sequence[Array], payload: RigidPayload | None, T_tool_payload: Array
+) -> list[tuple[Array, float]]:
+    """:func:`deflected_joints` of several joint paths under the same load, the model evaluated once.
+
+    The stiffness model costs about as much for one configuration as for a hundred (numpy's per-call
+    overhead): a cycle's legs of the same load share one evaluation. Each path's result is the same as
+    its own :func:`deflected_joints` (the model is evaluated row by row).
+    """
     from scipy.spatial.transform import Rotation
 
     from planner.dynamics.stiffness import stiffness_model
     from planner.kinematics import chain
     from planner.kinematics.closed_form import redundant_family
 
-    n = len(q)
-    idx = deflection_sample_indices(q)
+    if not paths:
+        return []
+    idxs = [deflection_sample_indices(q) for q in paths]
     # Each distinct configuration once (a dwell repeats one): the same inputs give the same deflection.
-    distinct, back = np.unique(q[idx], axis=0, return_inverse=True)
-    x = stiffness_model(robot).deflection_along(distinct, payload, T_tool_payload)[back.ravel()]
-    T_pay = robot.fk_batch(q[idx]) @ T_tool_payload
+    picked = np.vstack([q[idx] for q, idx in zip(paths, idxs, strict=True)])
+    distinct, back = np.unique(picked, axis=0, return_inverse=True)
+    x_all = stiffness_model(robot).deflection_along(distinct, payload, T_tool_payload)[back.ravel()]
+    T_pay = robot.fk_batch(picked) @ T_tool_payload
     T_payload_tool = np.linalg.inv(T_tool_payload)
     T_def = T_pay.copy()  # the payload frames displaced by their small twists (as deflected_pose, batched)
-    T_def[:, :3, :3] = Rotation.from_rotvec(x[:, 3:]).as_matrix() @ T_pay[:, :3, :3]
-    T_def[:, :3, 3] += x[:, :3]
+    T_def[:, :3, :3] = Rotation.from_rotvec(x_all[:, 3:]).as_matrix() @ T_pay[:, :3, :3]
+    T_def[:, :3, 3] += x_all[:, :3]
     T_tool = T_def @ T_payload_tool
-    dq = redundant_family(robot.desc.serial_chain, T_tool, q[idx, chain.GAMMA], q[idx, chain.D5]) - q[idx]
-    dq[:, chain.THETA6] = np.arctan2(np.sin(dq[:, chain.THETA6]), np.cos(dq[:, chain.THETA6]))
-    steps = np.arange(n)
-    correction = np.column_stack([np.interp(steps, idx, dq[:, j]) for j in range(8)])
-    return q + correction, float(np.linalg.norm(x[:, :3], axis=1).max())
+    dq_all = redundant_family(robot.desc.serial_chain, T_tool, picked[:, chain.GAMMA], picked[:, chain.D5])
+    dq_all -= picked
+    dq_all[:, chain.THETA6] = np.arctan2(np.sin(dq_all[:, chain.THETA6]), np.cos(dq_all[:, chain.THETA6]))
+    out = []
+    start = 0
+    for q, idx in zip(paths, idxs, strict=True):
+        stop = start + len(idx)
+        dq, x = dq_all[start:stop], x_all[start:stop]
+        start = stop
+        steps = np.arange(len(q))
+        correction = np.column_stack([np.interp(steps, idx, dq[:, j]) for j in range(8)])
+        out.append((q + correction, float(np.linalg.norm(x[:, :3], axis=1).max())))
+    return out

@@ -51,7 +51,7 @@ from planner.dynamics.load_change import load_change
 from planner.dynamics.models import DriveDynamics, drive_dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.dynamics.stiffness import COMPENSATION_TOL_M, COMPENSATION_TOL_RAD
-from planner.gate.checks import deflected_joints, sagging_certificate
+from planner.gate.checks import deflected_joints, deflected_joints_of, sagging_certificate
 from planner.gate.drive_checks import Check, GateReport, drive_checks, ratio_check
 from planner.gate.requirements import (
     GATE_MOTION_MARGIN_M,
@@ -282,7 +282,8 @@ def _collision_checks(
     failures: list[Check] = []
     passes: list[_LegPass] = []
     worst_sag, exact, walked = 0.0, 0, 0
-    for leg in req.legs:
+    sagging = _sagging_legs(robot, q, req) if req.stiffness else {}
+    for k, leg in enumerate(req.legs):
         sl = leg.rows()
         rows = q[sl]
         first = sl.start
@@ -299,7 +300,7 @@ def _collision_checks(
         passes.append(_LegPass(leg, first, sl.stop - 1, along))
         if not req.stiffness:
             continue
-        q_def, sag = deflected_joints(robot, rows, leg.payload, req.T_tool_unit)
+        q_def, sag = sagging[k]
         worst_sag = max(worst_sag, sag)
         rep_def = sagging_certificate(leg.world, q_def, req.clearance_m, GATE_MOTION_MARGIN_M, along)
         exact += rep_def.exact_queries
@@ -333,6 +334,23 @@ def _collision_checks(
         figure,
         allowed,
     )
+
+
+def _sagging_legs(robot: Cabin8, q: Array, req: CycleRequirements) -> dict[int, tuple[Array, float]]:
+    """Each leg's sagging configurations under its load (:func:`deflected_joints`), by leg index.
+
+    The legs of one load share one evaluation of the stiffness model (:func:`deflected_joints_of`).
+    """
+    loads: list[RigidPayload | None] = []
+    for leg in req.legs:
+        if not any(leg.payload is x for x in loads):
+            loads.append(leg.payload)
+    out: dict[int, tuple[Array, float]] = {}
+    for load in loads:
+        ks = [k for k, leg in enumerate(req.legs) if leg.payload is load]
+        paths = [q[req.legs[k].rows()] for k in ks]
+        out.update(zip(ks, deflected_joints_of(robot, paths, load, req.T_tool_unit), strict=True))
+    return out
 
 
 def _cycle_clearance(passes: list[_LegPass]) -> CycleClearance | None:

@@ -211,6 +211,39 @@ def test_deflection_along_is_the_pointwise_deflection(model: StiffnessModel, sam
         np.testing.assert_allclose(along[i], d.twist, rtol=1e-12, atol=1e-18)
 
 
+def test_a_configuration_asked_again_gets_the_same_numbers_and_its_own_copy(
+    robot: Cabin8, samples: np.ndarray
+) -> None:
+    """Single configurations are remembered by (q, load case): the same bits, never a shared array.
+
+    Every part of the load case tells cases apart (payload, its centre of mass, frame, wrench, gravity),
+    and the remembered answer is the batch's row (the model is evaluated row by row).
+    """
+    model = StiffnessModel(robot)
+    q = samples[5]
+    heavier_back = RigidPayload(PAYLOAD.mass, PAYLOAD.com_tool + [0.0, 0.0, 0.05], PAYLOAD.inertia_tool)
+    push = np.array([0.0, 0.0, 80.0, 0.0, 0.0, 0.0])
+    cases = [
+        LoadCase(),
+        LoadCase(PAYLOAD),
+        LoadCase(heavier_back),
+        LoadCase(PAYLOAD, GRASP),
+        LoadCase(PAYLOAD, GRASP, push),
+        LoadCase(PAYLOAD, GRASP, push, gravity=False),
+    ]
+    first = [model.deflections(q, case) for case in cases]
+    assert len({f.tobytes() for f in first}) == len(cases)  # no two cases share an answer
+    batch = [model.deflections(samples, case)[5] for case in cases]
+    for case, f, row in zip(cases, first, batch, strict=True):
+        again = model.deflections(q[None], case)
+        assert np.array_equal(again, f) and np.array_equal(again[0], row)
+        again[:] = 0.0  # the caller's copy
+        assert np.array_equal(model.deflections(q, case), f)
+    for i in range(200):  # many configurations later the answers are still the model's
+        model.deflection(samples[i % 50] + 1e-3 * (i // 50), PAYLOAD)
+    assert np.array_equal(model.deflections(q, cases[3]), first[3])
+
+
 # --------------------------------------------------------------------------------------- compensation
 def _goal(robot: Cabin8) -> tuple[np.ndarray, np.ndarray]:
     q = robot.joints_from_drives(robot.home_drives)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
+import itertools
 import json
 from collections.abc import Callable
 from pathlib import Path
@@ -518,6 +519,24 @@ def test_deflected_joints_put_the_payload_where_it_sags_to(soft_dir: Path) -> No
     got_p = (sc.robot.fk_batch(q_def) @ sc.payload.T_tool_payload)[:, :3, 3]
     assert float(np.linalg.norm(got_p - want_p, axis=1).max()) < 3e-6
     assert len(deflection_sample_indices(q)) < len(q) / 4  # a subsample indeed
+
+
+def test_legs_of_one_load_share_one_evaluation_with_each_legs_own_numbers(soft_dir: Path) -> None:
+    """deflected_joints_of over a profile cut in legs gives, bit for bit, each leg's deflected_joints."""
+    from planner.gate.checks import deflected_joints, deflected_joints_of
+
+    sc = _carry(1.3, soft_dir)
+    q = Planner(sc).plan().profile.joints
+    assert sc.payload is not None
+    load, T = sc.payload.rigid_payload(), sc.payload.T_tool_payload
+    cuts = [0, 1, 40, len(q) // 2, len(q) // 2 + 1, len(q)]  # a one-sample leg, a rest, the rest of it
+    legs = [q[a : max(b, a + 1)] for a, b in itertools.pairwise(cuts)]
+    legs.append(np.repeat(q[7:8], 30, axis=0))  # a dwell: one configuration repeated
+    together = deflected_joints_of(sc.robot, legs, load, T)
+    for leg, (q_def, sag) in zip(legs, together, strict=True):
+        alone, sag_alone = deflected_joints(sc.robot, leg, load, T)
+        assert q_def.shape == leg.shape and np.array_equal(q_def, alone) and sag == sag_alone
+    assert deflected_joints_of(sc.robot, [], load, T) == []
 
 
 def test_deflection_samples_follow_the_motion_not_the_clock() -> None:
