@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import weakref
 from functools import cache
 from typing import Generic, TypeVar
 
@@ -84,13 +85,31 @@ def _cabin_grid(sha256: str, vertices_bytes: bytes, faces_bytes: bytes, step: fl
 _CARRIAGE_TABLES: dict[tuple[str, str, float, float], tuple[float, float, Array]] = {}
 
 
+#: The geometry key and digest of each loaded cabin (the mesh object's arrays are read-only).
+_CABIN_KEYS: weakref.WeakKeyDictionary[LoadedMesh, tuple[tuple[str, bytes, bytes], str]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
 def cabin_key(cabin: LoadedMesh) -> tuple[str, bytes, bytes]:
-    """The cache key of a cabin's geometry: (content hash + pose, vertices, faces) as loaded."""
-    return (
-        cabin.sha256 + cabin.T_base_mesh.tobytes().hex(),
-        cabin.vertices.tobytes(),
-        cabin.faces.astype(np.int64).tobytes(),
-    )
+    """The cache key of a cabin's geometry: (content hash + pose, vertices, faces) as loaded.
+
+    Computed once per loaded mesh (the bytes of a large cabin cost a copy and a hash each time).
+    """
+    return _cabin_entry(cabin)[0]
+
+
+def _cabin_entry(cabin: LoadedMesh) -> tuple[tuple[str, bytes, bytes], str]:
+    """(:func:`cabin_key`, the key's one-line digest: content hash and pose, then the arrays' SHA-256)."""
+    entry = _CABIN_KEYS.get(cabin)
+    if entry is None:
+        key = (
+            cabin.sha256 + cabin.T_base_mesh.tobytes().hex(),
+            cabin.vertices.tobytes(),
+            cabin.faces.astype(np.int64).tobytes(),
+        )
+        entry = _CABIN_KEYS[cabin] = (key, key[0] + hashlib.sha256(key[1] + key[2]).hexdigest())
+    return entry
 
 
 class CollisionWorld(Generic[RobotT]):
@@ -138,12 +157,12 @@ class CollisionWorld(Generic[RobotT]):
         self._n_bodies = len(self.names)
         self._grid: ClearanceGrid | None = None
         self._carriage_table: tuple[float, float, Array] | None = None
-        key = cabin_key(cabin) if cabin is not None else None
-        self._probes = Probes(self.bodies, cabin_bvh(*key) if key is not None else None)
-        if key is not None:
-            self._grid = _cabin_grid(*key, grid_step_m)
+        entry = _cabin_entry(cabin) if cabin is not None else None
+        self._probes = Probes(self.bodies, cabin_bvh(*entry[0]) if entry is not None else None)
+        if entry is not None:
+            self._grid = _cabin_grid(*entry[0], grid_step_m)
             if self.model.rail_body is not None:
-                self._carriage_table = self._carriage_table_of(key)
+                self._carriage_table = self._carriage_table_of(entry[1])
         self._kernel = buffers.build(
             self.model, self.bodies, self._T_tool_box, self._grid, self._carriage_table
         )
@@ -161,7 +180,7 @@ class CollisionWorld(Generic[RobotT]):
         if allowed and not obstacles:
             raise InvalidInput("allowed: pairs given without obstacles", field="allowed")
 
-    def _carriage_table_of(self, key: tuple[str, bytes, bytes]) -> tuple[float, float, Array]:
+    def _carriage_table_of(self, cabin_digest: str) -> tuple[float, float, Array]:
         """The rail body's clearance table along the rail, built once per cabin, body shape and rail.
 
         The rail body (cabin8: the carriage) moves with joint 0 alone. Its table depends on the cabin's
@@ -172,7 +191,7 @@ class CollisionWorld(Generic[RobotT]):
         carriage = self.names.index(self.model.rail_body)
         lo, hi = self.model.rail_range
         table_key = (
-            key[0] + hashlib.sha256(key[1] + key[2]).hexdigest(),
+            cabin_digest,
             repr(self.bodies.shapes[carriage]),
             lo,
             hi,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
@@ -53,8 +54,12 @@ class Shape:
         serves every length up to ``length`` (a capsule between two frames may stretch with a joint): with
         n + 1 spheres the spacing is at most length / n and the radius sqrt(r^2 + (length / 2n)^2) covers
         the swept disc between. A box is split into cells of at most ``cell`` [m] per side, one sphere
-        around each.
+        around each. Computed once per shape and cell (every collision world asks); the arrays are
+        read-only.
         """
+        return _sphere_cover(self, float(cell))
+
+    def _sphere_cover(self, cell: float) -> tuple[Array, Array]:
         if self.kind == "capsule":
             n = max(1, int(np.ceil(self.length / max(self.radius, 1e-3))))
             t = np.linspace(-0.5, 0.5, n + 1)
@@ -74,6 +79,14 @@ class Shape:
         if self.kind == "box":
             return 0.5 * float(np.linalg.norm(self.size))
         return self.radius + self.length / 2
+
+
+@lru_cache(maxsize=1024)
+def _sphere_cover(shape: Shape, cell: float) -> tuple[Array, Array]:
+    centres, radii = shape._sphere_cover(cell)
+    centres.flags.writeable = False
+    radii.flags.writeable = False
+    return centres, radii
 
 
 class Admissibility(Protocol):

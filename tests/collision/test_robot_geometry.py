@@ -79,3 +79,30 @@ def test_a_model_without_a_rail_body_gives_the_same_verdicts(robot: Cabin8) -> N
 def test_a_robot_without_collision_geometry_is_refused() -> None:
     with pytest.raises(InvalidInput, match="has no collision geometry"):
         CollisionWorld(Pprs6())
+
+
+def test_sphere_covers_and_cabin_keys_are_computed_once_per_shape_and_mesh() -> None:
+    """Every world asks for the same covers and the same cabin key: built once, shared read-only."""
+    from planner.collision.world import cabin_key
+    from planner.robots.geometry import Shape
+
+    box = Shape("box", (0.31, 0.2, 0.12))
+    centres, radii = box.sphere_cover(0.1)
+    again = Shape("box", (0.31, 0.2, 0.12)).sphere_cover(0.1)
+    assert again[0] is centres and again[1] is radii
+    with pytest.raises(ValueError):
+        centres[0, 0] = 1.0
+    # The cover is the box's: 4 x 2 x 2 cells of at most 0.1 m, one sphere around each.
+    assert centres.shape == (16, 3) and np.allclose(radii, 0.5 * np.linalg.norm([0.31 / 4, 0.1, 0.06]))
+    points = np.random.default_rng(3).uniform(-1.0, 1.0, (2000, 3)) * np.array([0.155, 0.1, 0.06])
+    inside = np.linalg.norm(points[:, None, :] - centres[None], axis=2) <= radii[None]
+    assert inside.any(axis=1).all()  # the union of the spheres contains the box
+    assert box.sphere_cover(0.2)[0].shape == (2, 3)  # another cell, another cover (2 x 1 x 1)
+    mesh = load_mesh(MESHES / "cabin-aisle.stl", units="m")
+    key = cabin_key(mesh)
+    assert cabin_key(mesh) is key
+    assert key[1] == mesh.vertices.tobytes() and key[2] == mesh.faces.astype(np.int64).tobytes()
+    moved = np.eye(4)
+    moved[0, 3] = 0.5
+    other = load_mesh(MESHES / "cabin-aisle.stl", units="m", pose=moved)
+    assert cabin_key(other)[0] != key[0]  # the same file at another pose is another geometry
