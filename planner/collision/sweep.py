@@ -24,10 +24,12 @@ nothing (``-inf``).
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import fcl
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from planner.core.types import Array
@@ -73,13 +75,32 @@ def pose_offsets(poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...]) -> A
     A box's distance to anything fixed, and a capsule's (its axis segment's less its radius), differ by no
     more between the two poses.
     """
+    box, half = _box_halves(shapes)
     d = poses_b - poses_a
-    dp = np.sqrt(np.sum(d[:, :, 9:12] ** 2, axis=2))
+    sq = d * d
+    # The sums written out in the order numpy's own reductions add (pairwise over the 9 entries of R, in
+    # sequence over 3): the same bits as np.sum, at less than half its cost on these strided columns.
+    dp = np.sqrt((sq[..., 9] + sq[..., 10]) + sq[..., 11])
+    r2 = ((sq[..., 0] + sq[..., 1]) + (sq[..., 2] + sq[..., 3])) + (
+        (sq[..., 4] + sq[..., 5]) + (sq[..., 6] + sq[..., 7])
+    )
+    r2 += sq[..., 8]
+    dR = np.sqrt(r2)  # Frobenius norm >= spectral norm
+    dzl = poses_b[..., 6:9] * poses_b[..., 12:13]
+    dzl -= poses_a[..., 6:9] * poses_a[..., 12:13]
+    dzl *= dzl
+    dz = 0.5 * np.sqrt((dzl[..., 0] + dzl[..., 1]) + dzl[..., 2])
+    return dp + np.where(box[None, :], dR * half[None, :], dz)
+
+
+@lru_cache(maxsize=256)
+def _box_halves(shapes: tuple[Shape, ...]) -> tuple[NDArray[np.bool_], Array]:
+    """(which bodies are boxes, each box's half-diagonal [m], 0 for a capsule) of a world's shapes."""
     box = np.array([s.kind == "box" for s in shapes])
     half = np.array([0.5 * float(np.linalg.norm(s.size)) if s.kind == "box" else 0.0 for s in shapes])
-    dR = np.sqrt(np.sum(d[:, :, :9] ** 2, axis=2))  # Frobenius norm >= spectral norm
-    dzl = poses_b[:, :, 6:9] * poses_b[:, :, 12:13] - poses_a[:, :, 6:9] * poses_a[:, :, 12:13]
-    return dp + np.where(box[None, :], dR * half[None, :], 0.5 * np.sqrt(np.sum(dzl**2, axis=2)))
+    box.flags.writeable = False
+    half.flags.writeable = False
+    return box, half
 
 
 def pose_steps(poses: Array, shapes: tuple[Shape, ...]) -> Array:

@@ -6,7 +6,13 @@ import fcl
 import numpy as np
 import trimesh
 
-from planner.collision.sweep import body_vertices, relative_poses, shape_object, swept_bound
+from planner.collision.sweep import (
+    body_vertices,
+    pose_offsets,
+    relative_poses,
+    shape_object,
+    swept_bound,
+)
 from planner.robots.geometry import Shape
 
 BOX = Shape("box", (0.3, 0.2, 0.1))
@@ -76,3 +82,38 @@ def test_curved_runs_and_pairs_are_bounded_from_below_at_every_sample() -> None:
             v = swept_bound(body_vertices(rel, shape), shape, target)
             other = fcl.CollisionObject(fcl.Box(*BOX.size), fcl.Transform(Rb, pb[0, 9:12]))
             assert v <= min(_exact(shape, p, other) for p in poses_a) + 1e-12
+
+
+def test_pose_offsets_bound_every_vertex_move_and_are_the_plain_formula_bit_for_bit() -> None:
+    """Each body's offset bounds how far any of its vertices moves; the written-out sums change no bit.
+
+    The plain formula: |dp| + |dR|_F h (a box, h its half-diagonal) or |dp| + |d(z L)| / 2 (a capsule),
+    summed by np.sum.
+    """
+    rng = np.random.default_rng(11)
+    shapes = (BOX, CAPSULE, Shape("box", (0.05, 0.6, 0.2)))
+    n = 300
+    poses_a = np.empty((n, len(shapes), 13))
+    poses_b = np.empty_like(poses_a)
+    for k in range(n):
+        for b in range(len(shapes)):
+            R = _rotation(rng)
+            p = rng.normal(size=3)
+            poses_a[k, b] = _pose(R, p, 0.3 + 0.1 * rng.random())
+            step = trimesh.transformations.rotation_matrix(0.05 * rng.random(), rng.normal(size=3))[:3, :3]
+            poses_b[k, b] = _pose(step @ R, p + 0.01 * rng.normal(size=3), 0.3 + 0.1 * rng.random())
+    got = pose_offsets(poses_a, poses_b, shapes)
+    d = poses_b - poses_a
+    half = np.array([0.5 * np.linalg.norm(s.size) if s.kind == "box" else 0.0 for s in shapes])
+    dzl = poses_b[:, :, 6:9] * poses_b[:, :, 12:13] - poses_a[:, :, 6:9] * poses_a[:, :, 12:13]
+    plain = np.sqrt(np.sum(d[:, :, 9:12] ** 2, axis=2)) + np.where(
+        np.array([s.kind == "box" for s in shapes])[None, :],
+        np.sqrt(np.sum(d[:, :, :9] ** 2, axis=2)) * half[None, :],
+        0.5 * np.sqrt(np.sum(dzl**2, axis=2)),
+    )
+    assert np.array_equal(got, plain)
+    for b, shape in enumerate(shapes):
+        moved = np.linalg.norm(
+            body_vertices(poses_b[:, b], shape) - body_vertices(poses_a[:, b], shape), axis=2
+        )
+        assert np.all(moved.max(axis=1) <= got[:, b] + 1e-15)
