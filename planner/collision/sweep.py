@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError
 
+from planner.collision.kernels.entries import DEFAULT as KERNELS
 from planner.core.types import Array
 from planner.robots.geometry import Shape
 
@@ -76,21 +77,8 @@ def pose_offsets(poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...]) -> A
     more between the two poses.
     """
     box, half = _box_halves(shapes)
-    d = poses_b - poses_a
-    sq = d * d
-    # The sums written out in the order numpy's own reductions add (pairwise over the 9 entries of R, in
-    # sequence over 3): the same bits as np.sum, at less than half its cost on these strided columns.
-    dp = np.sqrt((sq[..., 9] + sq[..., 10]) + sq[..., 11])
-    r2 = ((sq[..., 0] + sq[..., 1]) + (sq[..., 2] + sq[..., 3])) + (
-        (sq[..., 4] + sq[..., 5]) + (sq[..., 6] + sq[..., 7])
-    )
-    r2 += sq[..., 8]
-    dR = np.sqrt(r2)  # Frobenius norm >= spectral norm
-    dzl = poses_b[..., 6:9] * poses_b[..., 12:13]
-    dzl -= poses_a[..., 6:9] * poses_a[..., 12:13]
-    dzl *= dzl
-    dz = 0.5 * np.sqrt((dzl[..., 0] + dzl[..., 1]) + dzl[..., 2])
-    return dp + np.where(box[None, :], dR * half[None, :], dz)
+    # Compiled (:mod:`.kernels.offsets`): one pass instead of numpy's dozen temporaries, the same bits.
+    return KERNELS.pose_offsets(np.ascontiguousarray(poses_a), np.ascontiguousarray(poses_b), box, half)
 
 
 @lru_cache(maxsize=256)
@@ -121,13 +109,7 @@ def hull_deviation(verts: Array) -> float:
 
     Over every sample s and vertex v of ``verts`` (n, V, 3).
     """
-    a, b = verts[0], verts[-1]
-    ab = b - a  # (V, 3)
-    den = (ab * ab).sum(axis=1)
-    rel = verts - a[None]
-    t = (rel * ab[None]).sum(axis=2) / np.where(den > 0.0, den, 1.0)[None]
-    off = rel - np.clip(t, 0.0, 1.0)[..., None] * ab[None]
-    return float(np.sqrt(np.max((off * off).sum(axis=2))))
+    return KERNELS.hull_deviation(np.ascontiguousarray(verts))  # compiled: :mod:`.kernels.offsets`
 
 
 def hull_object(verts: Array, shape: Shape) -> fcl.CollisionObject:

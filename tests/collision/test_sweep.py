@@ -8,6 +8,7 @@ import trimesh
 
 from planner.collision.sweep import (
     body_vertices,
+    hull_deviation,
     pose_offsets,
     relative_poses,
     shape_object,
@@ -117,3 +118,19 @@ def test_pose_offsets_bound_every_vertex_move_and_are_the_plain_formula_bit_for_
             body_vertices(poses_b[:, b], shape) - body_vertices(poses_a[:, b], shape), axis=2
         )
         assert np.all(moved.max(axis=1) <= got[:, b] + 1e-15)
+
+
+def test_hull_deviation_is_the_largest_distance_from_the_chords_bit_for_bit() -> None:
+    """The compiled deviation is the plain numpy formula's, bit for bit, and a straight run's is zero (to rounding)."""
+    rng = np.random.default_rng(5)
+    for n, v in ((1, 8), (2, 2), (7, 8), (300, 8)):
+        verts = np.cumsum(rng.normal(0.0, 0.01, (n, v, 3)), axis=0)
+        a, b = verts[0], verts[-1]
+        ab = b - a
+        den = (ab * ab).sum(axis=1)
+        rel = verts - a[None]
+        t = (rel * ab[None]).sum(axis=2) / np.where(den > 0.0, den, 1.0)[None]
+        off = rel - np.clip(t, 0.0, 1.0)[..., None] * ab[None]
+        assert hull_deviation(verts) == float(np.sqrt(np.max((off * off).sum(axis=2))))
+    line = np.linspace(0.0, 1.0, 50)[:, None, None] * np.array([[0.3, -0.2, 0.1], [0.0, 0.0, 0.0]])[None]
+    assert hull_deviation(line) < 1e-15  # rounding only

@@ -20,6 +20,7 @@ import pytest
 from planner.collision.kernels import codes, entries
 from planner.collision.kernels.entries import EXTENSION, Kernels
 from planner.collision.obstacles import Obstacle
+from planner.collision.sweep import body_vertices
 from planner.collision.world import CollisionWorld
 from planner.core import aot
 from planner.robots.cabin8 import Cabin8
@@ -98,6 +99,17 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     for cover in (d.fine, d.coarse):
         poses = out[0][0]
         _same(built.cover_centres_batch(poses, cover), jit.cover_centres_batch(poses, cover), "covers")
+    poses = out[0][0]
+    box = np.array([s.kind == "box" for s in world.bodies.shapes])
+    half = np.array([0.5 * float(np.linalg.norm(s.size)) for s in world.bodies.shapes])
+    step_a, step_b = np.ascontiguousarray(poses[:-1]), np.ascontiguousarray(poses[1:])
+    _same(
+        built.pose_offsets(step_a, step_b, box, half), jit.pose_offsets(step_a, step_b, box, half), "offsets"
+    )
+    for b, shape in enumerate(world.bodies.shapes):
+        verts = np.ascontiguousarray(body_vertices(poses[:-1, b], shape))  # the NaN state left out
+        _same(built.hull_deviation(verts), jit.hull_deviation(verts), "hull_deviation")
+        _same(built.hull_deviation(verts[:1]), jit.hull_deviation(verts[:1]), "hull_deviation, one sample")
     rng = np.random.default_rng(3)
     for a, b in zip(qs[:-1], qs[1:], strict=True):
         dq = b - a
@@ -259,6 +271,10 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
         (lambda: built.obstacle_bounds(at[0], od, th.astype(np.float32)), "threshold"),
         (lambda: built.obstacle_coarse_batch(at[0], od, False), "poses"),
         (lambda: built.obstacle_fine_batch(at, np.zeros(1, dtype=np.int32), 0, od), "rows"),
+        (lambda: built.pose_offsets(at, at, np.zeros(len(at[0]), bool), np.zeros(len(at[0]))), None),
+        (lambda: built.pose_offsets(at, at, np.zeros(len(at[0])), np.zeros(len(at[0]))), "box"),
+        (lambda: built.pose_offsets(at, at[:, :, :12], np.zeros(len(at[0]), bool), np.zeros(1)), "poses_b"),
+        (lambda: built.hull_deviation(np.asfortranarray(at[:, :, :3])), "verts"),
     ]
     for call, name in cases:
         if name is None:

@@ -13,6 +13,7 @@ By concern, each module importing only those above it:
   contacts from the grid's upper bound;
 * :mod:`.obstacles` -- the obstacles' bounds (bounding spheres and fine covers against the obstacles'
   bounding boxes), from an obstacle set's own packed data (:func:`~.buffers.obstacle_data`);
+* :mod:`.offsets` -- how far bodies move between poses, and a run's vertices from their chords;
 * :mod:`.state` -- one state check in one call (poses, bounds, verdict code);
 * :mod:`.walk` -- the certified motion walk, resumable around the FCL probes that stay in Python.
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
 from planner.collision.kernels.obstacles import obstacle_bounds, obstacle_coarse_batch, obstacle_fine_batch
+from planner.collision.kernels.offsets import hull_deviation, pose_offsets
 from planner.collision.kernels.state import packed_check, packed_poses, packed_state
 from planner.collision.kernels.walk import (
     end_ratio,
@@ -24,6 +25,7 @@ __all__ = [
     "cover_walk",
     "end_ratio",
     "first_inadmissible",
+    "hull_deviation",
     "motion_walk",
     "obstacle_bounds",
     "obstacle_coarse_batch",
@@ -31,6 +33,7 @@ __all__ = [
     "packed_check",
     "packed_poses",
     "packed_state",
+    "pose_offsets",
     "run_extent",
     "segment_reach",
 ]

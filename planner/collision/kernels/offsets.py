@@ -1,0 +1,66 @@
+"""How far bodies move between poses, and how far a run's vertices stray from their chords (compiled).
+
+The numbers of :func:`planner.collision.sweep.pose_offsets` and :func:`planner.collision.sweep.hull_deviation`
+in one pass over the poses instead of numpy's dozen temporaries: every sum is written out in the order
+numpy's own reductions add (pairwise over 9 terms, in sequence over 3), so both give the same bits as the
+plain numpy formulas (``tests/collision/test_sweep.py``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, fastmath=False)
+def pose_offsets(poses_a: np.ndarray, poses_b: np.ndarray, box: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """(M, B) upper bounds of how far any point of each body is between poses_a and poses_b (M, B, 13).
+
+    A box (``box[b]``, half-diagonal ``half[b]``): |dp| + |dR|_F h; a capsule: |dp| + |d(z L)| / 2.
+    """
+    m, nb = poses_a.shape[0], poses_a.shape[1]
+    out = np.empty((m, nb))
+    for k in range(m):
+        for b in range(nb):
+            a = poses_a[k, b]
+            c = poses_b[k, b]
+            d9, d10, d11 = c[9] - a[9], c[10] - a[10], c[11] - a[11]
+            dp = math.sqrt((d9 * d9 + d10 * d10) + d11 * d11)
+            if box[b]:
+                s = np.empty(9)
+                for i in range(9):
+                    d = c[i] - a[i]
+                    s[i] = d * d
+                r2 = ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))
+                r2 += s[8]
+                out[k, b] = dp + math.sqrt(r2) * half[b]
+            else:
+                z0 = c[6] * c[12] - a[6] * a[12]
+                z1 = c[7] * c[12] - a[7] * a[12]
+                z2 = c[8] * c[12] - a[8] * a[12]
+                out[k, b] = dp + 0.5 * math.sqrt((z0 * z0 + z1 * z1) + z2 * z2)
+    return out
+
+
+@njit(cache=True, fastmath=False)
+def hull_deviation(verts: np.ndarray) -> float:
+    """The largest distance of verts[s, v] (n, V, 3) from the chord [verts[0, v], verts[-1, v]] [m]."""
+    n, nv = verts.shape[0], verts.shape[1]
+    worst = 0.0
+    for v in range(nv):
+        a0, a1, a2 = verts[0, v, 0], verts[0, v, 1], verts[0, v, 2]
+        b0, b1, b2 = verts[n - 1, v, 0] - a0, verts[n - 1, v, 1] - a1, verts[n - 1, v, 2] - a2
+        den = (b0 * b0 + b1 * b1) + b2 * b2
+        if not den > 0.0:
+            den = 1.0
+        for s in range(n):
+            r0, r1, r2 = verts[s, v, 0] - a0, verts[s, v, 1] - a1, verts[s, v, 2] - a2
+            t = ((r0 * b0 + r1 * b1) + r2 * b2) / den
+            t = min(max(t, 0.0), 1.0)
+            o0, o1, o2 = r0 - t * b0, r1 - t * b1, r2 - t * b2
+            e2 = (o0 * o0 + o1 * o1) + o2 * o2
+            if e2 > worst:
+                worst = e2
+    return math.sqrt(worst)
