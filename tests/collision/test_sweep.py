@@ -121,7 +121,7 @@ def test_pose_offsets_bound_every_vertex_move_and_are_the_plain_formula_bit_for_
 
 
 def test_hull_deviation_is_the_largest_distance_from_the_chords_bit_for_bit() -> None:
-    """The compiled deviation is the plain numpy formula's, bit for bit, and a straight run's is zero (to rounding)."""
+    """The compiled deviation is the numpy formula's, bit for bit; a straight run's is zero (to rounding)."""
     rng = np.random.default_rng(5)
     for n, v in ((1, 8), (2, 2), (7, 8), (300, 8)):
         verts = np.cumsum(rng.normal(0.0, 0.01, (n, v, 3)), axis=0)
