@@ -13,6 +13,9 @@ local Ray with as many CPUs):
   run afresh (its own folder: no cycle reused from the exhaustive search)
 * **time per campaign**: ``order: given`` over campaigns of 5 units (wall clock)       [median <= 6 s]
   and ``order: find`` over a campaign of 6 units (wall clock)                          [<= 60 s, 2 cores]
+* **the independent check**: every planned cycle's profile document re-checked by
+  :func:`planner.task.check.check_cycle` against its own cycle document (every profile must pass), and
+  the spring-back of the events (attach, detach) over them, in mm;
 * **the suite's plans** in the same process: the reference scenarios expected to succeed, planned once
   each (success and end-to-end time), so that a cycle figure and a plan figure share the machine's state.
 
@@ -220,6 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     having = [t for t in truth_found if t["has_order"]]
     found = [t for t in having if t["found"]]
     wrong = [t for t in truth_found if t["found"] and not t["has_order"]]
+    checks = independent_checks(folder)
     suite = None if args.no_suite else _suite()
     record.update(
         cycles_alone=cycles_alone,
@@ -229,6 +233,7 @@ def main(argv: list[str] | None = None) -> int:
             "p95": _pct(cycle_times, 0.95),
             "n": len(cycle_times),
         },
+        independent_check=checks,
         given_wall_s=given_walls,
         find_wall_s=find_walls,
         suite=suite,
@@ -250,6 +255,14 @@ def main(argv: list[str] | None = None) -> int:
         if ct["n"]
         else "time per cycle: no cycle planned"
     )
+    print(
+        f"profiles passing the independent check (every planned cycle's document, re-checked): "
+        f"{checks['passed']}/{checks['checked']}"
+    )
+    for f in checks["failed"]:
+        print(f"  FAILED the independent check: {f}")
+    for kind, (lo, hi) in checks["springback_mm"].items():
+        print(f"spring-back at {kind} (the events' jump, every planned cycle): {lo:.3f}-{hi:.3f} mm")
     if given_walls:
         print(
             f"campaigns of 5 units, given order (wall): median {statistics.median(given_walls):.1f} s "
@@ -275,6 +288,42 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         args.json.write_text(json.dumps(record, indent=1, default=str) + "\n", encoding="utf-8")
     return 0
+
+
+def independent_checks(folder: Path) -> dict[str, Any]:
+    """Every planned cycle's profile document re-checked by the independent gate, and its spring-backs.
+
+    Each campaign run's ``cycles/profiles/<cycle>.json`` that is a cycle profile (refusals apart) is
+    checked against its own cycle document (``cycles/scenarios/<cycle>.json``, resolved afresh) by
+    :func:`planner.task.check.check_cycle`, which rebuilds every leg's world, load and line itself.
+
+    Returns:
+        ``{"checked", "passed", "failed": [file: failures], "springback_mm": {event kind: (min, max)}}``.
+    """
+    from planner.task.check import check_cycle
+    from planner.task.resolve import resolve_cycle
+    from planner.task.schema import cycle_from_dict
+
+    checked, passed, failed = 0, 0, []
+    jumps: dict[str, list[float]] = {}
+    for path in sorted(folder.glob("*/*/cycles/profiles/*.json")):  # <campaign>/<run>/cycles/profiles
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if doc.get("status", "succeeded") != "succeeded" or doc.get("kind") != "cycle":
+            continue
+        out_dir = path.parent.parent
+        spec = json.loads((out_dir / "scenarios" / path.name).read_text(encoding="utf-8"))
+        base_dir = out_dir.parent.parent  # the campaign file's folder (its meshes)
+        cyc = resolve_cycle(cycle_from_dict(spec, source=str(path)), base_dir=base_dir)
+        report = check_cycle(cyc, doc)
+        checked += 1
+        if report.passed:
+            passed += 1
+        else:
+            failed.append(f"{path}: {report.summary()}")
+        for event in doc.get("events", []):
+            jumps.setdefault(str(event["kind"]), []).append(1e3 * float(event["springback_m"]))
+    ranges = {kind: (min(v), max(v)) for kind, v in sorted(jumps.items())}
+    return {"checked": checked, "passed": passed, "failed": failed, "springback_mm": ranges}
 
 
 def _suite() -> dict[str, Any]:
