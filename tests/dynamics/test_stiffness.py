@@ -244,6 +244,25 @@ def test_a_configuration_asked_again_gets_the_same_numbers_and_its_own_copy(
     assert np.array_equal(model.deflections(q, cases[3]), first[3])
 
 
+def test_threads_sharing_one_model_get_its_numbers(robot: Cabin8, samples: np.ndarray) -> None:
+    """Eight threads ask one model for a hundred configurations each: every answer the configuration's own.
+
+    Fifty configurations against a memory of 64, in random orders: entries are added and dropped while
+    other threads read them.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    model = StiffnessModel(robot)
+    want = model.deflections(samples, LoadCase(PAYLOAD, GRASP))  # the batch: no memory involved
+
+    def ask(seed: int) -> bool:
+        order = np.random.default_rng(seed).integers(0, len(samples), 100)
+        return all(np.array_equal(model.deflection(samples[k], PAYLOAD, GRASP).twist, want[k]) for k in order)
+
+    with ThreadPoolExecutor(8) as pool:
+        assert all(pool.map(ask, range(8)))
+
+
 # --------------------------------------------------------------------------------------- compensation
 def _goal(robot: Cabin8) -> tuple[np.ndarray, np.ndarray]:
     q = robot.joints_from_drives(robot.home_drives)
