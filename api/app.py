@@ -248,6 +248,7 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
         QueueCollector(ctx.jobs.queue_counts, job_runner.busy, lambda: job_runner.warming() is not None)
     )
     feeder = SweepFeeder(db, settings, job_runner)
+    ctx.sweep_submitted = feeder.wake
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:

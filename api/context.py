@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -30,6 +31,8 @@ class AppContext:
     limiter: TenantRateLimiter
     #: Every job state change and query (:mod:`api.jobstore`).
     jobs: JobStore
+    #: Called when a sweep was submitted: its first plans are fed now, not at the feeder's next pass.
+    sweep_submitted: Callable[[], None] = lambda: None
 
 
 def get_context(request: Request) -> AppContext:

@@ -54,6 +54,7 @@ import threading
 import time
 import uuid
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from multiprocessing.context import ForkServerContext
@@ -107,6 +108,9 @@ class JobRunner(Protocol):
 
     def cancel(self, job_id: str) -> None:
         """Kill the job if it is running here (it becomes ``cancelled``)."""
+
+    def on_job_end(self, listener: Callable[[], None]) -> None:
+        """Call ``listener`` (no arguments, in the runner's thread) each time a job of this instance ends."""
 
     def alive(self) -> bool:
         """True while the runner can execute jobs."""
@@ -196,6 +200,7 @@ class ProcessJobRunner:
         #: Job id -> (worker pid, which job of that worker it was: 1 for a fresh worker) of the latest
         #: :data:`RAN_ON_KEPT` jobs started here (logs, tests).
         self.ran_on: OrderedDict[str, tuple[int, int]] = OrderedDict()
+        self._end_listeners: list[Callable[[], None]] = []
 
     def _new_pool(self) -> WarmPool:
         return WarmPool(
@@ -237,6 +242,10 @@ class ProcessJobRunner:
     def wake(self) -> None:
         """Look for queued work now."""
         self._wake.set()
+
+    def on_job_end(self, listener: Callable[[], None]) -> None:
+        """Call ``listener`` each time a job of this instance ends (its terminal state written or not)."""
+        self._end_listeners.append(listener)
 
     def cancel(self, job_id: str) -> None:
         """Ask the dispatcher to kill the job if it runs here (others see ``cancel_requested``)."""
@@ -529,6 +538,11 @@ class ProcessJobRunner:
             self.metrics.job_duration.labels(status=status).observe(time.monotonic() - r.started)
         _LOG.info("job %s %s (%s)", r.job_id, status, values.get("reason"))
         self._wake.set()
+        for listener in self._end_listeners:
+            try:
+                listener()
+            except Exception:  # a listener's failure must not stop the dispatcher
+                _LOG.exception("job %s: end listener failed", r.job_id)
 
 
 __all__ = [

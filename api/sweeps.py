@@ -137,14 +137,19 @@ class SweepStore:
 class SweepFeeder:
     """Submits the plans of running sweeps as jobs while their tenant has room under its quota.
 
+    A pass runs when it is woken -- a sweep was submitted here (:meth:`wake`, from the route), a job of this
+    instance ended (the runner's :meth:`~api.jobs.JobRunner.on_job_end`) -- and every ``poll_s`` besides,
+    for what other instances sharing the database do. A sweep waiting on its tenant's quota costs a pass
+    a few counts under the quota lock; its plans are read only when there is room for some.
+
     Args:
         db: The service database.
         settings: Quota (``tenant_max_active_jobs``).
-        runner: Woken when jobs were queued.
-        poll_s: Period of the feeder's pass over running sweeps [s].
+        runner: Woken when jobs were queued; it wakes the feeder when one of its jobs ends.
+        poll_s: Period of the feeder's pass over running sweeps when nothing wakes it [s].
     """
 
-    def __init__(self, db: Database, settings: Settings, runner: JobRunner, poll_s: float = 0.2) -> None:
+    def __init__(self, db: Database, settings: Settings, runner: JobRunner, poll_s: float = 1.0) -> None:
         self.db = db
         self.settings = settings
         self.runner = runner
@@ -153,6 +158,7 @@ class SweepFeeder:
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
+        runner.on_job_end(self.wake)
 
     def start(self) -> None:
         """Start the feeder thread."""
@@ -184,50 +190,57 @@ class SweepFeeder:
     def feed(self) -> int:
         """One pass: queue what the quotas allow, finish the sweeps whose jobs all ended; jobs queued."""
         queued = 0
-        with self.db.session() as s:
-            sweeps = s.scalars(
-                select(Sweep).where(Sweep.status == "running").order_by(Sweep.created_at)
+        with self.db.session() as s:  # not the plans: a sweep's plans are read when there is room for some
+            sweeps = s.execute(
+                select(Sweep.id, Sweep.tenant, Sweep.total)
+                .where(Sweep.status == "running")
+                .order_by(Sweep.created_at)
             ).all()
-        for sweep in sweeps:
-            queued += self._feed_one(sweep)
-            self._finish_if_done(sweep)
+        for sweep_id, tenant, total in sweeps:
+            queued += self._feed_one(sweep_id, tenant, total)
+            self._finish_if_done(sweep_id, total)
         if queued:
             self.runner.wake()
         return queued
 
-    def _feed_one(self, sweep: Sweep) -> int:
-        with self.db.tenant_quota_session(sweep.tenant) as s:  # the lock POST /plans counts the quota under
-            if s.scalar(select(Sweep.status).where(Sweep.id == sweep.id)) != "running":
+    def _feed_one(self, sweep_id: str, tenant: str, total: int) -> int:
+        with self.db.tenant_quota_session(tenant) as s:  # the lock POST /plans counts the quota under
+            if s.scalar(select(Sweep.status).where(Sweep.id == sweep_id)) != "running":
                 return 0  # cancelled (under this tenant's lock) since the pass listed it
-            active = self.jobs.active_count(s, sweep.tenant)
-            linked = s.scalar(select(func.count()).select_from(SweepJob).where(SweepJob.sweep_id == sweep.id))
-            room = self.settings.tenant_max_active_jobs - active
-            start = int(linked or 0)
-            todo = sweep.plans["plans"][start : start + max(0, room)]
+            linked = int(
+                s.scalar(select(func.count()).select_from(SweepJob).where(SweepJob.sweep_id == sweep_id)) or 0
+            )
+            if linked >= total:
+                return 0  # every plan has its job
+            room = self.settings.tenant_max_active_jobs - self.jobs.active_count(s, tenant)
+            if room <= 0:
+                return 0  # waiting on the quota
+            stored: dict[str, Any] = s.execute(select(Sweep.plans).where(Sweep.id == sweep_id)).scalar_one()
+            todo = stored["plans"][linked : linked + room]
             for plan in todo:
                 scenario = plan["scenario"]
                 job = new_job(
                     PLAN,
-                    sweep.tenant,
+                    tenant,
                     scenario,
                     scenario["name"],
                     plan["sha256"],
-                    dict(sweep.plans.get("meshes", {})),
-                    {**sweep.plans.get("provenance", {}), "scenario_sha256": plan["sha256"]},
+                    dict(stored.get("meshes", {})),
+                    {**stored.get("provenance", {}), "scenario_sha256": plan["sha256"]},
                     float(scenario["options"]["time_limit_s"]),
                 )
                 self.jobs.add_queued(s, job)  # the job row before its link (foreign keys in order)
-                s.add(SweepJob(sweep_id=sweep.id, index=int(plan["index"]), job_id=job.id))
+                s.add(SweepJob(sweep_id=sweep_id, index=int(plan["index"]), job_id=job.id))
         return len(todo)
 
-    def _finish_if_done(self, sweep: Sweep) -> None:
-        states = self.jobs.statuses(SweepStore(self.db).job_ids(sweep.id))
+    def _finish_if_done(self, sweep_id: str, total: int) -> None:
+        states = self.jobs.statuses(SweepStore(self.db).job_ids(sweep_id))
         ended = sum(status in TERMINAL_STATES for _, status, _ in states)
         with self.db.session() as s:
-            if ended >= sweep.total:
+            if ended >= total:
                 s.execute(
                     update(Sweep)
-                    .where(Sweep.id == sweep.id, Sweep.status == "running")
+                    .where(Sweep.id == sweep_id, Sweep.status == "running")
                     .values(status="finished", finished_at=now_s())
                 )
 

@@ -152,6 +152,7 @@ def submit_sweep(
         {"meshes": meshes, "provenance": provenance(resolved)},
     )
     SweepStore(ctx.db).add(row)
+    ctx.sweep_submitted()
     response.headers["Location"] = f"/api/v1/sweeps/{row.id}"
     return _sweep_document(ctx, row)
 

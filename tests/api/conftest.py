@@ -8,7 +8,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -115,6 +115,9 @@ class IdleRunner:
 
     def cancel(self, job_id: str) -> None:
         self.cancelled.append(job_id)
+
+    def on_job_end(self, listener: Callable[[], None]) -> None:
+        """No job ever ends here."""
 
     def alive(self) -> bool:
         return self.started

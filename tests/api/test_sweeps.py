@@ -5,7 +5,8 @@ from __future__ import annotations
 import csv
 import io
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
@@ -120,3 +121,60 @@ def test_invalid_sweeps_are_422_naming_the_field(svc: Service, change: dict[str,
     assert r.status_code == 422, r.text
     assert r.headers["content-type"].startswith("application/problem+json")
     assert r.json()["detail"].startswith(field)
+
+
+def test_the_feeder_feeds_when_a_sweep_arrives_or_a_job_ends_not_at_its_poll(tmp_path: Path) -> None:
+    """With a poll of a minute, a sweep's first plans and the next plan after a job's end are queued at once.
+
+    The route wakes the feeder when a sweep is submitted, and the runner when one of its jobs ends.
+    """
+    from api.db import Database
+    from api.jobstore import JobStore
+    from api.sweeps import SweepFeeder, SweepStore, new_sweep
+    from tests.api.conftest import IdleRunner
+
+    class Runner(IdleRunner):
+        def __init__(self) -> None:
+            super().__init__()
+            self.listeners: list[Callable[[], None]] = []
+
+        def on_job_end(self, listener: Callable[[], None]) -> None:
+            self.listeners.append(listener)
+
+    settings = make_settings(tmp_path, tenant_max_active_jobs=2)
+    settings.data_dir.mkdir(parents=True)
+    db = Database(settings.resolved_database_url(), settings.database_schema)
+    db.create_all()
+    runner = Runner()
+    feeder = SweepFeeder(db, settings, runner, poll_s=60.0)
+    assert runner.listeners == [feeder.wake]
+    feeder.start()
+    try:
+        feeder.wake()  # its first pass, over nothing, done before the sweep exists
+        time.sleep(0.2)
+        sc = scenario("aisle-transfer")
+        plans = [{"index": k, "sha256": f"{k:064x}", "scenario": sc, "labels": {}} for k in range(3)]
+        row = new_sweep("alpha", "three", {}, plans, {"meshes": {}, "provenance": {}})
+        SweepStore(db).add(row)
+        jobs = JobStore(db)
+
+        def linked() -> list[str]:
+            return SweepStore(db).job_ids(row.id)
+
+        feeder.wake()  # what POST /sweeps does (ctx.sweep_submitted)
+        deadline = time.monotonic() + 5.0
+        while len(linked()) < 2:
+            assert time.monotonic() < deadline, "the submitted sweep was not fed when woken"
+            time.sleep(0.02)
+        time.sleep(0.3)
+        assert len(linked()) == 2  # the quota: the third plan waits
+        jobs.cancel(linked()[:1], "ended")  # one job ends ...
+        for listener in runner.listeners:  # ... and the runner says so
+            listener()
+        deadline = time.monotonic() + 5.0
+        while len(linked()) < 3:
+            assert time.monotonic() < deadline, "the waiting plan was not fed when a job ended"
+            time.sleep(0.02)
+    finally:
+        feeder.stop()
+        db.dispose()
