@@ -59,7 +59,7 @@ class Shape:
         """
         return _sphere_cover(self, float(cell))
 
-    def _sphere_cover(self, cell: float) -> tuple[Array, Array]:
+    def _cover_of_cells(self, cell: float) -> tuple[Array, Array]:
         if self.kind == "capsule":
             n = max(1, int(np.ceil(self.length / max(self.radius, 1e-3))))
             t = np.linspace(-0.5, 0.5, n + 1)
@@ -83,7 +83,7 @@ class Shape:
 
 @lru_cache(maxsize=1024)
 def _sphere_cover(shape: Shape, cell: float) -> tuple[Array, Array]:
-    centres, radii = shape._sphere_cover(cell)
+    centres, radii = shape._cover_of_cells(cell)
     centres.flags.writeable = False
     radii.flags.writeable = False
     return centres, radii

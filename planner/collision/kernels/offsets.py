@@ -28,14 +28,12 @@ def pose_offsets(poses_a: np.ndarray, poses_b: np.ndarray, box: np.ndarray, half
             c = poses_b[k, b]
             d9, d10, d11 = c[9] - a[9], c[10] - a[10], c[11] - a[11]
             dp = math.sqrt((d9 * d9 + d10 * d10) + d11 * d11)
-            if box[b]:
-                s = np.empty(9)
-                for i in range(9):
-                    d = c[i] - a[i]
-                    s[i] = d * d
-                r2 = ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))
-                r2 += s[8]
-                out[k, b] = dp + math.sqrt(r2) * half[b]
+            if box[b]:  # |dR|_F: the 9 squares summed pairwise, then the ninth (numpy's order)
+                r0, r1, r2, r3 = c[0] - a[0], c[1] - a[1], c[2] - a[2], c[3] - a[3]
+                r4, r5, r6, r7, r8 = c[4] - a[4], c[5] - a[5], c[6] - a[6], c[7] - a[7], c[8] - a[8]
+                sq = ((r0 * r0 + r1 * r1) + (r2 * r2 + r3 * r3)) + ((r4 * r4 + r5 * r5) + (r6 * r6 + r7 * r7))
+                sq += r8 * r8
+                out[k, b] = dp + math.sqrt(sq) * half[b]
             else:
                 z0 = c[6] * c[12] - a[6] * a[12]
                 z1 = c[7] * c[12] - a[7] * a[12]
