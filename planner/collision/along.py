@@ -69,10 +69,10 @@ from planner.collision.reports import (
     limit_contacts,
 )
 from planner.collision.sweep import (
-    body_vertices,
+    body_vertices_along,
+    pair_vertices_along,
     pose_offsets,
     pose_steps,
-    relative_poses,
     shape_object,
     swept_bound,
 )
@@ -195,18 +195,14 @@ class AlongPath:
             cols.append(rho[[b for b, _ in self.obstacle_tasks]])
         #: Reach (N - 1, T): how far any point of a task's bodies (pairs: relative) moves along each piece.
         rho_t = np.concatenate(cols, axis=0)  # (T, n)
-        # dq @ rho_t.T written out over the joints (a threaded BLAS call costs more than these few sums).
-        reach = np.zeros((len(dq), n_tasks))
-        for j in range(dq.shape[1]):
-            reach += dq[:, j, None] * rho_t[None, :, j]
-        self.reach = reach
         # From sample to sample the bodies' vertices move exactly this far (a pair: both bodies' sum), often
         # far less than the reach bound, which holds between samples too.
         steps = self._per_task(pose_steps(poses, bodies.shapes))  # (N - 1, T)
-        #: Cumulative sample-to-sample bound (N, T): |d_t(q_j) - d_t(q_k)| <= |cum[j, t] - cum[k, t]|, each
-        #: step the smaller of the vertices' displacement and the piece's reach.
-        self.cum = np.ascontiguousarray(
-            np.vstack([np.zeros((1, n_tasks)), np.cumsum(np.minimum(self.reach, steps), axis=0)])
+        #: reach = dq @ rho_t.T (summed over the joints in order) and the cumulative sample-to-sample bound
+        #: cum (N, T): |d_t(q_j) - d_t(q_k)| <= |cum[j, t] - cum[k, t]|, each step the smaller of the
+        #: vertices' displacement and the piece's reach (compiled: :mod:`.kernels.spread`).
+        self.reach, self.cum = kernels[0].path_reach(
+            np.ascontiguousarray(dq), np.ascontiguousarray(rho_t), np.ascontiguousarray(steps)
         )
         nk = self.n_kernel
         self._reach_k = np.ascontiguousarray(self.reach[:, :nk])
@@ -250,10 +246,7 @@ class AlongPath:
     # ---------------------------------------------------------------- bounds
     def _propagate(self, cols: IntArray) -> None:
         """Raise columns ``cols`` to max_k (lower[k] - |C(j) - C(k)|) at every j (running maxima)."""
-        v, cum = self.lower[:, cols], self.cum[:, cols]
-        fwd = np.maximum.accumulate(v + cum, axis=0) - cum
-        bwd = np.flip(np.maximum.accumulate(np.flip(v - cum, axis=0), axis=0), axis=0) + cum
-        self.lower[:, cols] = np.maximum(v, np.maximum(fwd, bwd))
+        self._kernels.propagate(self.lower, self.cum, np.ascontiguousarray(cols, dtype=np.int64))
 
     def _bounds(self, rows: IntArray) -> None:
         """Evaluate the certified bounds of every kernel task at samples ``rows`` (one kernel call)."""
@@ -355,21 +348,20 @@ class AlongPath:
             b, target = t, self.probes.cabin_obj
             shape = self.bodies.shapes[b]
             if verts is None:
-                verts = self._verts[t] = body_vertices(self.poses[:, b], shape)
+                verts = self._verts[t] = body_vertices_along(self.poses, b, shape)
         elif t < self.n_kernel:
             a, b = self.bodies.pairs[t - self.n_cabin]
             shape = self.bodies.shapes[a]
             target = shape_object(self.bodies.shapes[b], float(np.max(self.poses[i : j + 1, b, 12])))
             if verts is None:
-                rel = relative_poses(self.poses[:, a], self.poses[:, b])
-                verts = self._verts[t] = body_vertices(rel, shape)
+                verts = self._verts[t] = pair_vertices_along(self.poses, a, b, shape)
         else:
             assert self.obstacles is not None
             b, o = self.obstacle_tasks[t - self.n_kernel]
             target = self.obstacles.mesh_object(o)
             shape = self.bodies.shapes[b]
             if verts is None:
-                verts = self._verts[t] = body_vertices(self.poses[:, b], shape)
+                verts = self._verts[t] = body_vertices_along(self.poses, b, shape)
         self.swept_queries += 1
         return swept_bound(verts[i : j + 1], shape, target)
 

@@ -67,6 +67,28 @@ def body_vertices(poses: Array, shape: Shape) -> Array:
     return np.stack([p - half, p + half], axis=1)
 
 
+def body_vertices_along(poses: Array, b: int, shape: Shape) -> Array:
+    """:func:`body_vertices` of body b at every sample of poses (N, B, 13): compiled, the same bits."""
+    return KERNELS.path_vertices(np.ascontiguousarray(poses), b, _local_corners(shape), shape.kind == "box")
+
+
+def pair_vertices_along(poses: Array, a: int, b: int, shape: Shape) -> Array:
+    """Body a's vertices in body b's frame at every sample of poses (N, B, 13) (``shape``: a's).
+
+    :func:`body_vertices` of :func:`relative_poses`, compiled: the same bits.
+    """
+    local, box = _local_corners(shape), shape.kind == "box"
+    return KERNELS.pair_vertices(np.ascontiguousarray(poses), a, b, local, box)
+
+
+@lru_cache(maxsize=256)
+def _local_corners(shape: Shape) -> Array:
+    """A box's 8 corners in its frame (8, 3) (a capsule's: unused zeros), read-only."""
+    local = _SIGNS * (0.5 * np.asarray(shape.size, dtype=float)) if shape.kind == "box" else np.zeros((8, 3))
+    local.flags.writeable = False
+    return local
+
+
 def pose_offsets(poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...]) -> Array:
     """How far any point of each body is between two poses of it: (M, B) [m], an upper bound.
 

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import fcl
 import numpy as np
+import pytest
 import trimesh
 
 from planner.collision.sweep import (
     body_vertices,
+    body_vertices_along,
     hull_deviation,
+    pair_vertices_along,
     pose_offsets,
     relative_poses,
     shape_object,
@@ -134,3 +137,23 @@ def test_hull_deviation_is_the_largest_distance_from_the_chords_bit_for_bit() ->
         assert hull_deviation(verts) == float(np.sqrt(np.max((off * off).sum(axis=2))))
     line = np.linspace(0.0, 1.0, 50)[:, None, None] * np.array([[0.3, -0.2, 0.1], [0.0, 0.0, 0.0]])[None]
     assert hull_deviation(line) < 1e-15  # rounding only
+
+
+def test_compiled_vertices_along_a_path_are_the_numpy_formulas_bit_for_bit() -> None:
+    """A body's vertices at every sample, and body a's in body b's frame, as body_vertices(relative_poses)."""
+    rng = np.random.default_rng(17)
+    shapes = (BOX, CAPSULE, Shape("box", (0.05, 0.6, 0.2)))
+    n = 400
+    poses = np.empty((n, len(shapes), 13))
+    for k in range(n):
+        for b in range(len(shapes)):
+            poses[k, b] = _pose(_rotation(rng), rng.normal(size=3), 0.3 + 0.1 * rng.random())
+    for b, shape in enumerate(shapes):
+        assert np.array_equal(body_vertices_along(poses, b, shape), body_vertices(poses[:, b], shape))
+        for a, other in enumerate(shapes):
+            if a == b:
+                continue
+            want = body_vertices(relative_poses(poses[:, b], poses[:, a]), shape)
+            assert np.array_equal(pair_vertices_along(poses, b, a, shape), want), (b, other)
+    with pytest.raises(ValueError, match="body index"):
+        body_vertices_along(poses, 3, BOX)

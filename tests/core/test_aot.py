@@ -20,7 +20,7 @@ import pytest
 from planner.collision.kernels import codes, entries
 from planner.collision.kernels.entries import EXTENSION, Kernels
 from planner.collision.obstacles import Obstacle
-from planner.collision.sweep import body_vertices
+from planner.collision.sweep import _SIGNS, body_vertices
 from planner.collision.world import CollisionWorld
 from planner.core import aot
 from planner.robots.cabin8 import Cabin8
@@ -106,8 +106,15 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     _same(
         built.pose_offsets(step_a, step_b, box, half), jit.pose_offsets(step_a, step_b, box, half), "offsets"
     )
+    finite = np.ascontiguousarray(poses[:-1])  # the NaN state left out
     for b, shape in enumerate(world.bodies.shapes):
-        verts = np.ascontiguousarray(body_vertices(poses[:-1, b], shape))  # the NaN state left out
+        local = _SIGNS * (0.5 * np.asarray(shape.size, dtype=float))
+        kind = shape.kind == "box"
+        _same(built.path_vertices(finite, b, local, kind), jit.path_vertices(finite, b, local, kind), "verts")
+        a = (b + 1) % len(world.bodies.shapes)
+        pair = (finite, b, a, local, kind)
+        _same(built.pair_vertices(*pair), jit.pair_vertices(*pair), "pair")
+        verts = np.ascontiguousarray(body_vertices(poses[:-1, b], shape))
         _same(built.hull_deviation(verts), jit.hull_deviation(verts), "hull_deviation")
         _same(built.hull_deviation(verts[:1]), jit.hull_deviation(verts[:1]), "hull_deviation, one sample")
     rng = np.random.default_rng(3)
@@ -121,6 +128,17 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
         _same(built.segment_reach(d, k, 0.2, np.abs(dq)), jit.segment_reach(d, k, 0.2, np.abs(dq)), "reach")
     path = np.ascontiguousarray(sc.start_q + np.cumsum(rng.normal(0.0, 0.01, (40, 8)), axis=0))
     rho = np.ascontiguousarray(np.max(d.rho, axis=0))
+    dq_path = np.abs(np.diff(path, axis=0))
+    rates = np.abs(rng.normal(0.0, 0.5, (5, 8)))
+    steps = np.abs(rng.normal(0.0, 0.01, (39, 5)))
+    _same(built.path_reach(dq_path, rates, steps), jit.path_reach(dq_path, rates, steps), "path_reach")
+    lower = rng.normal(0.0, 0.01, (40, 5))
+    lower[rng.random(lower.shape) < 0.5] = -np.inf
+    cum = np.ascontiguousarray(np.vstack([np.zeros((1, 5)), np.cumsum(steps, axis=0)]))
+    spread = [lower.copy(), lower.copy()]
+    built.propagate(spread[0], cum, np.array([0, 2, 4]))
+    jit.propagate(spread[1], cum, np.array([0, 2, 4]))
+    _same(spread[0], spread[1], "propagate")
     for i in range(0, 39, 3):
         run = built.run_extent(path, i, 39, rho, 0.002)
         _same(run, jit.run_extent(path, i, 39, rho, 0.002), "run_extent")

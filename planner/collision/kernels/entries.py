@@ -103,6 +103,10 @@ EXTENSION = aot.Extension(
         Entry("obstacle_fine_batch", ("f8[3]", "i8[1]", "i8", *_OBSTACLES), "f8[2]w"),
         Entry("pose_offsets", ("f8[3]", "f8[3]", "b1[1]", "f8[1]"), "f8[2]w"),
         Entry("hull_deviation", ("f8[3]",), "f8"),
+        Entry("path_vertices", ("f8[3]", "i8", "f8[2]", "b1"), "f8[3]w"),
+        Entry("pair_vertices", ("f8[3]", "i8", "i8", "f8[2]", "b1"), "f8[3]w"),
+        Entry("path_reach", ("f8[2]", "f8[2]", "f8[2]"), "(f8[2]w,f8[2]w)"),
+        Entry("propagate", ("f8[2]w", "f8[2]", "i8[1]"), "none"),
     ),
 )
 
@@ -381,6 +385,45 @@ class Kernels:
         if verts.shape[0] < 1 or verts.shape[2] != 3:
             raise ValueError(f"verts: shape (n >= 1, V, 3) expected, got {verts.shape}")
         return float(self.module.hull_deviation(verts))
+
+    def path_vertices(self, poses: Array, b: int, local: Array, box: bool) -> Array:
+        """:func:`.offsets.path_vertices`: body b's vertices (N, V, 3) at poses (N, B, 13)."""
+        poses = self._poses_of(poses, b)
+        local = check_array(local, "local", F8, 2, shape=(8, 3))
+        return self.module.path_vertices(poses, int(b), local, bool(box))
+
+    def pair_vertices(self, poses: Array, a: int, b: int, local: Array, box: bool) -> Array:
+        """:func:`.offsets.pair_vertices`: body a's vertices (N, V, 3) in body b's frame."""
+        poses = self._poses_of(poses, a, b)
+        local = check_array(local, "local", F8, 2, shape=(8, 3))
+        return self.module.pair_vertices(poses, int(a), int(b), local, bool(box))
+
+    @staticmethod
+    def _poses_of(poses: Array, *bodies: int) -> Array:
+        poses = check_array(poses, "poses", F8, 3)
+        if poses.shape[2] != 13:
+            raise ValueError(f"poses: shape (N, B, 13) expected, got {poses.shape}")
+        for b in bodies:
+            if not 0 <= int(b) < poses.shape[1]:
+                raise ValueError(f"body index {b} outside [0, {poses.shape[1]})")
+        return poses
+
+    def path_reach(self, dq: Array, rho: Array, steps: Array) -> tuple[Array, Array]:
+        """:func:`.spread.path_reach`: (reach (N - 1, T), cum (N, T)) from |dq| (N - 1, J), rho (T, J)."""
+        dq = check_array(dq, "dq", F8, 2)
+        rho = check_array(rho, "rho", F8, 2, shape=(None, dq.shape[1]))
+        steps = check_array(steps, "steps", F8, 2, shape=(dq.shape[0], rho.shape[0]))
+        reach, cum = self.module.path_reach(dq, rho, steps)
+        return reach, cum
+
+    def propagate(self, lower: Array, cum: Array, cols: IntArray) -> None:
+        """:func:`.spread.propagate`: raise columns ``cols`` of lower (N, T) along cum (N, T), in place."""
+        lower = check_array(lower, "lower", F8, 2, out=True)
+        cum = check_array(cum, "cum", F8, 2, shape=lower.shape)
+        cols = check_array(cols, "cols", I8, 1)
+        if len(cols) and not (0 <= int(cols.min()) and int(cols.max()) < lower.shape[1]):
+            raise ValueError(f"propagate: columns in [0, {lower.shape[1]}) expected")
+        self.module.propagate(lower, cum, cols)
 
 
 #: The kernels every world uses: the ahead-of-time build when there is one, resolved on first use.

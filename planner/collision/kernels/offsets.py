@@ -62,3 +62,59 @@ def hull_deviation(verts: np.ndarray) -> float:
             if e2 > worst:
                 worst = e2
     return math.sqrt(worst)
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _vertices_of(pose: np.ndarray, local: np.ndarray, box: bool, out: np.ndarray) -> None:
+    """One pose's vertices into out (V, 3): a box's corners p + R local[v], a capsule's p -+ z L / 2.
+
+    The sums in :func:`planner.collision.sweep.body_vertices`' order: ((p + l0 x) + l1 y) + l2 z.
+    """
+    if box:
+        for v in range(local.shape[0]):
+            l0, l1, l2 = local[v, 0], local[v, 1], local[v, 2]
+            for r in range(3):
+                out[v, r] = ((pose[9 + r] + l0 * pose[r]) + l1 * pose[3 + r]) + l2 * pose[6 + r]
+    else:
+        h = 0.5 * pose[12]
+        for r in range(3):
+            half = h * pose[6 + r]
+            out[0, r] = pose[9 + r] - half
+            out[1, r] = pose[9 + r] + half
+
+
+@njit(cache=True, fastmath=False)
+def path_vertices(poses: np.ndarray, b: int, local: np.ndarray, box: bool) -> np.ndarray:
+    """Body b's vertices (N, V, 3) at poses (N, B, 13): a box's 8 corners (``local``), a capsule's 2 ends."""
+    n = poses.shape[0]
+    nv = local.shape[0] if box else 2
+    out = np.empty((n, nv, 3))
+    for s in range(n):
+        _vertices_of(poses[s, b], local, box, out[s])
+    return out
+
+
+@njit(cache=True, fastmath=False)
+def pair_vertices(poses: np.ndarray, a: int, b: int, local: np.ndarray, box: bool) -> np.ndarray:
+    """Body a's vertices (N, V, 3) in body b's frame at poses (N, B, 13) (``local``, ``box``: a's shape).
+
+    a's pose in b's frame (R_b^T R_a, R_b^T (p_a - p_b)), then its vertices. Each 3-term product is
+    summed as numpy's einsum sums it in :func:`planner.collision.sweep.relative_poses` (two running sums
+    over alternate terms: (t0 + t2) + t1), so the bits are the same (``tests/collision/test_sweep.py``).
+    """
+    n = poses.shape[0]
+    nv = local.shape[0] if box else 2
+    out = np.empty((n, nv, 3))
+    rel = np.empty(13)
+    for s in range(n):
+        pa, pb = poses[s, a], poses[s, b]
+        for k in range(3):
+            for i in range(3):  # R[i, k] = sum_j Rb[j, i] Ra[j, k], stored column-major at 3 k + i
+                even = pb[3 * i] * pa[3 * k] + pb[3 * i + 2] * pa[3 * k + 2]
+                rel[3 * k + i] = even + pb[3 * i + 1] * pa[3 * k + 1]
+        d0, d1, d2 = pa[9] - pb[9], pa[10] - pb[10], pa[11] - pb[11]
+        for i in range(3):
+            rel[9 + i] = (pb[3 * i] * d0 + pb[3 * i + 2] * d2) + pb[3 * i + 1] * d1
+        rel[12] = pa[12]
+        _vertices_of(rel, local, box, out[s])
+    return out

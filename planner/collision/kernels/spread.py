@@ -1,0 +1,70 @@
+"""A path's reach per piece and the spreading of bounds along it (compiled).
+
+The numbers of :class:`planner.collision.along.AlongPath`'s reach bound (each piece's joint steps times
+each task's reach rates), its cumulative bound and its running-maximum spread of lower bounds, in one pass
+each instead of numpy's temporaries. Every sum is taken in the order numpy's own formulas take it (over
+the joints in sequence, down the samples in sequence) and maxima are exact, so both give the same bits as
+the plain formulas (``tests/collision/test_along_kernels.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _max(a: float, b: float) -> float:
+    """np.maximum's rule: a when a >= b or a is NaN, else b (so a NaN on either side wins)."""
+    return a if (a >= b or a != a) else b
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _min(a: float, b: float) -> float:
+    """np.minimum's rule: a when a <= b or a is NaN, else b."""
+    return a if (a <= b or a != a) else b
+
+
+@njit(cache=True, fastmath=False)
+def path_reach(dq: np.ndarray, rho: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(reach (N - 1, T), cum (N, T)) of joint steps |dq| (N - 1, J), rates rho (T, J), steps (N - 1, T).
+
+    reach[k, t] = sum_j dq[k, j] rho[t, j] (summed over j in order, from 0); cum[0] = 0 and
+    cum[k + 1] = cum[k] + min(reach[k], steps[k]).
+    """
+    m, nj = dq.shape[0], dq.shape[1]
+    nt = rho.shape[0]
+    reach = np.empty((m, nt))
+    cum = np.empty((m + 1, nt))
+    for t in range(nt):
+        cum[0, t] = 0.0
+    for k in range(m):
+        for t in range(nt):
+            r = 0.0
+            for j in range(nj):
+                r += dq[k, j] * rho[t, j]
+            reach[k, t] = r
+            cum[k + 1, t] = cum[k, t] + _min(r, steps[k, t])
+    return reach, cum
+
+
+@njit(cache=True, fastmath=False)
+def propagate(lower: np.ndarray, cum: np.ndarray, cols: np.ndarray) -> None:
+    """Raise lower[:, t] (N, T) to max_k (lower[k, t] - |cum[j, t] - cum[k, t]|) at every j, t in ``cols``.
+
+    In place: the forward running maximum of lower + cum less cum, the backward one of lower - cum plus
+    cum, the larger of them and lower itself (the values of the input column throughout).
+    """
+    n = lower.shape[0]
+    fwd = np.empty(n)
+    for c in range(cols.shape[0]):
+        t = cols[c]
+        run = 0.0
+        for j in range(n):
+            v = lower[j, t] + cum[j, t]
+            run = v if j == 0 else _max(run, v)
+            fwd[j] = run - cum[j, t]
+        for j in range(n - 1, -1, -1):
+            v = lower[j, t] - cum[j, t]
+            run = v if j == n - 1 else _max(run, v)
+            lower[j, t] = _max(lower[j, t], _max(fwd[j], run + cum[j, t]))

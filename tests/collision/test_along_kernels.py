@@ -1,0 +1,71 @@
+"""The compiled reach, cumulative bound and spread of an along-path pass are numpy's formulas, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.collision.kernels.entries import DEFAULT as KERNELS
+
+
+def _plain_reach(dq: np.ndarray, rho: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    reach = np.zeros((len(dq), len(rho)))
+    for j in range(dq.shape[1]):
+        reach += dq[:, j, None] * rho[None, :, j]
+    cum = np.vstack([np.zeros((1, len(rho))), np.cumsum(np.minimum(reach, steps), axis=0)])
+    return reach, cum
+
+
+def _plain_propagate(lower: np.ndarray, cum: np.ndarray, cols: np.ndarray) -> None:
+    v, c = lower[:, cols], cum[:, cols]
+    fwd = np.maximum.accumulate(v + c, axis=0) - c
+    bwd = np.flip(np.maximum.accumulate(np.flip(v - c, axis=0), axis=0), axis=0) + c
+    lower[:, cols] = np.maximum(v, np.maximum(fwd, bwd))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 257])
+def test_path_reach_is_the_plain_sum_and_cumsum_bit_for_bit(n: int) -> None:
+    rng = np.random.default_rng(n)
+    dq = np.abs(rng.normal(0.0, 1e-3, (n - 1, 8)))
+    rho = np.abs(rng.normal(0.0, 0.7, (35, 8)))
+    steps = np.abs(rng.normal(0.0, 2e-3, (n - 1, 35)))
+    steps[rng.random(steps.shape) < 0.1] = np.inf  # a step bound that says nothing
+    reach, cum = KERNELS.path_reach(dq, rho, steps)
+    want_reach, want_cum = _plain_reach(dq, rho, steps)
+    assert reach.shape == (n - 1, 35) and cum.shape == (n, 35)
+    assert np.array_equal(reach, want_reach) and np.array_equal(cum, want_cum)
+
+
+def test_propagate_is_the_plain_running_maxima_bit_for_bit() -> None:
+    """Over -inf (nothing known yet), NaN and ordinary bounds, on a subset of the columns."""
+    rng = np.random.default_rng(7)
+    n, t = 600, 12
+    lower = rng.normal(0.02, 0.01, (n, t))
+    lower[rng.random((n, t)) < 0.7] = -np.inf
+    lower[5, 3] = np.nan
+    cum = np.vstack([np.zeros((1, t)), np.cumsum(np.abs(rng.normal(0.0, 1e-4, (n - 1, t))), axis=0)])
+    cols = np.array([0, 3, 4, 11], dtype=np.int64)
+    got, want = lower.copy(), lower.copy()
+    KERNELS.propagate(got, cum, cols)
+    _plain_propagate(want, cum, cols)
+    assert np.array_equal(got, want, equal_nan=True)
+    assert np.array_equal(got[:, 1], lower[:, 1])  # other columns untouched
+    assert np.all(got[:, 0] >= np.where(np.isfinite(lower[:, 0]), lower[:, 0], -np.inf))
+
+
+def test_the_entries_refuse_wrong_arguments_by_name() -> None:
+    dq, rho, steps = np.zeros((4, 8)), np.zeros((3, 8)), np.zeros((4, 3))
+    with pytest.raises(ValueError, match="rho"):
+        KERNELS.path_reach(dq, np.zeros((3, 7)), steps)
+    with pytest.raises(ValueError, match="steps"):
+        KERNELS.path_reach(dq, rho, np.zeros((4, 2)))
+    with pytest.raises(TypeError, match="dq"):
+        KERNELS.path_reach(dq.astype(np.float32), rho, steps)
+    lower, cum = np.zeros((5, 3)), np.zeros((5, 3))
+    with pytest.raises(ValueError, match="columns"):
+        KERNELS.propagate(lower, cum, np.array([3], dtype=np.int64))
+    with pytest.raises(ValueError, match="cum"):
+        KERNELS.propagate(lower, np.zeros((5, 2)), np.array([0], dtype=np.int64))
+    lower.flags.writeable = False
+    with pytest.raises(TypeError, match="lower"):
+        KERNELS.propagate(lower, cum, np.array([0], dtype=np.int64))
