@@ -612,16 +612,17 @@ class AlongPath:
                 self._spread(k, t, d, floor_now())
         # Polish: the exact distance where the smallest bounds left are (within the tolerance, the true
         # minimum is most likely there), so the figure is more often the minimum itself.
+        # (An exact query writes its own entry only: the others' bounds stay as they are between queries.)
+        remaining = np.where((state != EXACT) & sel[None, :], lower, np.inf)
         for _ in range(POLISH_QUERIES):
-            remaining = np.where((state != EXACT) & sel[None, :], lower, np.inf)
             flat_k = int(np.argmin(remaining))
             k, t = flat_k // lower.shape[1], flat_k % lower.shape[1]
             if not remaining[k, t] < best:
                 break
             d = self.exact_at(k, t)
+            remaining[k, t] = np.inf
             if d < best:
                 best, best_k, best_t = d, k, t
-        remaining = np.where((state != EXACT) & sel[None, :], lower, np.inf)
         reached = max(tolerance_m, best - float(np.min(remaining)))
         lo_a, lo_b = lower[:-1][:, cols], lower[1:][:, cols]
         reach = self.reach[:, cols]

@@ -34,17 +34,19 @@ def path_reach(dq: np.ndarray, rho: np.ndarray, steps: np.ndarray) -> tuple[np.n
     """
     m, nj = dq.shape[0], dq.shape[1]
     nt = rho.shape[0]
-    reach = np.empty((m, nt))
+    rho_t = np.ascontiguousarray(rho.T)  # (J, T): the tasks innermost, each its own running sum
+    reach = np.zeros((m, nt))
     cum = np.empty((m + 1, nt))
     for t in range(nt):
         cum[0, t] = 0.0
     for k in range(m):
+        row = reach[k]
+        for j in range(nj):
+            step = dq[k, j]
+            for t in range(nt):
+                row[t] += step * rho_t[j, t]
         for t in range(nt):
-            r = 0.0
-            for j in range(nj):
-                r += dq[k, j] * rho[t, j]
-            reach[k, t] = r
-            cum[k + 1, t] = cum[k, t] + _min(r, steps[k, t])
+            cum[k + 1, t] = cum[k, t] + _min(row[t], steps[k, t])
     return reach, cum
 
 
