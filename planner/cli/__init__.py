@@ -9,10 +9,13 @@ from __future__ import annotations
 import os
 import sys
 
-import typer
+from planner.core.startup import loading_modules
 
-from planner.cli import commands, tasks  # noqa: F401 - the commands register with the app on import
-from planner.cli.common import app
+with loading_modules(freeze=True):  # the command line's modules, without the collector's passes
+    import typer
+
+    from planner.cli import commands, tasks  # noqa: F401 - the commands register with the app on import
+    from planner.cli.common import app
 
 __all__ = ["app", "main"]
 

@@ -28,6 +28,7 @@ from planner.cli.common import (
     refusal_to,
 )
 from planner.core.exceptions import InvalidInput
+from planner.core.startup import loading_modules
 from planner.robots import load_robot
 from planner.scenario import MAX_SEED
 from planner.tools import kinematics_tools
@@ -153,8 +154,14 @@ def plan(
 
     The JSON written to --output is the profile on success and the refusal document otherwise.
     """
-    from planner.documents.output import clearance_phrase, document_bytes, refusal_document, result_document
-    from planner.plan.pipeline import Planner
+    with loading_modules():
+        from planner.documents.output import (
+            clearance_phrase,
+            document_bytes,
+            refusal_document,
+            result_document,
+        )
+        from planner.plan.pipeline import Planner
 
     sc = _load(scenario)
     with (

@@ -1,0 +1,43 @@
+"""Start-up: modules load with the cyclic garbage collector suspended, and it is restored afterwards."""
+
+from __future__ import annotations
+
+import gc
+
+import pytest
+
+from planner.core.startup import loading_modules
+
+
+def test_the_collector_is_suspended_while_loading_and_restored_after_even_on_error() -> None:
+    assert gc.isenabled()
+    with loading_modules():
+        assert not gc.isenabled()
+    assert gc.isenabled()
+    with pytest.raises(ImportError), loading_modules():
+        import planner.no_such_module  # type: ignore[import-not-found]  # noqa: F401
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with loading_modules():
+            pass
+        assert not gc.isenabled()  # left as it was found
+    finally:
+        gc.enable()
+
+
+def test_freeze_moves_what_is_alive_out_of_later_collections() -> None:
+    before = gc.get_freeze_count()
+    try:
+        with loading_modules(freeze=True):
+            kept = [[i] for i in range(1000)]  # container objects alive at the end of the block
+        assert gc.get_freeze_count() >= before + len(kept)
+        assert gc.isenabled()
+    finally:
+        gc.unfreeze()
+
+
+def test_the_command_line_leaves_the_collector_running() -> None:
+    import planner.cli  # noqa: F401 - its import loads the commands under loading_modules(freeze=True)
+
+    assert gc.isenabled()
