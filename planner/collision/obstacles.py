@@ -45,6 +45,7 @@ from planner.collision.probes import Probes
 from planner.collision.reports import Contact
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
+from planner.robots.geometry import BOX_CORNER_SIGNS
 
 __all__ = ["Obstacle", "ObstacleSet", "obstacle_contact"]
 
@@ -133,8 +134,7 @@ class Obstacle:
     def corners(self) -> Array:
         """The 8 corners (8, 3) of :attr:`bound` in the base frame."""
         T, h = self.bound
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
-        return (signs * h) @ T[:3, :3].T + T[:3, 3]
+        return (BOX_CORNER_SIGNS * h) @ T[:3, :3].T + T[:3, 3]
 
     def collision_object(self) -> fcl.CollisionObject:
         """The obstacle's FCL object for collision queries (a box primitive, or the mesh's BVH)."""

@@ -18,6 +18,7 @@ import numpy as np
 from planner.collision.bodies import BodySet, Shape
 from planner.collision.reports import BodyState
 from planner.core.types import Array, IntArray
+from planner.robots.geometry import BOX_CORNER_SIGNS
 
 
 def _bvh(vertices: Array, faces: IntArray) -> fcl.BVHModel:
@@ -36,10 +37,9 @@ def cabin_bvh(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> fcl.BVH
     return _bvh(vertices, faces)
 
 
-#: A box's corners as signs of its half extents (x slowest, z fastest) and its 12 triangles, outward
+#: A box's 12 triangles over its corners (:data:`~planner.robots.geometry.BOX_CORNER_SIGNS`), outward
 #: (counter-clockwise seen from outside): the mesh ``trimesh.creation.box`` makes, vertex for vertex
 #: (``tests/collision/test_probes.py``), without importing trimesh (0.1 s of a plan's start-up) for it.
-_BOX_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
 _BOX_FACES = np.array(
     [[1, 3, 0], [4, 1, 0], [0, 3, 2], [2, 4, 0], [1, 7, 3], [5, 1, 4]]
     + [[5, 7, 1], [3, 7, 2], [6, 4, 2], [2, 7, 6], [6, 5, 4], [7, 5, 6]],
@@ -49,7 +49,7 @@ _BOX_FACES = np.array(
 
 def box_mesh(size: tuple[float, float, float]) -> tuple[Array, IntArray]:
     """(vertices (8, 3), faces (12, 3)) of a box of edge lengths ``size`` centred on its frame."""
-    return _BOX_SIGNS * (0.5 * np.asarray(size, dtype=float)), _BOX_FACES.copy()
+    return BOX_CORNER_SIGNS * (0.5 * np.asarray(size, dtype=float)), _BOX_FACES.copy()
 
 
 @cache

@@ -34,7 +34,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from planner.collision.kernels.entries import DEFAULT as KERNELS
 from planner.core.types import Array
-from planner.robots.geometry import Shape
+from planner.robots.geometry import BOX_CORNER_SIGNS, Shape
 
 #: Half size [m] of the cube each capsule end point is thickened to (a flat hull is no FCL convex).
 THICKEN_M = 1e-6
@@ -42,7 +42,6 @@ THICKEN_M = 1e-6
 #: tolerance of FCL's GJK (1e-6 relative): a micrometre, far below the figure's 0.1 mm.
 GJK_SLACK_M = 1e-6
 
-_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
 _REQUEST = fcl.DistanceRequest()
 
 
@@ -55,7 +54,7 @@ def body_vertices(poses: Array, shape: Shape) -> Array:
     R = poses[:, :9].reshape(n, 3, 3).transpose(0, 2, 1)  # R[s, :, k]: body axis k in the base frame
     p = poses[:, 9:12]
     if shape.kind == "box":
-        local = _SIGNS * (0.5 * np.asarray(shape.size, dtype=float))  # (8, 3)
+        local = _local_corners(shape)  # (8, 3)
         Rt = R.transpose(0, 2, 1)  # (R local)^T = local^T R^T, written out (no threaded BLAS for 3 x 3)
         return (
             p[:, None, :]
@@ -84,7 +83,11 @@ def pair_vertices_along(poses: Array, a: int, b: int, shape: Shape) -> Array:
 @lru_cache(maxsize=256)
 def _local_corners(shape: Shape) -> Array:
     """A box's 8 corners in its frame (8, 3) (a capsule's: unused zeros), read-only."""
-    local = _SIGNS * (0.5 * np.asarray(shape.size, dtype=float)) if shape.kind == "box" else np.zeros((8, 3))
+    local = (
+        BOX_CORNER_SIGNS * (0.5 * np.asarray(shape.size, dtype=float))
+        if shape.kind == "box"
+        else np.zeros((8, 3))
+    )
     local.flags.writeable = False
     return local
 
@@ -138,12 +141,12 @@ def hull_object(verts: Array, shape: Shape) -> fcl.CollisionObject:
     """The FCL convex hull of the body's vertices at the run's two ends (verts (n, V, 3))."""
     pts = np.vstack([verts[0], verts[-1]])
     if shape.kind == "capsule":
-        pts = (pts[:, None, :] + THICKEN_M * _SIGNS[None]).reshape(-1, 3)
+        pts = (pts[:, None, :] + THICKEN_M * BOX_CORNER_SIGNS[None]).reshape(-1, 3)
     try:
         hull = ConvexHull(pts, qhull_options="QJ")
     except QhullError:  # all points (nearly) equal: the cube around their centre
         c = pts.mean(axis=0)
-        pts = c + (float(np.max(np.abs(pts - c))) + THICKEN_M) * _SIGNS
+        pts = c + (float(np.max(np.abs(pts - c))) + THICKEN_M) * BOX_CORNER_SIGNS
         hull = ConvexHull(pts, qhull_options="QJ")
     simplices = hull.simplices.astype(np.int32)
     faces = np.hstack([np.full((len(simplices), 1), 3, dtype=np.int32), simplices]).ravel()

@@ -29,6 +29,11 @@ if TYPE_CHECKING:
     from planner.kinematics.compiled import FastFunction
 
 #: The name of the carried payload's body (the last body of a world that has one).
+#: A box's 8 corners as signs of its half extents (8, 3), x slowest and z fastest (read-only): the corners
+#: of a box of half extents h are ``BOX_CORNER_SIGNS * h`` in its frame.
+BOX_CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+BOX_CORNER_SIGNS.flags.writeable = False
+
 PAYLOAD = "payload"
 
 

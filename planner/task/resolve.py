@@ -28,7 +28,7 @@ from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload, box_inertia
 from planner.meshio.load import MeshLimits
 from planner.robots.cabin8 import Cabin8
-from planner.robots.geometry import PAYLOAD
+from planner.robots.geometry import BOX_CORNER_SIGNS, PAYLOAD
 from planner.scenario.files import read_document
 from planner.scenario.resolve import MeshResolver, ResolvedScenario, _load, _mesh_source, resolve_scenario
 from planner.scenario.schema import Scenario
@@ -308,9 +308,8 @@ def _containing(unit: PayloadGeometry, gripper: PayloadGeometry) -> PayloadGeome
     corners = []
     for g in (unit, gripper):
         h = 0.5 * np.array(g.size)
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
         T = T_box_tool @ g.T_tool_box
-        corners.append((signs * h) @ T[:3, :3].T + T[:3, 3])
+        corners.append((BOX_CORNER_SIGNS * h) @ T[:3, :3].T + T[:3, 3])
     pts = np.vstack(corners)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     T_shift = np.eye(4)

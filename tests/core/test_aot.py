@@ -20,10 +20,11 @@ import pytest
 from planner.collision.kernels import codes, entries
 from planner.collision.kernels.entries import EXTENSION, Kernels
 from planner.collision.obstacles import Obstacle
-from planner.collision.sweep import _SIGNS, body_vertices
+from planner.collision.sweep import body_vertices
 from planner.collision.world import CollisionWorld
 from planner.core import aot
 from planner.robots.cabin8 import Cabin8
+from planner.robots.geometry import BOX_CORNER_SIGNS
 from planner.scenario import load_scenario
 from planner.timing import acc_reference
 from planner.timing.jerk import JerkLimitedStage
@@ -108,7 +109,7 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     )
     finite = np.ascontiguousarray(poses[:-1])  # the NaN state left out
     for b, shape in enumerate(world.bodies.shapes):
-        local = _SIGNS * (0.5 * np.asarray(shape.size, dtype=float))
+        local = BOX_CORNER_SIGNS * (0.5 * np.asarray(shape.size, dtype=float))
         kind = shape.kind == "box"
         _same(built.path_vertices(finite, b, local, kind), jit.path_vertices(finite, b, local, kind), "verts")
         a = (b + 1) % len(world.bodies.shapes)

@@ -16,6 +16,7 @@ from planner.generate.cases.common import Draw
 from planner.generate.reach import tucked
 from planner.meshes.generate import Bulkhead, OpeningStep
 from planner.plan.goals import StaticForceCheck
+from planner.robots.geometry import BOX_CORNER_SIGNS
 
 HatchWorld = Callable[[Bulkhead], tuple[CollisionWorld, StaticForceCheck]]
 
@@ -24,7 +25,7 @@ def _payload_extent(d: Draw, z_bh: float) -> tuple[float, float]:
     """Largest |x| and y [m] of the payload box's corners at the tucked posture at ``z_bh``."""
     T = d.robot.fk(tucked(z_bh)) @ d.payload.T_tool_box
     half = np.array(d.payload.size) / 2
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
+    corners = BOX_CORNER_SIGNS * half
     pts = corners @ T[:3, :3].T + T[:3, 3]
     return float(abs(pts[:, 0]).max()), float(pts[:, 1].max())
 
