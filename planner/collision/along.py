@@ -13,8 +13,8 @@ capsules; for the obstacle tasks each body's bounding sphere against the obstacl
 sample in one vectorised pass, its fine sphere cover where that falls short). Along piece k no point of a
 body moves more than D[k, t] = rho_t . |q_{k+1} - q_k| (the reach bounds of :mod:`planner.collision.bodies`
 with the slope bound of the whole path, pairs by their relative reach), and from sample k to k + 1 no more
-than its vertices do (:func:`~planner.collision.sweep.pose_steps`); C_t, growing by the smaller of the two
-from sample to sample, makes d_t 1-Lipschitz over the samples (C_t(q_0) = 0). Hence:
+than its vertices do (:func:`~planner.collision.sweep.task_offsets` of consecutive samples); C_t, growing
+by the smaller of the two from sample to sample, makes d_t 1-Lipschitz over the samples (C_t(q_0) = 0). Hence:
 
 * an exact distance d at sample k bounds every other sample: L[j, t] >= d - |C_t(j) - C_t(k)| (the bounds
   are propagated both ways by running maxima);
@@ -71,10 +71,9 @@ from planner.collision.reports import (
 from planner.collision.sweep import (
     body_vertices_along,
     pair_vertices_along,
-    pose_offsets,
-    pose_steps,
     shape_object,
     swept_bound,
+    task_offsets,
 )
 from planner.core.types import Array, BoolArray, IntArray
 from planner.robots.geometry import CollisionModel
@@ -162,6 +161,13 @@ class AlongPath:
         #: Tasks certified and in the figure (the allowed pairs' columns follow them).
         self.n_checked = self.n_kernel + len(checked)
         n_tasks = self.n_checked + len(allowed)
+        #: Each task's bodies: col_a (and col_b for a pair, -1 otherwise), in the task columns' order.
+        singles = list(range(n_b)) if has_cabin else []
+        ob_bodies = [b for b, _ in self.obstacle_tasks]
+        self._col_a = np.array(singles + [a for a, _ in bodies.pairs] + ob_bodies, dtype=np.int64)
+        self._col_b = np.array(
+            [-1] * len(singles) + [b for _, b in bodies.pairs] + [-1] * len(ob_bodies), dtype=np.int64
+        )
         #: Lower bounds (N, T) of every task (cabin tasks first, then pairs); raised as evidence comes.
         self.lower = np.full((self.n, n_tasks), -np.inf)
         #: What each entry of ``lower`` is: ``SPREAD`` (only what other samples imply), ``BOUND``, ``EXACT``.
@@ -197,7 +203,7 @@ class AlongPath:
         rho_t = np.concatenate(cols, axis=0)  # (T, n)
         # From sample to sample the bodies' vertices move exactly this far (a pair: both bodies' sum), often
         # far less than the reach bound, which holds between samples too.
-        steps = self._per_task(pose_steps(poses, bodies.shapes))  # (N - 1, T)
+        steps = self._task_offsets(poses[:-1], poses[1:])  # (N - 1, T)
         #: reach = dq @ rho_t.T (summed over the joints in order) and the cumulative sample-to-sample bound
         #: cum (N, T): |d_t(q_j) - d_t(q_k)| <= |cum[j, t] - cum[k, t]|, each step the smaller of the
         #: vertices' displacement and the piece's reach (compiled: :mod:`.kernels.spread`).
@@ -219,17 +225,13 @@ class AlongPath:
                 b: (nk + np.flatnonzero(b_idx == b), o_idx[b_idx == b]) for b in np.unique(b_idx).tolist()
             }
 
-    def _per_task(self, per_body: Array) -> Array:
-        """A per-body displacement (M, B) as each task's (M, T): a body's own, a pair's both summed."""
-        pairs = self.bodies.pairs
-        a_idx = np.array([a for a, _ in pairs], dtype=np.int64)
-        b_idx = np.array([b for _, b in pairs], dtype=np.int64)
-        cols = [per_body[:, a_idx] + per_body[:, b_idx]]
-        if self.n_cabin:
-            cols.insert(0, per_body)
-        if self.obstacle_tasks:
-            cols.append(per_body[:, [b for b, _ in self.obstacle_tasks]])
-        return np.hstack(cols)
+    def _task_offsets(self, poses_a: Array, poses_b: Array) -> Array:
+        """How far each task's bodies move between two poses (M, B, 13) of them: (M, T), an upper bound.
+
+        :func:`~planner.collision.sweep.task_offsets`: a body's own move (cabin and obstacle tasks), a
+        pair's both summed.
+        """
+        return task_offsets(poses_a, poses_b, self.bodies.shapes, self._col_a, self._col_b)
 
     def seed_from(self, other: AlongPath) -> None:
         """Raise the bounds from another pass over nearby configurations of the same world.
@@ -240,7 +242,7 @@ class AlongPath:
         """
         if other.lower.shape != self.lower.shape:
             raise ValueError(f"seed_from: passes of {other.lower.shape} and {self.lower.shape} tasks")
-        off = self._per_task(pose_offsets(other.poses, self.poses, self.bodies.shapes))
+        off = self._task_offsets(other.poses, self.poses)
         np.maximum(self.lower, other.lower - off, out=self.lower)
 
     # ---------------------------------------------------------------- bounds

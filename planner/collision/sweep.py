@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from planner.collision.kernels.entries import DEFAULT as KERNELS
-from planner.core.types import Array
+from planner.core.types import Array, IntArray
 from planner.robots.geometry import BOX_CORNER_SIGNS, Shape
 
 #: Half size [m] of the cube each capsule end point is thickened to (a flat hull is no FCL convex).
@@ -116,12 +116,19 @@ def _box_halves(shapes: tuple[Shape, ...]) -> tuple[NDArray[np.bool_], Array]:
     return box, half
 
 
-def pose_steps(poses: Array, shapes: tuple[Shape, ...]) -> Array:
-    """How far any point of each body moves from each sample to the next: (N - 1, B) [m], an upper bound.
+def task_offsets(
+    poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...], col_a: IntArray, col_b: IntArray
+) -> Array:
+    """:func:`pose_offsets` per task (M, T): body col_a[t]'s, plus body col_b[t]'s where that is >= 0.
 
-    :func:`pose_offsets` of consecutive samples of poses (N, B, 13).
+    A task of one body (against the cabin, an obstacle) is as far from anything fixed as its body moves;
+    a pair's distance changes by at most both bodies' moves. Compiled, the same bits as the per-body
+    offsets summed by numpy.
     """
-    return pose_offsets(poses[:-1], poses[1:], shapes)
+    box, half = _box_halves(shapes)
+    return KERNELS.task_offsets(
+        np.ascontiguousarray(poses_a), np.ascontiguousarray(poses_b), box, half, col_a, col_b
+    )
 
 
 def grown_radius(shape: Shape) -> float:

@@ -16,6 +16,7 @@ from planner.collision.sweep import (
     relative_poses,
     shape_object,
     swept_bound,
+    task_offsets,
 )
 from planner.robots.geometry import Shape
 
@@ -157,3 +158,31 @@ def test_compiled_vertices_along_a_path_are_the_numpy_formulas_bit_for_bit() -> 
             assert np.array_equal(pair_vertices_along(poses, b, a, shape), want), (b, other)
     with pytest.raises(ValueError, match="body index"):
         body_vertices_along(poses, 3, BOX)
+
+
+def test_task_offsets_are_each_task_s_bodies_offsets_bit_for_bit() -> None:
+    """A single body's column is its own offset, a pair's the sum of both (as numpy adds them)."""
+    rng = np.random.default_rng(23)
+    shapes = (BOX, CAPSULE, Shape("box", (0.05, 0.6, 0.2)))
+    n = 200
+    poses_a = np.empty((n, len(shapes), 13))
+    poses_b = np.empty_like(poses_a)
+    for k in range(n):
+        for b in range(len(shapes)):
+            R = _rotation(rng)
+            p = rng.normal(size=3)
+            poses_a[k, b] = _pose(R, p, 0.3 + 0.1 * rng.random())
+            poses_b[k, b] = _pose(_rotation(rng), p + 0.01 * rng.normal(size=3), 0.3 + 0.1 * rng.random())
+    per_body = pose_offsets(poses_a, poses_b, shapes)
+    col_a = np.array([0, 1, 2, 0, 1, 2], dtype=np.int64)
+    col_b = np.array([-1, -1, -1, 1, 2, -1], dtype=np.int64)
+    got = task_offsets(poses_a, poses_b, shapes, col_a, col_b)
+    want = np.column_stack(
+        [per_body[:, 0], per_body[:, 1], per_body[:, 2], per_body[:, 0] + per_body[:, 1]]
+        + [per_body[:, 1] + per_body[:, 2], per_body[:, 2]]
+    )
+    assert np.array_equal(got, want)
+    with pytest.raises(ValueError, match="col_b"):
+        task_offsets(poses_a, poses_b, shapes, col_a, np.array([3, -1, -1, 1, 2, -1], dtype=np.int64))
+    with pytest.raises(ValueError, match="col_a"):
+        task_offsets(poses_a, poses_b, shapes, np.array([-1], dtype=np.int64), np.array([-1], dtype=np.int64))

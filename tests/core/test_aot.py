@@ -107,6 +107,11 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     _same(
         built.pose_offsets(step_a, step_b, box, half), jit.pose_offsets(step_a, step_b, box, half), "offsets"
     )
+    nb = len(box)
+    col_a = np.array([*range(nb), *range(nb - 1)], dtype=np.int64)
+    col_b = np.array([-1] * nb + [*range(1, nb)], dtype=np.int64)
+    tasks = (step_a, step_b, box, half, col_a, col_b)
+    _same(built.task_offsets(*tasks), jit.task_offsets(*tasks), "task_offsets")
     finite = np.ascontiguousarray(poses[:-1])  # the NaN state left out
     for b, shape in enumerate(world.bodies.shapes):
         local = BOX_CORNER_SIGNS * (0.5 * np.asarray(shape.size, dtype=float))

@@ -102,6 +102,7 @@ EXTENSION = aot.Extension(
         Entry("obstacle_coarse_batch", ("f8[3]", *_OBSTACLES, "b1"), "f8[3]w"),
         Entry("obstacle_fine_batch", ("f8[3]", "i8[1]", "i8", *_OBSTACLES), "f8[2]w"),
         Entry("pose_offsets", ("f8[3]", "f8[3]", "b1[1]", "f8[1]"), "f8[2]w"),
+        Entry("task_offsets", ("f8[3]", "f8[3]", "b1[1]", "f8[1]", "i8[1]", "i8[1]"), "f8[2]w"),
         Entry("hull_deviation", ("f8[3]",), "f8"),
         Entry("path_vertices", ("f8[3]", "i8", "f8[2]", "b1"), "f8[3]w"),
         Entry("pair_vertices", ("f8[3]", "i8", "i8", "f8[2]", "b1"), "f8[3]w"),
@@ -378,6 +379,25 @@ class Kernels:
         box = check_array(box, "box", B1, 1, shape=(nb,))
         half = check_array(half, "half", F8, 1, shape=(nb,))
         return self.module.pose_offsets(poses_a, poses_b, box, half)
+
+    def task_offsets(
+        self, poses_a: Array, poses_b: Array, box: BoolArray, half: Array, col_a: IntArray, col_b: IntArray
+    ) -> Array:
+        """:func:`.offsets.task_offsets`: (M, T) bounds of each task's move (body col_a[t] + col_b[t])."""
+        poses_a = check_array(poses_a, "poses_a", F8, 3)
+        nb = poses_a.shape[1]
+        poses_b = check_array(poses_b, "poses_b", F8, 3, shape=(poses_a.shape[0], nb, 13))
+        if poses_a.shape[2] != 13:
+            raise ValueError(f"poses_a: shape (M, B, 13) expected, got {poses_a.shape}")
+        box = check_array(box, "box", B1, 1, shape=(nb,))
+        half = check_array(half, "half", F8, 1, shape=(nb,))
+        col_a = check_array(col_a, "col_a", I8, 1)
+        col_b = check_array(col_b, "col_b", I8, 1, shape=col_a.shape)
+        if len(col_a) and not (0 <= int(col_a.min()) and int(col_a.max()) < nb):
+            raise ValueError(f"col_a: body indices in [0, {nb}) expected")
+        if len(col_b) and not (-1 <= int(col_b.min()) and int(col_b.max()) < nb):
+            raise ValueError(f"col_b: body indices in [-1, {nb}) expected (-1: none)")
+        return self.module.task_offsets(poses_a, poses_b, box, half, col_a, col_b)
 
     def hull_deviation(self, verts: Array) -> float:
         """:func:`.offsets.hull_deviation`: how far a run's vertices (n, V, 3) stray from their chords."""

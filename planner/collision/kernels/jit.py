@@ -9,7 +9,13 @@ from __future__ import annotations
 from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
 from planner.collision.kernels.obstacles import obstacle_bounds, obstacle_coarse_batch, obstacle_fine_batch
-from planner.collision.kernels.offsets import hull_deviation, pair_vertices, path_vertices, pose_offsets
+from planner.collision.kernels.offsets import (
+    hull_deviation,
+    pair_vertices,
+    path_vertices,
+    pose_offsets,
+    task_offsets,
+)
 from planner.collision.kernels.spread import path_reach, propagate
 from planner.collision.kernels.state import packed_check, packed_poses, packed_state
 from planner.collision.kernels.walk import (
@@ -41,4 +47,5 @@ __all__ = [
     "propagate",
     "run_extent",
     "segment_reach",
+    "task_offsets",
 ]

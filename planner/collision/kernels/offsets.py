@@ -14,6 +14,26 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, fastmath=False, inline="always")
+def _offset(a: np.ndarray, c: np.ndarray, box: bool, half: float) -> float:
+    """How far any point of a body moves between its poses a and c (13,): an upper bound [m].
+
+    A box (half-diagonal ``half``): |dp| + |dR|_F h; a capsule: |dp| + |d(z L)| / 2.
+    """
+    d9, d10, d11 = c[9] - a[9], c[10] - a[10], c[11] - a[11]
+    dp = math.sqrt((d9 * d9 + d10 * d10) + d11 * d11)
+    if box:  # |dR|_F: the 9 squares summed pairwise, then the ninth (numpy's order)
+        r0, r1, r2, r3 = c[0] - a[0], c[1] - a[1], c[2] - a[2], c[3] - a[3]
+        r4, r5, r6, r7, r8 = c[4] - a[4], c[5] - a[5], c[6] - a[6], c[7] - a[7], c[8] - a[8]
+        sq = ((r0 * r0 + r1 * r1) + (r2 * r2 + r3 * r3)) + ((r4 * r4 + r5 * r5) + (r6 * r6 + r7 * r7))
+        sq += r8 * r8
+        return dp + math.sqrt(sq) * half
+    z0 = c[6] * c[12] - a[6] * a[12]
+    z1 = c[7] * c[12] - a[7] * a[12]
+    z2 = c[8] * c[12] - a[8] * a[12]
+    return dp + 0.5 * math.sqrt((z0 * z0 + z1 * z1) + z2 * z2)
+
+
 @njit(cache=True, fastmath=False)
 def pose_offsets(poses_a: np.ndarray, poses_b: np.ndarray, box: np.ndarray, half: np.ndarray) -> np.ndarray:
     """(M, B) upper bounds of how far any point of each body is between poses_a and poses_b (M, B, 13).
@@ -24,21 +44,35 @@ def pose_offsets(poses_a: np.ndarray, poses_b: np.ndarray, box: np.ndarray, half
     out = np.empty((m, nb))
     for k in range(m):
         for b in range(nb):
-            a = poses_a[k, b]
-            c = poses_b[k, b]
-            d9, d10, d11 = c[9] - a[9], c[10] - a[10], c[11] - a[11]
-            dp = math.sqrt((d9 * d9 + d10 * d10) + d11 * d11)
-            if box[b]:  # |dR|_F: the 9 squares summed pairwise, then the ninth (numpy's order)
-                r0, r1, r2, r3 = c[0] - a[0], c[1] - a[1], c[2] - a[2], c[3] - a[3]
-                r4, r5, r6, r7, r8 = c[4] - a[4], c[5] - a[5], c[6] - a[6], c[7] - a[7], c[8] - a[8]
-                sq = ((r0 * r0 + r1 * r1) + (r2 * r2 + r3 * r3)) + ((r4 * r4 + r5 * r5) + (r6 * r6 + r7 * r7))
-                sq += r8 * r8
-                out[k, b] = dp + math.sqrt(sq) * half[b]
-            else:
-                z0 = c[6] * c[12] - a[6] * a[12]
-                z1 = c[7] * c[12] - a[7] * a[12]
-                z2 = c[8] * c[12] - a[8] * a[12]
-                out[k, b] = dp + 0.5 * math.sqrt((z0 * z0 + z1 * z1) + z2 * z2)
+            out[k, b] = _offset(poses_a[k, b], poses_b[k, b], box[b], half[b])
+    return out
+
+
+@njit(cache=True, fastmath=False)
+def task_offsets(
+    poses_a: np.ndarray,
+    poses_b: np.ndarray,
+    box: np.ndarray,
+    half: np.ndarray,
+    col_a: np.ndarray,
+    col_b: np.ndarray,
+) -> np.ndarray:
+    """(M, T) :func:`pose_offsets` per task column: body col_a[t]'s, plus body col_b[t]'s when >= 0.
+
+    A task of one body (against the cabin or an obstacle) moves by that body's offset; a pair's relative
+    distance by at most the sum of both bodies' offsets.
+    """
+    m, nb, nt = poses_a.shape[0], poses_a.shape[1], col_a.shape[0]
+    body = np.empty(nb)
+    out = np.empty((m, nt))
+    for k in range(m):
+        for b in range(nb):
+            body[b] = _offset(poses_a[k, b], poses_b[k, b], box[b], half[b])
+        for t in range(nt):
+            v = body[col_a[t]]
+            if col_b[t] >= 0:
+                v = v + body[col_b[t]]
+            out[k, t] = v
     return out
 
 
