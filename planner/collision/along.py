@@ -626,11 +626,9 @@ class AlongPath:
             if d < best:
                 best, best_k, best_t = d, k, t
         reached = max(tolerance_m, best - float(np.min(remaining)))
-        lo_a, lo_b = lower[:-1][:, cols], lower[1:][:, cols]
-        reach = self.reach[:, cols]
-        between = np.maximum(0.5 * (lo_a + lo_b - reach), np.maximum(lo_a, lo_b) - reach)
-        kb = int(np.argmin(np.min(between, axis=1)))
-        bound = min(float(np.min(between)), best)
+        # Between samples: on each piece the larger of (a + b - D) / 2 and max(a, b) - D (compiled).
+        between, kb = self._kernels.between_bound(lower, self.reach, cols.astype(np.int64))
+        bound = min(between, best)
         return ClearanceAlong(
             best, bound, int(best_k), self.task_name(int(best_t)), kb, self.queries, reached
         )

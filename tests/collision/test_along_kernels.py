@@ -69,3 +69,36 @@ def test_the_entries_refuse_wrong_arguments_by_name() -> None:
     lower.flags.writeable = False
     with pytest.raises(TypeError, match="lower"):
         KERNELS.propagate(lower, cum, np.array([0], dtype=np.int64))
+
+
+def _plain_between(lower: np.ndarray, reach: np.ndarray, cols: np.ndarray) -> tuple[float, int]:
+    lo_a, lo_b = lower[:-1][:, cols], lower[1:][:, cols]
+    r = reach[:, cols]
+    between = np.maximum(0.5 * (lo_a + lo_b - r), np.maximum(lo_a, lo_b) - r)
+    return float(np.min(between)), int(np.argmin(np.min(between, axis=1)))
+
+
+def test_between_bound_is_the_plain_formula_bit_for_bit() -> None:
+    """The smallest bound between samples and its piece, with -inf entries, ties, NaN and a column subset."""
+    rng = np.random.default_rng(9)
+    n, t = 500, 10
+    lower = rng.normal(0.02, 0.005, (n, t))
+    reach = np.abs(rng.normal(0.0, 1e-4, (n - 1, t)))
+    cols = np.array([1, 4, 5, 9], dtype=np.int64)
+    for case in range(4):
+        low = lower.copy()
+        if case >= 1:
+            low[rng.random((n, t)) < 0.05] = -np.inf
+        if case == 2:
+            low[100:] = low[:100].min()  # ties: the first piece holding the minimum
+            low[:100] = 1.0
+        if case == 3:
+            low[200, 4] = np.nan
+        got = KERNELS.between_bound(low, reach, cols)
+        want = _plain_between(low, reach, cols)
+        assert got[1] == want[1]
+        assert np.array_equal(np.float64(got[0]), np.float64(want[0]), equal_nan=True)
+    with pytest.raises(ValueError, match="columns"):
+        KERNELS.between_bound(lower, reach, np.array([], dtype=np.int64))
+    with pytest.raises(ValueError, match="reach"):
+        KERNELS.between_bound(lower, reach[:-1], cols)

@@ -145,6 +145,11 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     built.propagate(spread[0], cum, np.array([0, 2, 4]))
     jit.propagate(spread[1], cum, np.array([0, 2, 4]))
     _same(spread[0], spread[1], "propagate")
+    _same(
+        built.between_bound(lower, steps, np.array([0, 3])),
+        jit.between_bound(lower, steps, np.array([0, 3])),
+        "between",
+    )
     for i in range(0, 39, 3):
         run = built.run_extent(path, i, 39, rho, 0.002)
         _same(run, jit.run_extent(path, i, 39, rho, 0.002), "run_extent")

@@ -108,6 +108,7 @@ EXTENSION = aot.Extension(
         Entry("pair_vertices", ("f8[3]", "i8", "i8", "f8[2]", "b1"), "f8[3]w"),
         Entry("path_reach", ("f8[2]", "f8[2]", "f8[2]"), "(f8[2]w,f8[2]w)"),
         Entry("propagate", ("f8[2]w", "f8[2]", "i8[1]"), "none"),
+        Entry("between_bound", ("f8[2]", "f8[2]", "i8[1]"), "(f8,i8)"),
     ),
 )
 
@@ -444,6 +445,16 @@ class Kernels:
         if len(cols) and not (0 <= int(cols.min()) and int(cols.max()) < lower.shape[1]):
             raise ValueError(f"propagate: columns in [0, {lower.shape[1]}) expected")
         self.module.propagate(lower, cum, cols)
+
+    def between_bound(self, lower: Array, reach: Array, cols: IntArray) -> tuple[float, int]:
+        """:func:`.spread.between_bound`: (smallest bound between samples, its piece) over ``cols``."""
+        lower = check_array(lower, "lower", F8, 2)
+        reach = check_array(reach, "reach", F8, 2, shape=(lower.shape[0] - 1, lower.shape[1]))
+        cols = check_array(cols, "cols", I8, 1)
+        if not len(cols) or not (0 <= int(cols.min()) and int(cols.max()) < lower.shape[1]):
+            raise ValueError(f"between_bound: one or more columns in [0, {lower.shape[1]}) expected")
+        value, k = self.module.between_bound(lower, reach, cols)
+        return float(value), int(k)
 
 
 #: The kernels every world uses: the ahead-of-time build when there is one, resolved on first use.

@@ -16,7 +16,7 @@ from planner.collision.kernels.offsets import (
     pose_offsets,
     task_offsets,
 )
-from planner.collision.kernels.spread import path_reach, propagate
+from planner.collision.kernels.spread import between_bound, path_reach, propagate
 from planner.collision.kernels.state import packed_check, packed_poses, packed_state
 from planner.collision.kernels.walk import (
     end_ratio,
@@ -27,6 +27,7 @@ from planner.collision.kernels.walk import (
 )
 
 __all__ = [
+    "between_bound",
     "bounds_at",
     "cover_centres_batch",
     "cover_walk",

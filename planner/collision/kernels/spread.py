@@ -70,3 +70,27 @@ def propagate(lower: np.ndarray, cum: np.ndarray, cols: np.ndarray) -> None:
             v = lower[j, t] - cum[j, t]
             run = v if j == n - 1 else _max(run, v)
             lower[j, t] = _max(lower[j, t], _max(fwd[j], run + cum[j, t]))
+
+
+@njit(cache=True, fastmath=False)
+def between_bound(lower: np.ndarray, reach: np.ndarray, cols: np.ndarray) -> tuple[float, int]:
+    """(the smallest bound between samples, the piece where it is) over columns ``cols``.
+
+    On piece k of column t, with a = lower[k, t], b = lower[k + 1, t] and D = reach[k, t]: the larger of
+    (a + b - D) / 2 and max(a, b) - D (the distance cannot fall below either along the piece). The
+    smallest over every piece and column (NaN wins, as np.min), and the first piece whose row holds it
+    (as np.argmin of the rows' minima).
+    """
+    m = reach.shape[0]
+    best = np.inf
+    best_k = 0
+    for k in range(m):
+        row = np.inf
+        for c in range(cols.shape[0]):
+            t = cols[c]
+            a, b, d = lower[k, t], lower[k + 1, t], reach[k, t]
+            v = _max(0.5 * (a + b - d), _max(a, b) - d)
+            row = _min(row, v) if c > 0 else v
+        if row < best or (row != row and best == best) or k == 0:
+            best, best_k = row, k
+    return best, best_k
