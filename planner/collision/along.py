@@ -201,15 +201,13 @@ class AlongPath:
             cols.append(rho[[b for b, _ in self.obstacle_tasks]])
         #: Reach (N - 1, T): how far any point of a task's bodies (pairs: relative) moves along each piece.
         rho_t = np.concatenate(cols, axis=0)  # (T, n)
+        self.reach = np.ascontiguousarray(dq @ rho_t.T)
         # From sample to sample the bodies' vertices move exactly this far (a pair: both bodies' sum), often
         # far less than the reach bound, which holds between samples too.
         steps = self._task_offsets(poses[:-1], poses[1:])  # (N - 1, T)
-        #: reach = dq @ rho_t.T (summed over the joints in order) and the cumulative sample-to-sample bound
-        #: cum (N, T): |d_t(q_j) - d_t(q_k)| <= |cum[j, t] - cum[k, t]|, each step the smaller of the
-        #: vertices' displacement and the piece's reach (compiled: :mod:`.kernels.spread`).
-        self.reach, self.cum = kernels[0].path_reach(
-            np.ascontiguousarray(dq), np.ascontiguousarray(rho_t), np.ascontiguousarray(steps)
-        )
+        #: Cumulative sample-to-sample bound (N, T): |d_t(q_j) - d_t(q_k)| <= |cum[j, t] - cum[k, t]|, each
+        #: step the smaller of the vertices' displacement and the piece's reach (compiled: .kernels.spread).
+        self.cum = kernels[0].cumulative_bound(self.reach, steps)
         nk = self.n_kernel
         self._reach_k = np.ascontiguousarray(self.reach[:, :nk])
         self._cum_k = np.ascontiguousarray(self.cum[:, :nk])

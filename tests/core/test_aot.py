@@ -134,10 +134,9 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
         _same(built.segment_reach(d, k, 0.2, np.abs(dq)), jit.segment_reach(d, k, 0.2, np.abs(dq)), "reach")
     path = np.ascontiguousarray(sc.start_q + np.cumsum(rng.normal(0.0, 0.01, (40, 8)), axis=0))
     rho = np.ascontiguousarray(np.max(d.rho, axis=0))
-    dq_path = np.abs(np.diff(path, axis=0))
-    rates = np.abs(rng.normal(0.0, 0.5, (5, 8)))
+    reach = np.ascontiguousarray(np.abs(np.diff(path, axis=0)) @ np.abs(rng.normal(0.0, 0.5, (5, 8))).T)
     steps = np.abs(rng.normal(0.0, 0.01, (39, 5)))
-    _same(built.path_reach(dq_path, rates, steps), jit.path_reach(dq_path, rates, steps), "path_reach")
+    _same(built.cumulative_bound(reach, steps), jit.cumulative_bound(reach, steps), "cumulative_bound")
     lower = rng.normal(0.0, 0.01, (40, 5))
     lower[rng.random(lower.shape) < 0.5] = -np.inf
     cum = np.ascontiguousarray(np.vstack([np.zeros((1, 5)), np.cumsum(steps, axis=0)]))

@@ -106,7 +106,7 @@ EXTENSION = aot.Extension(
         Entry("hull_deviation", ("f8[3]",), "f8"),
         Entry("path_vertices", ("f8[3]", "i8", "f8[2]", "b1"), "f8[3]w"),
         Entry("pair_vertices", ("f8[3]", "i8", "i8", "f8[2]", "b1"), "f8[3]w"),
-        Entry("path_reach", ("f8[2]", "f8[2]", "f8[2]"), "(f8[2]w,f8[2]w)"),
+        Entry("cumulative_bound", ("f8[2]", "f8[2]"), "f8[2]w"),
         Entry("propagate", ("f8[2]w", "f8[2]", "i8[1]"), "none"),
         Entry("between_bound", ("f8[2]", "f8[2]", "i8[1]"), "(f8,i8)"),
     ),
@@ -429,13 +429,11 @@ class Kernels:
                 raise ValueError(f"body index {b} outside [0, {poses.shape[1]})")
         return poses
 
-    def path_reach(self, dq: Array, rho: Array, steps: Array) -> tuple[Array, Array]:
-        """:func:`.spread.path_reach`: (reach (N - 1, T), cum (N, T)) from |dq| (N - 1, J), rho (T, J)."""
-        dq = check_array(dq, "dq", F8, 2)
-        rho = check_array(rho, "rho", F8, 2, shape=(None, dq.shape[1]))
-        steps = check_array(steps, "steps", F8, 2, shape=(dq.shape[0], rho.shape[0]))
-        reach, cum = self.module.path_reach(dq, rho, steps)
-        return reach, cum
+    def cumulative_bound(self, reach: Array, steps: Array) -> Array:
+        """:func:`.spread.cumulative_bound`: cum (N, T) of the pieces' reach and steps (N - 1, T)."""
+        reach = check_array(reach, "reach", F8, 2)
+        steps = check_array(steps, "steps", F8, 2, shape=reach.shape)
+        return self.module.cumulative_bound(reach, steps)
 
     def propagate(self, lower: Array, cum: Array, cols: IntArray) -> None:
         """:func:`.spread.propagate`: raise columns ``cols`` of lower (N, T) along cum (N, T), in place."""

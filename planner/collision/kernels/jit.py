@@ -16,7 +16,7 @@ from planner.collision.kernels.offsets import (
     pose_offsets,
     task_offsets,
 )
-from planner.collision.kernels.spread import between_bound, path_reach, propagate
+from planner.collision.kernels.spread import between_bound, cumulative_bound, propagate
 from planner.collision.kernels.state import packed_check, packed_poses, packed_state
 from planner.collision.kernels.walk import (
     end_ratio,
@@ -31,6 +31,7 @@ __all__ = [
     "bounds_at",
     "cover_centres_batch",
     "cover_walk",
+    "cumulative_bound",
     "end_ratio",
     "first_inadmissible",
     "hull_deviation",
@@ -42,7 +43,6 @@ __all__ = [
     "packed_poses",
     "packed_state",
     "pair_vertices",
-    "path_reach",
     "path_vertices",
     "pose_offsets",
     "propagate",

@@ -1,10 +1,10 @@
-"""A path's reach per piece and the spreading of bounds along it (compiled).
+"""A path's cumulative bound and the spreading of bounds along it (compiled).
 
-The numbers of :class:`planner.collision.along.AlongPath`'s reach bound (each piece's joint steps times
-each task's reach rates), its cumulative bound and its running-maximum spread of lower bounds, in one pass
-each instead of numpy's temporaries. Every sum is taken in the order numpy's own formulas take it (over
-the joints in sequence, down the samples in sequence) and maxima are exact, so both give the same bits as
-the plain formulas (``tests/collision/test_along_kernels.py``).
+The numbers of :class:`planner.collision.along.AlongPath`'s cumulative bound (each piece's reach or its
+vertices' step, the smaller, summed along the path), its running-maximum spread of lower bounds and its
+bound between samples, in one pass each instead of numpy's temporaries. Every sum is taken in the order
+numpy's own formulas take it (down the samples in sequence) and maxima and minima are exact, with numpy's
+NaN rules, so both give the same bits as the plain formulas (``tests/collision/test_along_kernels.py``).
 """
 
 from __future__ import annotations
@@ -26,28 +26,20 @@ def _min(a: float, b: float) -> float:
 
 
 @njit(cache=True, fastmath=False)
-def path_reach(dq: np.ndarray, rho: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(reach (N - 1, T), cum (N, T)) of joint steps |dq| (N - 1, J), rates rho (T, J), steps (N - 1, T).
+def cumulative_bound(reach: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """The cumulative bound (N, T) of each piece's reach and vertex step (N - 1, T).
 
-    reach[k, t] = sum_j dq[k, j] rho[t, j] (summed over j in order, from 0); cum[0] = 0 and
-    cum[k + 1] = cum[k] + min(reach[k], steps[k]).
+    cum[0] = 0, cum[k + 1] = cum[k] + min(reach[k], steps[k]), added down the samples in order: as
+    ``np.vstack([0, np.cumsum(np.minimum(reach, steps), axis=0)])``.
     """
-    m, nj = dq.shape[0], dq.shape[1]
-    nt = rho.shape[0]
-    rho_t = np.ascontiguousarray(rho.T)  # (J, T): the tasks innermost, each its own running sum
-    reach = np.zeros((m, nt))
+    m, nt = reach.shape[0], reach.shape[1]
     cum = np.empty((m + 1, nt))
     for t in range(nt):
         cum[0, t] = 0.0
     for k in range(m):
-        row = reach[k]
-        for j in range(nj):
-            step = dq[k, j]
-            for t in range(nt):
-                row[t] += step * rho_t[j, t]
         for t in range(nt):
-            cum[k + 1, t] = cum[k, t] + _min(row[t], steps[k, t])
-    return reach, cum
+            cum[k + 1, t] = cum[k, t] + _min(reach[k, t], steps[k, t])
+    return cum
 
 
 @njit(cache=True, fastmath=False)
