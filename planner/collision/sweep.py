@@ -101,9 +101,9 @@ def pose_offsets(poses_a: Array, poses_b: Array, shapes: tuple[Shape, ...]) -> A
     A box's distance to anything fixed, and a capsule's (its axis segment's less its radius), differ by no
     more between the two poses.
     """
-    box, half = _box_halves(shapes)
-    # Compiled (:mod:`.kernels.offsets`): one pass instead of numpy's dozen temporaries, the same bits.
-    return KERNELS.pose_offsets(np.ascontiguousarray(poses_a), np.ascontiguousarray(poses_b), box, half)
+    # Each body its own task: :func:`task_offsets` (compiled, the same bits as the numpy formula).
+    bodies = np.arange(len(shapes), dtype=np.int64)
+    return task_offsets(poses_a, poses_b, shapes, bodies, np.full(len(shapes), -1, dtype=np.int64))
 
 
 @lru_cache(maxsize=256)

@@ -104,9 +104,6 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     box = np.array([s.kind == "box" for s in world.bodies.shapes])
     half = np.array([0.5 * float(np.linalg.norm(s.size)) for s in world.bodies.shapes])
     step_a, step_b = np.ascontiguousarray(poses[:-1]), np.ascontiguousarray(poses[1:])
-    _same(
-        built.pose_offsets(step_a, step_b, box, half), jit.pose_offsets(step_a, step_b, box, half), "offsets"
-    )
     nb = len(box)
     col_a = np.array([*range(nb), *range(nb - 1)], dtype=np.int64)
     col_b = np.array([-1] * nb + [*range(1, nb)], dtype=np.int64)
@@ -292,6 +289,9 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
     od, th = with_obstacles.obstacles.kernel_data, np.zeros(len(with_obstacles.names))
     at = np.zeros((1, len(with_obstacles.names), 13))
     at[0, :, [0, 4, 8]] = 1.0
+    one = np.arange(len(at[0]), dtype=np.int64)  # each body its own task column
+    none = np.full(len(at[0]), -1, dtype=np.int64)
+    yes, half = np.zeros(len(at[0]), bool), np.zeros(len(at[0]))
     cases += [
         (lambda: built.obstacle_bounds(at[0], od, th), None),  # the control: accepted
         (lambda: built.obstacle_bounds(at[0], d, th), "d"),  # a world's data, not an obstacle set's
@@ -299,9 +299,10 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
         (lambda: built.obstacle_bounds(at[0], od, th.astype(np.float32)), "threshold"),
         (lambda: built.obstacle_coarse_batch(at[0], od, False), "poses"),
         (lambda: built.obstacle_fine_batch(at, np.zeros(1, dtype=np.int32), 0, od), "rows"),
-        (lambda: built.pose_offsets(at, at, np.zeros(len(at[0]), bool), np.zeros(len(at[0]))), None),
-        (lambda: built.pose_offsets(at, at, np.zeros(len(at[0])), np.zeros(len(at[0]))), "box"),
-        (lambda: built.pose_offsets(at, at[:, :, :12], np.zeros(len(at[0]), bool), np.zeros(1)), "poses_b"),
+        (lambda: built.task_offsets(at, at, yes, half, one, none), None),
+        (lambda: built.task_offsets(at, at, half, half, one, none), "box"),
+        (lambda: built.task_offsets(at, at[:, :, :12], yes, np.zeros(1), one, none), "poses_b"),
+        (lambda: built.task_offsets(at, at, yes, half, one.astype(np.int32), none), "col_a"),
         (lambda: built.hull_deviation(np.asfortranarray(at[:, :, :3])), "verts"),
     ]
     for call, name in cases:

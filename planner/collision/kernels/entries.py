@@ -101,7 +101,6 @@ EXTENSION = aot.Extension(
         Entry("obstacle_bounds", ("f8[2]", *_OBSTACLES, "f8[1]"), "f8[2]w"),
         Entry("obstacle_coarse_batch", ("f8[3]", *_OBSTACLES, "b1"), "f8[3]w"),
         Entry("obstacle_fine_batch", ("f8[3]", "i8[1]", "i8", *_OBSTACLES), "f8[2]w"),
-        Entry("pose_offsets", ("f8[3]", "f8[3]", "b1[1]", "f8[1]"), "f8[2]w"),
         Entry("task_offsets", ("f8[3]", "f8[3]", "b1[1]", "f8[1]", "i8[1]", "i8[1]"), "f8[2]w"),
         Entry("hull_deviation", ("f8[3]",), "f8"),
         Entry("path_vertices", ("f8[3]", "i8", "f8[2]", "b1"), "f8[3]w"),
@@ -369,17 +368,6 @@ class Kernels:
         if not 0 <= b < d.n_bodies:
             raise ValueError(f"obstacle_fine_batch: a body in [0, {d.n_bodies}) expected, got {b}")
         return self.module.obstacle_fine_batch(poses, rows, b, d.fbuf, d.ibuf)
-
-    def pose_offsets(self, poses_a: Array, poses_b: Array, box: BoolArray, half: Array) -> Array:
-        """:func:`.offsets.pose_offsets`: (M, B) bounds of each body's move between poses (M, B, 13)."""
-        poses_a = check_array(poses_a, "poses_a", F8, 3)
-        nb = poses_a.shape[1]
-        poses_b = check_array(poses_b, "poses_b", F8, 3, shape=(poses_a.shape[0], nb, 13))
-        if poses_a.shape[2] != 13:
-            raise ValueError(f"poses_a: shape (M, B, 13) expected, got {poses_a.shape}")
-        box = check_array(box, "box", B1, 1, shape=(nb,))
-        half = check_array(half, "half", F8, 1, shape=(nb,))
-        return self.module.pose_offsets(poses_a, poses_b, box, half)
 
     def task_offsets(
         self, poses_a: Array, poses_b: Array, box: BoolArray, half: Array, col_a: IntArray, col_b: IntArray

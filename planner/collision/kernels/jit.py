@@ -13,7 +13,6 @@ from planner.collision.kernels.offsets import (
     hull_deviation,
     pair_vertices,
     path_vertices,
-    pose_offsets,
     task_offsets,
 )
 from planner.collision.kernels.spread import between_bound, cumulative_bound, propagate
@@ -44,7 +43,6 @@ __all__ = [
     "packed_state",
     "pair_vertices",
     "path_vertices",
-    "pose_offsets",
     "propagate",
     "run_extent",
     "segment_reach",

@@ -1,9 +1,10 @@
 """How far bodies move between poses, and how far a run's vertices stray from their chords (compiled).
 
-The numbers of :func:`planner.collision.sweep.pose_offsets` and :func:`planner.collision.sweep.hull_deviation`
-in one pass over the poses instead of numpy's dozen temporaries: every sum is written out in the order
-numpy's own reductions add (pairwise over 9 terms, in sequence over 3), so both give the same bits as the
-plain numpy formulas (``tests/collision/test_sweep.py``).
+The numbers of :func:`planner.collision.sweep.task_offsets` (each body's move between poses, per task) and
+:func:`planner.collision.sweep.hull_deviation`, and the swept hulls' vertices along a path, in one pass
+over the poses instead of numpy's dozen temporaries: every sum is written out in the order numpy's own
+reductions add (pairwise over 9 terms, in sequence over 3), so both give the same bits as the plain numpy
+formulas (``tests/collision/test_sweep.py``).
 """
 
 from __future__ import annotations
@@ -35,20 +36,6 @@ def _offset(a: np.ndarray, c: np.ndarray, box: bool, half: float) -> float:
 
 
 @njit(cache=True, fastmath=False)
-def pose_offsets(poses_a: np.ndarray, poses_b: np.ndarray, box: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """(M, B) upper bounds of how far any point of each body is between poses_a and poses_b (M, B, 13).
-
-    A box (``box[b]``, half-diagonal ``half[b]``): |dp| + |dR|_F h; a capsule: |dp| + |d(z L)| / 2.
-    """
-    m, nb = poses_a.shape[0], poses_a.shape[1]
-    out = np.empty((m, nb))
-    for k in range(m):
-        for b in range(nb):
-            out[k, b] = _offset(poses_a[k, b], poses_b[k, b], box[b], half[b])
-    return out
-
-
-@njit(cache=True, fastmath=False)
 def task_offsets(
     poses_a: np.ndarray,
     poses_b: np.ndarray,
@@ -57,7 +44,10 @@ def task_offsets(
     col_a: np.ndarray,
     col_b: np.ndarray,
 ) -> np.ndarray:
-    """(M, T) :func:`pose_offsets` per task column: body col_a[t]'s, plus body col_b[t]'s when >= 0.
+    """(M, T) bounds of how far each task's bodies move between poses_a and poses_b (M, B, 13).
+
+    Per body (``box[b]``, half-diagonal ``half[b]``): |dp| + |dR|_F h for a box, |dp| + |d(z L)| / 2 for
+    a capsule; per task column, body col_a[t]'s, plus body col_b[t]'s when >= 0.
 
     A task of one body (against the cabin or an obstacle) moves by that body's offset; a pair's relative
     distance by at most the sum of both bodies' offsets.
