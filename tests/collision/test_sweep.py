@@ -89,24 +89,28 @@ def test_curved_runs_and_pairs_are_bounded_from_below_at_every_sample() -> None:
             assert v <= min(_exact(shape, p, other) for p in poses_a) + 1e-12
 
 
+def _nearby_poses(rng: np.random.Generator, n_bodies: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Random poses (n, B, 13) of B bodies, and each moved a little (a turn under 0.05 rad, ~1 cm)."""
+    poses_a = np.empty((n, n_bodies, 13))
+    poses_b = np.empty_like(poses_a)
+    for k in range(n):
+        for b in range(n_bodies):
+            R = _rotation(rng)
+            p = rng.normal(size=3)
+            poses_a[k, b] = _pose(R, p, 0.3 + 0.1 * rng.random())
+            step = trimesh.transformations.rotation_matrix(0.05 * rng.random(), rng.normal(size=3))[:3, :3]
+            poses_b[k, b] = _pose(step @ R, p + 0.01 * rng.normal(size=3), 0.3 + 0.1 * rng.random())
+    return poses_a, poses_b
+
+
 def test_pose_offsets_bound_every_vertex_move_and_are_the_plain_formula_bit_for_bit() -> None:
     """Each body's offset bounds how far any of its vertices moves; the written-out sums change no bit.
 
     The plain formula: |dp| + |dR|_F h (a box, h its half-diagonal) or |dp| + |d(z L)| / 2 (a capsule),
     summed by np.sum.
     """
-    rng = np.random.default_rng(11)
     shapes = (BOX, CAPSULE, Shape("box", (0.05, 0.6, 0.2)))
-    n = 300
-    poses_a = np.empty((n, len(shapes), 13))
-    poses_b = np.empty_like(poses_a)
-    for k in range(n):
-        for b in range(len(shapes)):
-            R = _rotation(rng)
-            p = rng.normal(size=3)
-            poses_a[k, b] = _pose(R, p, 0.3 + 0.1 * rng.random())
-            step = trimesh.transformations.rotation_matrix(0.05 * rng.random(), rng.normal(size=3))[:3, :3]
-            poses_b[k, b] = _pose(step @ R, p + 0.01 * rng.normal(size=3), 0.3 + 0.1 * rng.random())
+    poses_a, poses_b = _nearby_poses(np.random.default_rng(11), len(shapes), 300)
     got = pose_offsets(poses_a, poses_b, shapes)
     d = poses_b - poses_a
     half = np.array([0.5 * np.linalg.norm(s.size) if s.kind == "box" else 0.0 for s in shapes])
@@ -162,17 +166,8 @@ def test_compiled_vertices_along_a_path_are_the_numpy_formulas_bit_for_bit() -> 
 
 def test_task_offsets_are_each_task_s_bodies_offsets_bit_for_bit() -> None:
     """A single body's column is its own offset, a pair's the sum of both (as numpy adds them)."""
-    rng = np.random.default_rng(23)
     shapes = (BOX, CAPSULE, Shape("box", (0.05, 0.6, 0.2)))
-    n = 200
-    poses_a = np.empty((n, len(shapes), 13))
-    poses_b = np.empty_like(poses_a)
-    for k in range(n):
-        for b in range(len(shapes)):
-            R = _rotation(rng)
-            p = rng.normal(size=3)
-            poses_a[k, b] = _pose(R, p, 0.3 + 0.1 * rng.random())
-            poses_b[k, b] = _pose(_rotation(rng), p + 0.01 * rng.normal(size=3), 0.3 + 0.1 * rng.random())
+    poses_a, poses_b = _nearby_poses(np.random.default_rng(23), len(shapes), 200)
     per_body = pose_offsets(poses_a, poses_b, shapes)
     col_a = np.array([0, 1, 2, 0, 1, 2], dtype=np.int64)
     col_b = np.array([-1, -1, -1, 1, 2, -1], dtype=np.int64)
