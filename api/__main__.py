@@ -10,6 +10,8 @@ from __future__ import annotations
 import logging
 import os
 import sys
+from collections.abc import Callable
+from types import FrameType
 
 import uvicorn
 
@@ -57,7 +59,20 @@ def main() -> None:
             f"cabinplan: operator page: http://{settings.host}:{settings.port}/viewer/ (key: as above)\n"
         )
         sys.stdout.flush()
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="info", access_log=False)
+    config = uvicorn.Config(app, host=settings.host, port=settings.port, log_level="info", access_log=False)
+    _Server(config, app.state.ctx.waiters.close).run()
+
+
+class _Server(uvicorn.Server):
+    """uvicorn's server; on the exit signal the long polls answer at once (no wait for them to time out)."""
+
+    def __init__(self, config: uvicorn.Config, on_exit: Callable[[], None]) -> None:
+        super().__init__(config)
+        self._on_exit = on_exit
+
+    def handle_exit(self, sig: int, frame: FrameType | None) -> None:
+        super().handle_exit(sig, frame)
+        self._on_exit()
 
 
 if __name__ == "__main__":

@@ -249,9 +249,11 @@ def create_app(settings: Settings | None = None, runner: JobRunner | None = None
     )
     feeder = SweepFeeder(db, settings, job_runner)
     ctx.sweep_submitted = feeder.wake
+    job_runner.on_job_end(ctx.waiters.notify)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        ctx.waiters.bind(asyncio.get_running_loop())
         db.create_all()
         recover_jobs(db)
         job_runner.start()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from fastapi import Request
@@ -13,6 +13,7 @@ from api.jobstore import JobStore
 from api.metrics import ServiceMetrics
 from api.ratelimit import TenantRateLimiter
 from api.settings import Settings
+from api.waiters import JobWaiters
 
 if TYPE_CHECKING:
     from api.jobs import JobRunner
@@ -33,6 +34,8 @@ class AppContext:
     jobs: JobStore
     #: Called when a sweep was submitted: its first plans are fed now, not at the feeder's next pass.
     sweep_submitted: Callable[[], None] = lambda: None
+    #: Requests waiting for a job to end (``wait_s``), woken by the runner.
+    waiters: JobWaiters = field(default_factory=JobWaiters)
 
 
 def get_context(request: Request) -> AppContext:

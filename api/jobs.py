@@ -16,7 +16,8 @@ memory never grows without bound; ``worker_max_jobs = 1`` gives a fresh process 
   claimed once even with several service instances on one PostgreSQL database), up to ``workers`` at a
   time, and counts the attempt;
 * reads ``progress`` and ``done`` messages from each job's pipe and writes them to the database (the
-  latest progress once a pass, with its detail -- a campaign's units --, the outcome once);
+  latest progress at most every :data:`PROGRESS_PERIOD_S`, with its detail -- a campaign's units --,
+  the outcome once);
 * stores the files a running job hands over to keep (``keep`` messages: a campaign's finished cycles,
   :meth:`api.jobstore.JobStore.keep`) and gives them to the job's next attempt (``kept``), so a job whose
   instance died resumes from them;
@@ -61,6 +62,7 @@ from multiprocessing.context import ForkServerContext
 from multiprocessing.process import BaseProcess
 from typing import Any, Protocol
 
+from api import results
 from api.db import Database
 from api.jobkinds import kind_of
 from api.jobstore import (
@@ -90,6 +92,9 @@ RAN_ON_KEPT = 256
 #: Period of the retention purge [s].
 PURGE_PERIOD_S = 60.0
 
+#: A running job's progress is written at most this often [s] (:meth:`ProcessJobRunner._drain`).
+PROGRESS_PERIOD_S = 0.25
+
 
 class JobRunner(Protocol):
     """What the service needs of a job executor (pluggable: processes here, a cluster elsewhere)."""
@@ -109,8 +114,8 @@ class JobRunner(Protocol):
     def cancel(self, job_id: str) -> None:
         """Kill the job if it is running here (it becomes ``cancelled``)."""
 
-    def on_job_end(self, listener: Callable[[], None]) -> None:
-        """Call ``listener`` (no arguments, in the runner's thread) each time a job of this instance ends."""
+    def on_job_end(self, listener: Callable[[str], None]) -> None:
+        """Call ``listener(job_id)`` (in the runner's thread) each time a job of this instance ends."""
 
     def alive(self) -> bool:
         """True while the runner can execute jobs."""
@@ -132,6 +137,10 @@ class _Running:
     eof: bool = False
     #: Its worker was killed (and reaped) by the runner.
     killed: bool = False
+    #: Latest (stage, fraction) and detail reported and not yet written; when progress was last written.
+    progress: tuple[str, float] | None = None
+    detail: dict[str, Any] | None = None
+    progress_at: float = 0.0
 
     @property
     def conn(self) -> Connection:
@@ -200,7 +209,7 @@ class ProcessJobRunner:
         #: Job id -> (worker pid, which job of that worker it was: 1 for a fresh worker) of the latest
         #: :data:`RAN_ON_KEPT` jobs started here (logs, tests).
         self.ran_on: OrderedDict[str, tuple[int, int]] = OrderedDict()
-        self._end_listeners: list[Callable[[], None]] = []
+        self._end_listeners: list[Callable[[str], None]] = []
 
     def _new_pool(self) -> WarmPool:
         return WarmPool(
@@ -243,8 +252,8 @@ class ProcessJobRunner:
         """Look for queued work now."""
         self._wake.set()
 
-    def on_job_end(self, listener: Callable[[], None]) -> None:
-        """Call ``listener`` each time a job of this instance ends (its terminal state written or not)."""
+    def on_job_end(self, listener: Callable[[str], None]) -> None:
+        """Call ``listener(job_id)`` each time a job of this instance ends (terminal state written or not)."""
         self._end_listeners.append(listener)
 
     def cancel(self, job_id: str) -> None:
@@ -427,7 +436,7 @@ class ProcessJobRunner:
         started = time.monotonic()
         deadline = started + float(job["time_limit_s"]) + self.settings.job_grace_s
         with self._lock:
-            self._running[job["id"]] = _Running(job["id"], worker, deadline, started)
+            self._running[job["id"]] = _Running(job["id"], worker, deadline, started, progress_at=started)
             self.ran_on[job["id"]] = (worker.pid or 0, worker.served)
             while len(self.ran_on) > RAN_ON_KEPT:
                 self.ran_on.popitem(last=False)
@@ -447,9 +456,13 @@ class ProcessJobRunner:
             _LOG.exception("job %s: not re-queued now; its lease will lapse", job_id)
 
     def _drain(self, r: _Running) -> None:
-        """Read the job's messages; write its latest progress once (one database write a pass)."""
-        latest: tuple[str, float, dict[str, Any] | None] | None = None
-        detail: dict[str, Any] | None = None
+        """Read the job's messages; write its latest progress at most once a :data:`PROGRESS_PERIOD_S`.
+
+        A plan reports each stage as it starts, several a second; each write is a committed (synced)
+        transaction on the dispatcher's thread, which meanwhile hands no finished worker its next job.
+        So the latest progress waits until the period since the job's last progress write (or its
+        start) is over, and a job that ends first never writes it: its end write supersedes it.
+        """
         while not r.eof:
             try:
                 if not r.conn.poll(0):
@@ -460,16 +473,22 @@ class ProcessJobRunner:
                 break
             if msg[0] == "progress":
                 if len(msg) > 3 and msg[3] is not None:
-                    detail = msg[3]
-                latest = (str(msg[1]), float(msg[2]), detail)
+                    r.detail = msg[3]
+                r.progress = (str(msg[1]), float(msg[2]))
             elif msg[0] == "keep":  # a file the job keeps for a relaunch (a campaign's finished cycle)
                 self.store.keep(r.job_id, self.instance_id, str(msg[1]), bytes(msg[2]))
             elif msg[0] == "done":
                 r.outcome = msg[1]
-        if latest is not None and r.outcome is None:  # a finished job's end write supersedes it
-            self.store.progress(r.job_id, self.instance_id, *latest)
-        elif detail is not None:  # the last units of a finished job stay in its document
-            self.store.progress(r.job_id, self.instance_id, "finishing", 0.99, detail)
+        if r.outcome is not None or r.eof:
+            if r.detail is not None and r.outcome is not None:  # its last units stay in its document
+                self.store.progress(r.job_id, self.instance_id, "finishing", 0.99, r.detail)
+            r.progress = r.detail = None
+            return
+        now = time.monotonic()
+        if r.progress is not None and now - r.progress_at >= PROGRESS_PERIOD_S:
+            self.store.progress(r.job_id, self.instance_id, *r.progress, r.detail)
+            r.progress = r.detail = None
+            r.progress_at = now
 
     def _crashed(self, r: _Running) -> None:
         """The job's worker died without an outcome: reap it (a fresh one takes its place), fail the job."""
@@ -499,6 +518,7 @@ class ProcessJobRunner:
         self._end(
             r,
             str(out["status"]),
+            text=out.get("text") if out.get("packed") is not None else None,
             reason=out.get("reason"),
             message=out.get("message"),
             result_packed=out.get("packed"),
@@ -511,10 +531,12 @@ class ProcessJobRunner:
             r.killed = True
             self._pool.discard(r.worker)
 
-    def _end(self, r: _Running, status: str, **values: Any) -> None:
+    def _end(self, r: _Running, status: str, text: str | None = None, **values: Any) -> None:
         """Write the terminal state (only over this instance's ``running``: never over a cancellation).
 
         The slot is released first, so that whoever reads the terminal state also sees the slot free.
+        ``text``: the result's JSON text, kept (:mod:`api.results`) once the result is written, before the
+        end listeners (long-polling readers) run.
         """
         with self._lock:
             self._running.pop(r.job_id, None)
@@ -533,6 +555,8 @@ class ProcessJobRunner:
             if not r.killed and r.outcome is None:  # never left running without its job
                 self._kill(r)
         if written:
+            if text is not None:
+                results.remember(r.job_id, text)
             reason = values.get("reason")
             self.metrics.job_outcomes.labels(status=status, reason=str(reason or "")).inc()
             self.metrics.job_duration.labels(status=status).observe(time.monotonic() - r.started)
@@ -540,7 +564,7 @@ class ProcessJobRunner:
         self._wake.set()
         for listener in self._end_listeners:
             try:
-                listener()
+                listener(r.job_id)
             except Exception:  # a listener's failure must not stop the dispatcher
                 _LOG.exception("job %s: end listener failed", r.job_id)
 

@@ -94,6 +94,12 @@ class Settings(BaseSettings):
     body_timeout_s: float = Field(
         10.0, gt=0.0, le=600.0, description="Longest wait for the next chunk of a request body (408 beyond)."
     )
+    job_wait_max_s: float = Field(
+        30.0,
+        ge=0.0,
+        le=60.0,
+        description="Longest a job document request waits for the job to end (its wait_s is capped to this).",
+    )
     forkserver_preload: bool = Field(
         True, description="Import the planner once in the forkserver so that each job forks warm."
     )

@@ -158,7 +158,11 @@ class SweepFeeder:
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
-        runner.on_job_end(self.wake)
+        runner.on_job_end(self.job_ended)
+
+    def job_ended(self, job_id: str) -> None:
+        """A job of this instance ended (the runner's end listener): its tenant may have room now."""
+        self.wake()
 
     def start(self) -> None:
         """Start the feeder thread."""

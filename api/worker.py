@@ -9,7 +9,8 @@ and the tenant's mesh files it names) on the pipe. The worker runs that function
 messages while planning (``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)`` for
 what a relaunch must not redo (a campaign's finished cycles) and one ``("done", outcome)`` at the end of
 each job; the parent writes everything to the database. The packed result document (:mod:`api.compact`)
-is made here, never in the server's event loop; it is the only thing a job writes: the CSV and the plot
+and its JSON text (kept by the server for the first reads, :mod:`api.results`) are made here, never in
+the server; the packed document is the only thing a job writes: the CSV and the plot
 are made on request (:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the
 plot kept once made).
 
@@ -32,7 +33,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from api.compact import pack_value
+from api.compact import document_text, pack_value
 from api.jobtypes import FileSource
 from planner.core.lifeline import die_with_parent
 
@@ -47,7 +48,8 @@ _LOG = logging.getLogger(__name__)
 def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
     """Plan one job; the outcome ``{"status", "reason", "message", "document", "provenance"}``.
 
-    The document is the result (or refusal) document as a dict; nothing else is made here (the CSV
+    The document is the result (or refusal) document as a dict, its samples as numpy arrays (packed and
+    written as they are, :func:`run_job`: no list of ~10^5 Python floats); nothing else is made here (the CSV
     and the plot are made on request from the stored document: :func:`profile_csv`, :func:`plot_png`).
 
     Args:
@@ -73,7 +75,7 @@ def plan_job(job: dict[str, Any], send: Any) -> dict[str, Any]:
         name = job["scenario"].get("name") if isinstance(job["scenario"], dict) else None
         return failed_outcome(exc, refusal_document(exc, sc, name=name))
     message = f"{sc.spec.name}: {result.profile.duration_s:.3f} s, {len(result.profile.t)} samples"
-    return succeeded_outcome(result_document(sc, result), message)
+    return succeeded_outcome(result_document(sc, result, arrays=True), message)
 
 
 def worker_setup(server_pid: int | None, nice: int) -> None:
@@ -93,8 +95,9 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
     """Run one ``job`` in this worker (its kind's function) and send its progress and its outcome.
 
     The outcome (always sent, last) carries the result document packed (``packed``,
-    :func:`api.compact.pack_value`), not its text; a bug in the job's function is a failed job with
-    reason ``internal_error``, and the worker takes the next job.
+    :func:`api.compact.pack_value`: what is stored) and as its JSON text (``text``,
+    :func:`api.compact.document_text`: what the server keeps for the first reads); a bug in the job's
+    function is a failed job with reason ``internal_error``, and the worker takes the next job.
     """
 
     def send(message: tuple[Any, ...]) -> None:
@@ -126,6 +129,7 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
         }
     document = outcome.pop("document", None)
     outcome["packed"] = pack_value(document) if document is not None else None
+    outcome["text"] = document_text(document) if document is not None else None
     send(("done", outcome))
 
 

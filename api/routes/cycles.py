@@ -209,8 +209,10 @@ def _job_routes(kind: JobKind) -> None:
     ) -> dict[str, Any]:
         return jobroutes.page(ctx, kind, principal.tenant, status, limit, offset)
 
-    def get_job(job_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
-        return jobroutes.job_answer(ctx, kind, principal.tenant, job_id)
+    async def get_job(
+        job_id: str, ctx: Ctx, principal: CurrentPrincipal, wait_s: jobroutes.WaitQuery = 0.0
+    ) -> Response:
+        return await jobroutes.waited_answer(ctx, kind, principal.tenant, job_id, wait_s)
 
     def delete_job(job_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
         return jobroutes.cancel_or_delete(ctx, kind, principal.tenant, job_id)
@@ -233,7 +235,8 @@ def _job_routes(kind: JobKind) -> None:
             "each unit's status."
             if kind is CAMPAIGN
             else " (the cycle profile document: legs, events) or its refusal."
-        ),
+        )
+        + " With `wait_s` the request waits for the job to end (long poll).",
         response_class=Response,
         responses={200: {"content": {"application/json": {}}}},
     )

@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import hashlib
 import json
-import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from fastapi import Depends, Header, Request, Response
+from fastapi import Depends, Header, Query, Request, Response
+from starlette.concurrency import run_in_threadpool
 
+from api import results
 from api.bodies import parse_body
 from api.compact import unpack_text
 from api.context import AppContext
@@ -218,42 +218,67 @@ def page(
     }
 
 
-#: Decoded result texts of the last few jobs read (finished results never change).
-_RESULTS: OrderedDict[str, str] = OrderedDict()
-_RESULTS_MAX = 8
-_RESULTS_LOCK = threading.Lock()
-
-
 def result_text(ctx: AppContext, row: Job) -> str | None:
-    """The result document's JSON text (unpacked from storage, or a legacy text row), or ``None``."""
+    """The result document's JSON text (kept, unpacked from storage, or a legacy text row), or ``None``."""
     if row.status in ACTIVE_STATES:
         return None
-    with _RESULTS_LOCK:
-        if row.id in _RESULTS:
-            _RESULTS.move_to_end(row.id)
-            return _RESULTS[row.id]
+    text = results.recall(row.id)
+    if text is not None:
+        return text
     packed, legacy = ctx.jobs.result_blob(row.id)
     text = unpack_text(packed) if packed is not None else legacy
     if text is not None:
-        with _RESULTS_LOCK:
-            _RESULTS[row.id] = text
-            while len(_RESULTS) > _RESULTS_MAX:
-                _RESULTS.popitem(last=False)
+        results.remember(row.id, text)
     return text
 
 
 def forget_result(job_id: str) -> None:
     """Drop a deleted job's decoded result."""
-    with _RESULTS_LOCK:
-        _RESULTS.pop(job_id, None)
+    results.forget(job_id)
 
 
 def job_answer(ctx: AppContext, kind: JobKind, tenant: str, job_id: str) -> Response:
     """The job document; once finished, ``result`` is its result document (refusal included)."""
-    row = tenant_job(ctx, kind, tenant, job_id)
+    return _answer(ctx, kind, tenant_job(ctx, kind, tenant, job_id))
+
+
+def _answer(ctx: AppContext, kind: JobKind, row: Job) -> Response:
     head = json.dumps(job_document(kind, row, ctx.runner.warming()), allow_nan=False, separators=(",", ":"))
     body = f'{head[:-1]},"result":{result_text(ctx, row) or "null"}}}'
     return Response(body, media_type="application/json")
+
+
+#: Largest ``wait_s`` a job document request may ask for [s] (the service caps it further:
+#: ``Settings.job_wait_max_s``).
+MAX_WAIT_S = 60.0
+
+WaitQuery = Annotated[
+    float,
+    Query(
+        ge=0.0,
+        le=MAX_WAIT_S,
+        description="Long poll: wait up to this many seconds for the job to end before answering (the "
+        "answer comes as soon as it ends; at most the service's job_wait_max_s, 30 s by default). 0: "
+        "answer at once.",
+    ),
+]
+
+
+async def waited_answer(ctx: AppContext, kind: JobKind, tenant: str, job_id: str, wait_s: float) -> Response:
+    """:func:`job_answer`, after waiting up to ``wait_s`` (capped) for an active job to end (long poll).
+
+    An unknown job is a 404 at once; a job that ends while the request waits is answered then
+    (:class:`api.waiters.JobWaiters`); one still active after the wait is answered as it is.
+    """
+    limit = min(wait_s, ctx.settings.job_wait_max_s)
+    if limit <= 0.0:
+        return await run_in_threadpool(job_answer, ctx, kind, tenant, job_id)
+
+    async def read() -> Job:
+        return await run_in_threadpool(tenant_job, ctx, kind, tenant, job_id)
+
+    row = await ctx.waiters.until(job_id, limit, read, lambda r: r.status not in ACTIVE_STATES)
+    return await run_in_threadpool(_answer, ctx, kind, row)
 
 
 def succeeded(ctx: AppContext, kind: JobKind, tenant: str, job_id: str, what: str) -> Job:
@@ -304,8 +329,10 @@ def cancel_or_delete(ctx: AppContext, kind: JobKind, tenant: str, job_id: str) -
     if row.status in TERMINAL_STATES:
         ctx.jobs.delete_finished([job_id])
         forget_result(job_id)
+        ctx.waiters.notify(job_id)  # a long poll of the deleted job answers 404 now
         return Response(status_code=204)
     outcome = ctx.jobs.cancel([job_id], "cancelled by the client")
+    ctx.waiters.notify(job_id)  # a queued job is cancelled now (a running one when its owner kills it)
     if outcome.running:
         ctx.runner.cancel(job_id)
         deadline = time.monotonic() + 10.0
@@ -344,4 +371,5 @@ __all__ = [
     "submit_request",
     "succeeded",
     "tenant_job",
+    "waited_answer",
 ]

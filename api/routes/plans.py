@@ -133,13 +133,16 @@ def list_plans(
     response_class=Response,
     responses={200: {"content": {"application/json": {}}}},
 )
-def get_plan(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
+async def get_plan(
+    plan_id: str, ctx: Ctx, principal: CurrentPrincipal, wait_s: jobroutes.WaitQuery = 0.0
+) -> Response:
     """The job document; once finished, ``result`` is the drive profile or the refusal document.
 
-    The stored result is unpacked into its JSON text once and spliced into the answer (a few recent
-    results are kept decoded), so that polling stays cheap for the server.
+    With ``wait_s`` the request waits for the plan to end (long poll: answered as soon as it does, or
+    after ``wait_s`` with the plan still queued or running), so a client needs no polling loop. The
+    result's JSON text is kept for recent plans (:mod:`api.results`), so reading it is cheap.
     """
-    return jobroutes.job_answer(ctx, PLAN, principal.tenant, plan_id)
+    return await jobroutes.waited_answer(ctx, PLAN, principal.tenant, plan_id, wait_s)
 
 
 @router.get(

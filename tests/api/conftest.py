@@ -116,7 +116,7 @@ class IdleRunner:
     def cancel(self, job_id: str) -> None:
         self.cancelled.append(job_id)
 
-    def on_job_end(self, listener: Callable[[], None]) -> None:
+    def on_job_end(self, listener: Callable[[str], None]) -> None:
         """No job ever ends here."""
 
     def alive(self) -> bool:

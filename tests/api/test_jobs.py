@@ -248,3 +248,37 @@ def _runner_with_job(tmp_path, status: str, meshes: dict[str, str], owned: bool 
             )
         )
     return db, runner
+
+
+def test_progress_is_written_at_most_once_a_period_and_a_finished_jobs_units_stay(tmp_path: Any) -> None:
+    """The dispatcher writes a running job's latest progress once a PROGRESS_PERIOD_S, not per message."""
+    import multiprocessing
+    from types import SimpleNamespace
+
+    from api.db import Database
+    from api.jobs import PROGRESS_PERIOD_S, ProcessJobRunner, _Running
+
+    settings = make_settings(tmp_path)
+    settings.data_dir.mkdir(parents=True)
+    runner = ProcessJobRunner(Database(settings.resolved_database_url(), settings.database_schema), settings)
+    writes: list[tuple[Any, ...]] = []
+    runner.store = SimpleNamespace(progress=lambda *a: writes.append(a[2:]))  # type: ignore[assignment]
+    ours, theirs = multiprocessing.Pipe()
+    now = time.monotonic()
+    worker: Any = SimpleNamespace(conn=ours, process=None)
+    r = _Running("j1", worker, now + 60.0, now, progress_at=now)
+    for k in range(10):  # a plan's stages, in quick succession
+        theirs.send(("progress", f"stage{k}", k / 10, None))
+    runner._drain(r)
+    assert writes == []  # within the period of the job's start: nothing written yet
+    time.sleep(PROGRESS_PERIOD_S + 0.05)
+    runner._drain(r)  # no new message: the pending latest is written once the period is over
+    assert writes == [("stage9", 0.9, None)]
+    theirs.send(("progress", "unit A3", 0.5, {"units": [{"id": "A3", "status": "planned"}]}))
+    runner._drain(r)
+    assert len(writes) == 1  # the period since the last write is not over
+    theirs.send(("done", {"status": "succeeded"}))
+    runner._drain(r)  # it ended: its last units stay in its document, the stage goes with the end write
+    assert writes[1:] == [("finishing", 0.99, {"units": [{"id": "A3", "status": "planned"}]})]
+    assert r.outcome == {"status": "succeeded"}
+    runner.db.dispose()

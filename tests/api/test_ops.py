@@ -20,7 +20,8 @@ import pytest
 import yaml
 from sqlalchemy import select
 
-from api.compact import pack_document, pack_value, unpack_document, unpack_text
+from api import results
+from api.compact import document_text, pack_document, pack_value, unpack_document, unpack_text
 from api.db import Database, Job, now_s
 from api.jobs import purge_expired
 from api.settings import Settings
@@ -360,6 +361,53 @@ def test_compact_documents_round_trip_exactly() -> None:
         assert all(a == b for a, b in zip(served["t"], doc["t"], strict=True))
 
 
+def test_numpy_arrays_pack_as_their_lists_and_the_worker_text_is_the_served_text() -> None:
+    rng = np.random.default_rng(3)
+    arrays = {
+        "t": np.cumsum(rng.random(300)),
+        "position": rng.normal(size=(300, 8)) * 1e3,
+        "single": rng.random(40).astype(np.float32),  # packed as float64, as its tolist() would be
+        "short": rng.random(5),  # below MIN_PACKED_FLOATS: stays in the skeleton, as its list would
+        "narrow": rng.random((3, 2)),
+        "ints": np.arange(30),  # not floats: a list of ints
+        "empty": np.zeros((0, 8)),
+        "view": rng.random((50, 8))[:, ::2],  # not contiguous
+        "nested": {"deep": [rng.random(20), {"x": rng.random((4, 4))}]},
+    }
+
+    def as_lists(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {k: as_lists(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [as_lists(x) for x in v]
+        return v.tolist() if isinstance(v, np.ndarray) else v
+
+    doc = {"status": "succeeded", "n": 3, "duration_s": 1.25, **arrays}
+    lists = as_lists(doc)
+    assert pack_value(doc) == pack_value(lists)  # the same blob, whichever form the document had
+    text = unpack_text(pack_value(doc))
+    assert document_text(doc) == document_text(lists) == text  # what the worker sends is what is served
+    assert json.loads(text) == json.loads(json.dumps(lists))
+    assert document_text({"big": 2**70}) is None  # orjson cannot: the server unpacks the blob instead
+
+
+def test_packed_documents_of_earlier_formats_are_still_read() -> None:
+    import lzma
+    import zlib
+
+    import zstandard
+
+    doc = {"t": [0.004 * k for k in range(40)], "name": "x", "q": [[0.5 * k, -k / 7] for k in range(20)]}
+    blob = pack_value(doc)
+    assert blob[:4] == b"CPD3"
+    body = zstandard.ZstdDecompressor().decompress(blob[8:])
+    for magic, compress in ((b"CPD2", zlib.compress), (b"CPD1", lzma.compress)):
+        old = magic + blob[4:8] + compress(body)
+        assert unpack_document(old) == doc and unpack_text(old) == unpack_text(blob)
+    with pytest.raises(ValueError, match="not a packed"):
+        unpack_document(b"CPD9" + blob[4:])
+
+
 def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tmp_path: Path) -> None:
     for svc in start_service(make_settings(tmp_path)):
         r = svc.client.post("/api/v1/plans", json=scenario("aisle-bay-insert"), headers=svc.h())
@@ -389,6 +437,11 @@ def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tm
             row = s.get(Job, doc["id"])
             stored = len(row.result_packed) + len(plot)
             assert row.result_json is None and row.profile_csv is None and row.plot_png is None
+            # the worker's text, kept by the runner, served on the first read: the stored blob's text
+            assert results.recall(doc["id"]) == unpack_text(row.result_packed)
+            assert text.endswith(f',"result":{unpack_text(row.result_packed)}}}')
+            results.forget(doc["id"])  # and a read after a restart (unpacked from storage): the same text
+            assert svc.client.get(f"/api/v1/plans/{doc['id']}", headers=svc.h()).text == text
         as_text = len(json.dumps(result).encode()) + len(csv.content) + len(png.content)
         assert as_text / stored >= 5.0, (as_text, stored)
         # DELETE of a finished plan deletes it.

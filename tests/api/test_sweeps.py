@@ -136,9 +136,9 @@ def test_the_feeder_feeds_when_a_sweep_arrives_or_a_job_ends_not_at_its_poll(tmp
     class Runner(IdleRunner):
         def __init__(self) -> None:
             super().__init__()
-            self.listeners: list[Callable[[], None]] = []
+            self.listeners: list[Callable[[str], None]] = []
 
-        def on_job_end(self, listener: Callable[[], None]) -> None:
+        def on_job_end(self, listener: Callable[[str], None]) -> None:
             self.listeners.append(listener)
 
     settings = make_settings(tmp_path, tenant_max_active_jobs=2)
@@ -147,7 +147,7 @@ def test_the_feeder_feeds_when_a_sweep_arrives_or_a_job_ends_not_at_its_poll(tmp
     db.create_all()
     runner = Runner()
     feeder = SweepFeeder(db, settings, runner, poll_s=60.0)
-    assert runner.listeners == [feeder.wake]
+    assert runner.listeners == [feeder.job_ended]
     feeder.start()
     try:
         feeder.wake()  # its first pass, over nothing, done before the sweep exists
@@ -168,9 +168,10 @@ def test_the_feeder_feeds_when_a_sweep_arrives_or_a_job_ends_not_at_its_poll(tmp
             time.sleep(0.02)
         time.sleep(0.3)
         assert len(linked()) == 2  # the quota: the third plan waits
-        jobs.cancel(linked()[:1], "ended")  # one job ends ...
+        ended = linked()[0]
+        jobs.cancel([ended], "ended")  # one job ends ...
         for listener in runner.listeners:  # ... and the runner says so
-            listener()
+            listener(ended)
         deadline = time.monotonic() + 5.0
         while len(linked()) < 3:
             assert time.monotonic() < deadline, "the waiting plan was not fed when a job ended"
