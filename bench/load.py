@@ -1,27 +1,28 @@
 """Load check of the HTTP service: concurrent clients submitting the reference scenarios.
 
 Starts the real server (``python -m api``, temp data dir, SQLite), then ``--clients`` threads each submit
-one reference scenario (round robin over the suite's succeeding scenarios) and poll it to the end, while a
-prober calls ``/health`` every 50 ms. Prints throughput, p50/p95/max latency of ``/health`` and of
-``GET /plans/{id}`` under load, ``POST /plans`` latency under load next to the same submissions made
-one at a time on the idle server first (each cancelled at once), and how many results pass the
-validation gate: the gate report stored with each plan, and an independent re-run of the gate through
-``POST /plans:validate``.
+``--rounds`` reference scenarios one after another (round robin over the suite's succeeding scenarios), each
+waited for to its end with long polls (``GET /plans/{id}?wait_s=30``: answered when the plan ends), while a
+prober calls ``/health`` every 50 ms. Prints throughput, p50/p95/max latency of ``/health`` and of ``GET
+/plans/{id}`` under load, ``POST /plans`` latency under load next to the same submissions made one at a time
+on the idle server first (each cancelled at once), and how many results pass the validation gate: the gate
+report stored with each plan, and an independent re-run of the gate through ``POST /plans:validate``.
 
-In the same run, before the server starts, ``--workers`` in-process planners (one process each, warmed
-up on every scenario first, at the niceness of the service's job processes) plan the same list of plans
-the clients submit: plans a minute in process,
-next to the service's, and their ratio (the service's overhead: handing a job to a worker, its documents,
-the database and the polling), and the median job overhead (a job's run time minus its own
-``planning_time_s``). The load average is printed at the start and the end (a shared machine), and the
-resident memory of the service's processes after the run.
+In the same run, before the server starts, ``--workers`` in-process planners (one process each, warmed up on
+every scenario first, at the niceness of the service's job processes) plan the same list of plans the
+clients submit: plans a minute in process, next to the service's, and their ratio (the service's overhead:
+handing a job to a worker, its documents, the database, the HTTP requests and the clients themselves, which
+share the machine), and the median job overhead (a job's run time minus its own ``planning_time_s``). The
+load average is printed at the start and the end (a shared machine), and the resident memory of the
+service's processes after the run.
 
-    python -m bench.load [--clients 20] [--workers 2]
+    python -m bench.load [--clients 20] [--workers 2] [--rounds 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import multiprocessing
 import os
 import signal
@@ -40,6 +41,7 @@ import orjson
 import yaml
 
 from api.settings import Settings
+from planner.core.procpool import SINGLE_THREAD_ENV
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "tests" / "scenarios"
@@ -81,12 +83,16 @@ def probe(url: str, headers: dict[str, str], job_id: str, stop: Any, out: Any) -
 
 
 def _plan_in_process(
-    scenarios: list[dict[str, Any]], mine: list[int], start: Any, out: Any, nice: int
+    scenarios: list[dict[str, Any]], order: list[int], taken: Any, start: Any, out: Any, nice: int
 ) -> None:
-    """One in-process planner: warm up on every scenario, wait for ``start``, plan ``mine`` in order.
+    """One in-process planner: warm up on every scenario, wait for ``start``, then take the next plan.
 
-    At the niceness the service gives its job processes (``nice``), so that on a shared machine both
-    get the same share of the CPU.
+    The planners take plans from one shared list (``order``, the next index in ``taken``) as each is
+    free, as the service's workers take queued jobs: a fixed split would leave one planner idle while
+    the other plans the heavier scenarios. At the niceness the service gives its job processes
+    (``nice``), so that on a shared machine both get the same share of the CPU, and with one BLAS/numba
+    thread each (:data:`~planner.core.procpool.SINGLE_THREAD_ENV`, set by :func:`in_process_rate`), as
+    the job workers: two planners on two cores, not four threads.
     """
     os.nice(nice)
     from planner.plan.pipeline import Planner
@@ -101,10 +107,19 @@ def _plan_in_process(
 
     for sc in scenarios:  # what the service's forkserver warm-up and the cache folder give its jobs
         plan(sc)
+    gc.collect()
+    gc.freeze()  # as the forkserver does after its warm-up (api/warmup.py): no GC pass walks the modules
     start.wait()  # every planner warm: they plan at the same time, as the service's workers do
     t0 = time.perf_counter()
-    times = [(scenarios[k]["name"], plan(scenarios[k])) for k in mine]
-    out.put((time.perf_counter() - t0, times))
+    times = []
+    while True:
+        with taken.get_lock():
+            k = taken.value
+            taken.value += 1
+        if k >= len(order):
+            break
+        times.append((scenarios[order[k]]["name"], plan(scenarios[order[k]])))
+    out.put((t0, time.perf_counter(), times))
 
 
 def in_process_rate(
@@ -112,27 +127,49 @@ def in_process_rate(
 ) -> tuple[float, dict[str, list[float]]]:
     """Plans a minute of ``planners`` warm in-process planners on plans ``k % len(scenarios)``, k < n.
 
-    Returns the rate and each scenario's plan times [s] (resolve + plan, no document).
+    Returns the rate (from the common start to the last plan's end) and each scenario's plan times [s]
+    (resolve + plan, no document).
     """
     mp = multiprocessing.get_context("spawn")
-    start, out = mp.Barrier(planners), mp.Queue()
+    start, out, taken = mp.Barrier(planners), mp.Queue(), mp.Value("i", 0)
     nice = int(os.environ.get("CABINPLAN_WORKER_NICE", Settings.model_fields["worker_nice"].default))
     order = [k % len(scenarios) for k in range(n)]
     procs = [
-        mp.Process(target=_plan_in_process, args=(scenarios, order[i::planners], start, out, nice))
-        for i in range(planners)
+        mp.Process(target=_plan_in_process, args=(scenarios, order, taken, start, out, nice))
+        for _ in range(planners)
     ]
-    for p in procs:
-        p.start()
+    saved = {k: os.environ.get(k) for k in SINGLE_THREAD_ENV}
+    os.environ.update(SINGLE_THREAD_ENV)  # one BLAS/numba thread a planner, as the service's job workers
+    try:
+        for p in procs:
+            p.start()
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
     results = [out.get(timeout=1800) for _ in procs]
     for p in procs:
         p.join()
-    wall = max(r[0] for r in results)
+    wall = max(r[1] for r in results) - min(r[0] for r in results)  # perf_counter: one clock per machine
     times: dict[str, list[float]] = {}
-    for _, ts in results:
+    for _, _, ts in results:
         for name, dt in ts:
             times.setdefault(name, []).append(dt)
     return 60.0 * n / wall, times
+
+
+def _head(body: bytes) -> dict[str, Any]:
+    """The job document of a ``GET /plans/{id}`` answer without its result (status, times, ...).
+
+    The server writes the job's fields first and its result document last (``,"result":...}``,
+    :func:`api.routes.jobroutes.job_answer`), so the head parses alone; the clients parse the 2.5-5 MB
+    results after the load (orjson: 15-20 ms each here), since a plant's clients run on machines of
+    their own, not on the service's two cores.
+    """
+    cut = body.find(b',"result":')
+    return dict(orjson.loads(body[:cut] + b"}" if cut > 0 else body))
 
 
 def _group_rss(pgid: int) -> list[tuple[str, int]]:
@@ -175,11 +212,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--clients", type=int, default=20)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument(
+        "--rounds", type=int, default=3, help="plans each client submits, one after another (default 3)"
+    )
     args = ap.parse_args()
 
     load_start = os.getloadavg()
     scenarios = reference_scenarios()
-    inproc_rate, inproc_times = in_process_rate(scenarios, args.clients, args.workers)
+    inproc_rate, inproc_times = in_process_rate(scenarios, args.clients * args.rounds, args.workers)
 
     data = Path(tempfile.mkdtemp(prefix="cabinplan-load-"))
     port = _free_port()
@@ -232,26 +272,26 @@ def main() -> None:
         time.sleep(2.0)  # the prober's interpreter is up before the load starts
 
         def client(k: int) -> None:
-            sc = scenarios[k % len(scenarios)]
             with httpx.Client(base_url=url, timeout=60, headers=headers) as c:
-                t = time.perf_counter()
-                r = c.post("/api/v1/plans", json=sc, headers={"Idempotency-Key": f"load-{k}"})
-                with lock:
-                    post_s.append(time.perf_counter() - t)
-                r.raise_for_status()
-                job_id = r.json()["id"]
-                while True:
+                for rnd in range(args.rounds):  # one plan after another, each to its end
+                    n = k + rnd * args.clients
+                    sc = scenarios[n % len(scenarios)]
                     t = time.perf_counter()
-                    # orjson: the stdlib's parse of a finished plan's 2.5 MB document costs this machine's
-                    # clients 60 ms each, CPU the service's job workers share (the product's own JSON library)
-                    doc = orjson.loads(c.get(f"/api/v1/plans/{job_id}").content)
+                    r = c.post("/api/v1/plans", json=sc, headers={"Idempotency-Key": f"load-{n}"})
+                    if rnd == 0:  # the first round's submissions come all at once
+                        with lock:
+                            post_s.append(time.perf_counter() - t)
+                    r.raise_for_status()
+                    job_id = r.json()["id"]
+                    while True:  # long poll: each read waits up to 30 s for the plan to end
+                        t = time.perf_counter()
+                        body = c.get(f"/api/v1/plans/{job_id}", params={"wait_s": 30}).content
+                        with lock:
+                            status_s.append(time.perf_counter() - t)
+                        if _head(body)["status"] not in ("queued", "running"):
+                            break
                     with lock:
-                        status_s.append(time.perf_counter() - t)
-                    if doc["status"] not in ("queued", "running"):
-                        break
-                    time.sleep(0.25)
-            with lock:
-                results.append({"scenario": sc, "doc": doc})
+                        results.append({"scenario": sc, "body": body})
 
         cpu0 = _cpu_s(proc.pid), time.process_time()
         t0 = time.perf_counter()
@@ -265,6 +305,8 @@ def main() -> None:
         stop.set()
         health_s, probe_status_s, slow = out.get(timeout=30)
         prober.join()
+        for r in results:  # parsed after the load: a client's own work, on its own machine in a plant
+            r["doc"] = orjson.loads(r.pop("body"))
 
         ok = [r for r in results if r["doc"]["status"] == "succeeded"]
         stored_pass = sum(bool(r["doc"]["result"]["report"]["gate"]["passed"]) for r in ok)
@@ -285,11 +327,14 @@ def main() -> None:
         members = _group_rss(proc.pid)
         rate = 60 * len(results) / wall
         load_end = os.getloadavg()
-        print(f"clients {args.clients}, workers {args.workers}, scenarios {len(scenarios)} (round robin)")
+        print(
+            f"clients {args.clients}, {args.rounds} plans each, workers {args.workers}, "
+            f"scenarios {len(scenarios)} (round robin)"
+        )
         print(f"load average at start {load_start[0]:.2f}, at end {load_end[0]:.2f} (1 min)")
         print(f"wall {wall:.1f} s, {len(ok)}/{len(results)} succeeded, throughput {rate:.1f} plans/min")
         print(
-            f"in process ({args.workers} warm planners, the same {args.clients} plans): "
+            f"in process ({args.workers} warm planners, the same {len(results)} plans): "
             f"{inproc_rate:.1f} plans/min; service / in process {rate / inproc_rate:.0%}"
         )
         for name, ts in sorted(by_name.items()):
@@ -323,9 +368,12 @@ def main() -> None:
         late = ", ".join(f"{1e3 * dt:.0f} ms at {t:.1f} s" for t, dt in slow[:8])
         more = " ..." if len(slow) > 8 else ""
         print(f"  /health calls above 50 ms: {len(slow)} of {len(health_s)} ({late}{more})")
-        print(f"GET /plans/{{id}} polls of the 20 clients:      {_pct(status_s)}")
+        print(
+            f"GET /plans/{{id}}?wait_s=30 of the {args.clients} clients (long polls, {len(status_s)} "
+            f"for {len(results)} plans; each waits for its plan): {_pct(status_s)}"
+        )
         print(f"POST /plans idle (one at a time):               {_pct(idle_post_s)}")
-        print(f"POST /plans under load ({args.clients} clients at once):     {_pct(post_s)}")
+        print(f"POST /plans under load (first round: {args.clients} at once): {_pct(post_s)}")
         print(f"  median under load / idle: {np.median(post_s) / np.median(idle_post_s):.1f}x")
         print(
             f"gate: {stored_pass}/{len(ok)} stored reports passed, "
