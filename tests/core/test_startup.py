@@ -41,3 +41,29 @@ def test_the_command_line_leaves_the_collector_running() -> None:
     import planner.cli  # noqa: F401 - its import loads the commands under loading_modules(freeze=True)
 
     assert gc.isenabled()
+
+
+def test_the_install_compiles_the_projects_bytecode() -> None:
+    """`make`'s install step compiles planner and api: with PYTHONDONTWRITEBYTECODE set, nothing else would.
+
+    Where the venv was made by the Makefile (its stamp exists: `make test`, CI), every module of the
+    plan's import chain has its bytecode file, so a `cabinplan plan` does not compile them again.
+    """
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    recipe = (root / "Makefile").read_text()
+    assert "-m compileall -q planner api" in recipe
+    if not (root / ".venv" / ".installed").exists():
+        pytest.skip("the venv was not made by the Makefile: its install step did not run")
+    import planner.plan.pipeline  # noqa: F401 - the chain whose bytecode is checked
+
+    ours = [m for m in list(sys.modules.values()) if getattr(m, "__file__", None)]
+    ours = [m for m in ours if str(m.__file__).startswith(str(root / "planner"))]
+    assert len(ours) > 50
+    missing = [
+        m.__name__ for m in ours if not Path(importlib.util.cache_from_source(str(m.__file__))).exists()
+    ]
+    assert not missing, missing
