@@ -11,42 +11,29 @@ dropped (:func:`forget`).
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
+from planner.core.lru import BoundedLRU
 
 #: Texts kept at most: enough for every job that ends between two reads on a busy service.
 RESULTS_KEPT = 32
 #: Characters kept at most, all texts together (a plan's text is 2-5 MB); the latest text is always kept.
 RESULTS_MAX_CHARS = 96_000_000
 
-_RESULTS: OrderedDict[str, str] = OrderedDict()
-_LOCK = threading.Lock()
+_RESULTS: BoundedLRU[str, str] = BoundedLRU(RESULTS_KEPT, len, RESULTS_MAX_CHARS)
 
 
 def recall(job_id: str) -> str | None:
     """The kept text of job ``job_id``, or ``None``."""
-    with _LOCK:
-        text = _RESULTS.get(job_id)
-        if text is not None:
-            _RESULTS.move_to_end(job_id)
-        return text
+    return _RESULTS.get(job_id)
 
 
 def remember(job_id: str, text: str) -> None:
     """Keep ``text`` as job ``job_id``'s result text; the oldest texts beyond the bounds go."""
-    with _LOCK:
-        _RESULTS[job_id] = text
-        _RESULTS.move_to_end(job_id)
-        while len(_RESULTS) > 1 and (
-            len(_RESULTS) > RESULTS_KEPT or sum(map(len, _RESULTS.values())) > RESULTS_MAX_CHARS
-        ):
-            _RESULTS.popitem(last=False)
+    _RESULTS.put(job_id, text)
 
 
 def forget(job_id: str) -> None:
     """Drop job ``job_id``'s text (the job was deleted)."""
-    with _LOCK:
-        _RESULTS.pop(job_id, None)
+    _RESULTS.pop(job_id)
 
 
 __all__ = ["RESULTS_KEPT", "RESULTS_MAX_CHARS", "forget", "recall", "remember"]

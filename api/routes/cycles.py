@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import threading
-from collections import OrderedDict
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response
@@ -47,6 +45,7 @@ from api.routes.deps import Ctx
 from api.routes.inputs import MeshField, check_time_limit, empty_dir, stored_meshes
 from api.routes.scene import rebuilding_scene
 from api.store import scenario_mesh_resolver
+from planner.core.lru import BoundedLRU
 
 router = APIRouter(tags=["cycles"])
 
@@ -266,8 +265,8 @@ def _job_routes(kind: JobKind) -> None:
 
 
 # -------------------------------------------------------------------------------------------- scenes
-_SCENES: OrderedDict[str, bytes] = OrderedDict()
-_SCENES_LOCK = threading.Lock()
+#: Scene documents made lately, by job, status and result digest (a few MB each).
+_SCENES: BoundedLRU[str, bytes] = BoundedLRU(8)
 
 
 def _finished(ctx: AppContext, kind: JobKind, tenant: str, job_id: str) -> Job:
@@ -339,14 +338,10 @@ def _scene(kind: JobKind, ctx: AppContext, tenant: str, job_id: str) -> Response
     row = _finished(ctx, kind, tenant, job_id)
     digest = hashlib.sha256((jobroutes.result_text(ctx, row) or "").encode()).hexdigest()
     key = f"{row.id}:{row.status}:{digest}"
-    with _SCENES_LOCK:
-        body = _SCENES.get(key)
+    body = _SCENES.get(key)
     if body is None:
         body = json.dumps(_scene_document(ctx, kind, row), allow_nan=False, separators=(",", ":")).encode()
-        with _SCENES_LOCK:
-            _SCENES[key] = body
-            while len(_SCENES) > 8:
-                _SCENES.popitem(last=False)
+        _SCENES.put(key, body)
     return Response(body, media_type="application/json")
 
 

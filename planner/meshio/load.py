@@ -39,8 +39,6 @@ import functools
 import hashlib
 import importlib.metadata
 import logging
-import threading
-from collections import OrderedDict
 from collections.abc import Hashable
 from pathlib import Path
 from typing import Any, get_args
@@ -49,6 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from planner.core.cache import cache_dir, prune, touch, write_atomic
+from planner.core.lru import BoundedLRU
 from planner.core.types import Array, IntArray
 from planner.meshio.build import validate_and_build, validate_pose
 from planner.meshio.parse import concatenate, parse_obj, parse_with_trimesh
@@ -305,32 +304,22 @@ def _write_parts(
 #: object is shared. Bounded by entries and by the faces they hold.
 MESH_CACHE_ENTRIES = 8
 MESH_CACHE_MAX_FACES = 2_000_000
-_MESH_CACHE: OrderedDict[Hashable, LoadedMesh] = OrderedDict()
-_MESH_CACHE_LOCK = threading.Lock()
+_MESH_CACHE: BoundedLRU[Hashable, LoadedMesh] = BoundedLRU(
+    MESH_CACHE_ENTRIES, lambda m: len(m.faces), MESH_CACHE_MAX_FACES
+)
 
 
 def _cache_get(key: Hashable) -> LoadedMesh | None:
-    with _MESH_CACHE_LOCK:
-        found = _MESH_CACHE.get(key)
-        if found is not None:
-            _MESH_CACHE.move_to_end(key)
-        return found
+    return _MESH_CACHE.get(key)
 
 
 def _cache_put(key: Hashable, mesh: LoadedMesh) -> None:
-    with _MESH_CACHE_LOCK:
-        _MESH_CACHE[key] = mesh
-        _MESH_CACHE.move_to_end(key)
-        while len(_MESH_CACHE) > MESH_CACHE_ENTRIES or (
-            len(_MESH_CACHE) > 1 and sum(len(m.faces) for m in _MESH_CACHE.values()) > MESH_CACHE_MAX_FACES
-        ):
-            _MESH_CACHE.popitem(last=False)
+    _MESH_CACHE.put(key, mesh)
 
 
 def clear_mesh_cache() -> None:
     """Forget every parsed mesh (tests, benchmarks)."""
-    with _MESH_CACHE_LOCK:
-        _MESH_CACHE.clear()
+    _MESH_CACHE.clear()
 
 
 def _default_name(source: MeshSource) -> str:

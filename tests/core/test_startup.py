@@ -44,20 +44,21 @@ def test_the_command_line_leaves_the_collector_running() -> None:
 
 
 def test_the_install_compiles_the_projects_bytecode() -> None:
-    """`make`'s install step compiles planner and api: with PYTHONDONTWRITEBYTECODE set, nothing else would.
+    """`make` compiles planner and api (install, run, serve, test): PYTHONDONTWRITEBYTECODE never would.
 
-    Where the venv was made by the Makefile (its stamp exists: `make test`, CI), every module of the
-    plan's import chain has its bytecode file, so a `cabinplan plan` does not compile them again.
+    On CI (``make test`` on a fresh clone) every module of the plan's import chain has its bytecode
+    file, so a `cabinplan plan` does not compile them again.
     """
     import importlib.util
+    import os
     import sys
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
     recipe = (root / "Makefile").read_text()
     assert "-m compileall -q planner api" in recipe
-    if not (root / ".venv" / ".installed").exists():
-        pytest.skip("the venv was not made by the Makefile: its install step did not run")
+    if not os.environ.get("CI"):  # a developer's tree may hold modules added since the last `make`
+        pytest.skip("checked on CI's fresh clone (CI set), where `make test` compiled the tree first")
     import planner.plan.pipeline  # noqa: F401 - the chain whose bytecode is checked
 
     ours = [m for m in list(sys.modules.values()) if getattr(m, "__file__", None)]
