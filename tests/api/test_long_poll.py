@@ -133,3 +133,38 @@ def test_the_openapi_document_declares_wait_s(tmp_path: Path, path: str) -> None
         params = {p["name"]: p for p in spec["paths"][key]["get"]["parameters"]}
         schema = params["wait_s"]["schema"]
         assert params["wait_s"]["in"] == "query" and schema["minimum"] == 0 and schema["maximum"] == 60
+
+
+def test_a_clean_shutdown_answers_the_waiting_reads_at_once(tmp_path: Path) -> None:
+    """SIGTERM: uvicorn waits for open requests before it stops; a long poll must not hold it for wait_s."""
+    import os
+    import signal
+
+    import httpx
+
+    from tests.api.conftest import ADMIN_KEY, Server, stuck
+
+    srv = Server(tmp_path / "data")
+    srv.start(wait="health")  # jobs stay queued while the workers warm up; the stuck plan runs long after
+    try:
+        h = {"X-API-Key": ADMIN_KEY}
+        key = httpx.post(f"{srv.url}/api/v1/keys", json={"tenant": "alpha"}, headers=h, timeout=30)
+        h = {"X-API-Key": key.json()["key"]}
+        job = httpx.post(f"{srv.url}/api/v1/plans", json=stuck(11, 20.0), headers=h, timeout=30).json()
+        got: dict[str, Any] = {}
+        reader = threading.Thread(
+            target=_timed_read,
+            args=(httpx.Client(timeout=60), f"{srv.url}/api/v1/plans/{job['id']}?wait_s=60", h, got),
+        )
+        reader.start()
+        time.sleep(1.0)
+        assert "doc" not in got  # still waiting: the plan is queued or running
+        assert srv.proc is not None
+        t = time.monotonic()
+        os.kill(srv.proc.pid, signal.SIGTERM)
+        reader.join(timeout=20)
+        assert got["doc"]["status"] in ("queued", "running") and got["s"] < 1.0 + 5.0, got
+        srv.proc.wait(timeout=30)
+        assert time.monotonic() - t < 25.0  # not the 60 s the request asked to wait
+    finally:
+        srv.stop()
