@@ -48,10 +48,20 @@ class JobWaiters:
     def close(self) -> None:
         """The service is shutting down: every waiting request answers now, and later ones do not wait.
 
-        Called from the server's exit handler (the event loop's thread), so that a graceful shutdown
-        does not wait out the long polls.
+        Called from the server's exit handler (a signal handler: any thread, any moment), so that a
+        graceful shutdown does not wait out the long polls; the events are set on the loop's own thread.
         """
         self._closing = True
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            self._release_all()
+            return
+        try:
+            loop.call_soon_threadsafe(self._release_all)
+        except RuntimeError:  # the loop closed in between: nobody waits any more
+            pass
+
+    def _release_all(self) -> None:
         with self._lock:
             events = [e for es in self._events.values() for e in es]
         for event in events:
