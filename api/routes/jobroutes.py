@@ -9,8 +9,9 @@ turn its outcomes into answers:
   ``idempotency_key_reused`` for another body), or has the kind's route check the body and make the job,
   which :func:`submit` queues under the tenant's quota (429 ``quota_exceeded`` with ``Retry-After``),
   answering 202 with the job document and ``Location``;
-* :func:`job_answer` is the job document with its result document spliced in (unpacked once, a few
-  recent ones kept decoded, so that polling stays cheap);
+* :func:`job_answer` is the job document with its result document spliced in (the texts of recent
+  results kept: :mod:`api.results`); :func:`waited_answer` is the same after a long poll (``wait_s``:
+  answered when the job ends, :mod:`api.waiters`);
 * :func:`file_answer` is a download of a succeeded job (:class:`~api.jobkinds.ResultFile`), made from
   the stored result on request (409 while the job is active, 404 when it did not succeed);
 * :func:`cancel_or_delete`: queued -> cancelled, running -> killed by its owner (200, or 202 while the
