@@ -518,7 +518,7 @@ class ProcessJobRunner:
         self._end(
             r,
             str(out["status"]),
-            text=out.get("text") if out.get("packed") is not None else None,
+            served=out.get("json") if out.get("packed") is not None else None,
             reason=out.get("reason"),
             message=out.get("message"),
             result_packed=out.get("packed"),
@@ -531,11 +531,11 @@ class ProcessJobRunner:
             r.killed = True
             self._pool.discard(r.worker)
 
-    def _end(self, r: _Running, status: str, text: str | None = None, **values: Any) -> None:
+    def _end(self, r: _Running, status: str, served: bytes | None = None, **values: Any) -> None:
         """Write the terminal state (only over this instance's ``running``: never over a cancellation).
 
         The slot is released first, so that whoever reads the terminal state also sees the slot free.
-        ``text``: the result's JSON text, kept (:mod:`api.results`) once the result is written, before the
+        ``served``: the result's JSON, kept (:mod:`api.results`) once the result is written, before the
         end listeners (long-polling readers) run.
         """
         with self._lock:
@@ -555,8 +555,8 @@ class ProcessJobRunner:
             if not r.killed and r.outcome is None:  # never left running without its job
                 self._kill(r)
         if written:
-            if text is not None:
-                results.remember(r.job_id, text)
+            if served is not None:
+                results.remember(r.job_id, bytes(served))
             reason = values.get("reason")
             self.metrics.job_outcomes.labels(status=status, reason=str(reason or "")).inc()
             self.metrics.job_duration.labels(status=status).observe(time.monotonic() - r.started)

@@ -9,7 +9,7 @@ and the tenant's mesh files it names) on the pipe. The worker runs that function
 messages while planning (``detail``: ``None``, or a campaign's units), ``("keep", name, bytes)`` for
 what a relaunch must not redo (a campaign's finished cycles) and one ``("done", outcome)`` at the end of
 each job; the parent writes everything to the database. The packed result document (:mod:`api.compact`)
-and its JSON text (kept by the server for the first reads, :mod:`api.results`) are made here, never in
+and its JSON (kept by the server for the first reads, :mod:`api.results`) are made here, never in
 the server; the packed document is the only thing a job writes: the CSV and the plot
 are made on request (:func:`profile_csv`, :func:`plot_png`, run by the server in its thread pool, the
 plot kept once made).
@@ -33,7 +33,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from api.compact import document_text, pack_value
+from api.compact import document_json, pack_value
 from api.jobtypes import FileSource
 from planner.core.lifeline import die_with_parent
 
@@ -95,8 +95,8 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
     """Run one ``job`` in this worker (its kind's function) and send its progress and its outcome.
 
     The outcome (always sent, last) carries the result document packed (``packed``,
-    :func:`api.compact.pack_value`: what is stored) and as its JSON text (``text``,
-    :func:`api.compact.document_text`: what the server keeps for the first reads); a bug in the job's
+    :func:`api.compact.pack_value`: what is stored) and as its JSON (``json``, bytes,
+    :func:`api.compact.document_json`: what the server keeps for the first reads); a bug in the job's
     function is a failed job with reason ``internal_error``, and the worker takes the next job.
     """
 
@@ -129,7 +129,7 @@ def run_job(job: dict[str, Any], conn: Connection) -> None:
         }
     document = outcome.pop("document", None)
     outcome["packed"] = pack_value(document) if document is not None else None
-    outcome["text"] = document_text(document) if document is not None else None
+    outcome["json"] = document_json(document) if document is not None else None
     send(("done", outcome))
 
 

@@ -32,7 +32,7 @@ from starlette.concurrency import run_in_threadpool
 
 from api import results
 from api.bodies import parse_body
-from api.compact import unpack_text
+from api.compact import unpack_json
 from api.context import AppContext
 from api.db import ACTIVE_STATES, TERMINAL_STATES, Job
 from api.jobkinds import FileSource, JobKind, ResultFile
@@ -219,18 +219,24 @@ def page(
     }
 
 
-def result_text(ctx: AppContext, row: Job) -> str | None:
-    """The result document's JSON text (kept, unpacked from storage, or a legacy text row), or ``None``."""
+def result_json(ctx: AppContext, row: Job) -> bytes | None:
+    """The result document's JSON (kept, unpacked from storage, or a legacy text row), or ``None``."""
     if row.status in ACTIVE_STATES:
         return None
-    text = results.recall(row.id)
-    if text is not None:
-        return text
+    kept = results.recall(row.id)
+    if kept is not None:
+        return kept
     packed, legacy = ctx.jobs.result_blob(row.id)
-    text = unpack_text(packed) if packed is not None else legacy
-    if text is not None:
-        results.remember(row.id, text)
-    return text
+    found = unpack_json(packed) if packed is not None else legacy.encode() if legacy is not None else None
+    if found is not None:
+        results.remember(row.id, found)
+    return found
+
+
+def result_text(ctx: AppContext, row: Job) -> str | None:
+    """:func:`result_json` as text."""
+    found = result_json(ctx, row)
+    return None if found is None else found.decode()
 
 
 def forget_result(job_id: str) -> None:
@@ -245,7 +251,7 @@ def job_answer(ctx: AppContext, kind: JobKind, tenant: str, job_id: str) -> Resp
 
 def _answer(ctx: AppContext, kind: JobKind, row: Job) -> Response:
     head = json.dumps(job_document(kind, row, ctx.runner.warming()), allow_nan=False, separators=(",", ":"))
-    body = f'{head[:-1]},"result":{result_text(ctx, row) or "null"}}}'
+    body = b"".join((head[:-1].encode(), b',"result":', result_json(ctx, row) or b"null", b"}"))
     return Response(body, media_type="application/json")
 
 
@@ -367,6 +373,7 @@ __all__ = [
     "job_url",
     "page",
     "replay",
+    "result_json",
     "result_text",
     "submit",
     "submit_request",

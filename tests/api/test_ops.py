@@ -21,7 +21,7 @@ import yaml
 from sqlalchemy import select
 
 from api import results
-from api.compact import document_text, pack_document, pack_value, unpack_document, unpack_text
+from api.compact import document_json, pack_document, pack_value, unpack_document, unpack_json, unpack_text
 from api.db import Database, Job, now_s
 from api.jobs import purge_expired
 from api.settings import Settings
@@ -385,10 +385,11 @@ def test_numpy_arrays_pack_as_their_lists_and_the_worker_text_is_the_served_text
     doc = {"status": "succeeded", "n": 3, "duration_s": 1.25, **arrays}
     lists = as_lists(doc)
     assert pack_value(doc) == pack_value(lists)  # the same blob, whichever form the document had
-    text = unpack_text(pack_value(doc))
-    assert document_text(doc) == document_text(lists) == text  # what the worker sends is what is served
+    text = unpack_json(pack_value(doc))
+    assert document_json(doc) == document_json(lists) == text  # what the worker sends is what is served
+    assert unpack_text(pack_value(doc)) == text.decode()
     assert json.loads(text) == json.loads(json.dumps(lists))
-    assert document_text({"big": 2**70}) is None  # orjson cannot: the server unpacks the blob instead
+    assert document_json({"big": 2**70}) is None  # orjson cannot: the server unpacks the blob instead
 
 
 def test_packed_documents_of_earlier_formats_are_still_read() -> None:
@@ -438,7 +439,7 @@ def test_finished_plans_are_stored_compact_served_as_json_and_csv_and_deleted(tm
             stored = len(row.result_packed) + len(plot)
             assert row.result_json is None and row.profile_csv is None and row.plot_png is None
             # the worker's text, kept by the runner, served on the first read: the stored blob's text
-            assert results.recall(doc["id"]) == unpack_text(row.result_packed)
+            assert results.recall(doc["id"]) == unpack_json(row.result_packed)
             assert text.endswith(f',"result":{unpack_text(row.result_packed)}}}')
             results.forget(doc["id"])  # and a read after a restart (unpacked from storage): the same text
             assert svc.client.get(f"/api/v1/plans/{doc['id']}", headers=svc.h()).text == text
