@@ -52,9 +52,9 @@ serve: $(STAMP)  ## the HTTP service on 127.0.0.1:8000 (embedded defaults; print
 test: $(DEV_STAMP) chromium  ## lint, type-check and the whole test suite (installs Debian's Chromium first)
 	$(BIN)/python -m compileall -q planner api
 	$(BIN)/ruff check planner api tests bench
-	$(BIN)/mypy planner api > .mypy.out 2>&1 & mypy=$$!; \
+	$(BIN)/mypy planner api bench > .mypy.out 2>&1 & mypy=$$!; \
 	$(BIN)/python -m pytest -q -n 2 --dist loadgroup; tests=$$?; \
-	wait $$mypy; types=$$?; echo "mypy planner api:"; cat .mypy.out; rm -f .mypy.out; \
+	wait $$mypy; types=$$?; echo "mypy planner api bench:"; cat .mypy.out; rm -f .mypy.out; \
 	test $$tests -eq 0 && test $$types -eq 0
 
 chromium:  ## Debian's Chromium for the viewer's browser tests (they skip without it); never a downloaded browser
@@ -68,7 +68,7 @@ lint: $(DEV_STAMP)
 	$(BIN)/ruff format --check planner api tests bench
 
 typecheck: $(DEV_STAMP)
-	$(BIN)/mypy planner api
+	$(BIN)/mypy planner api bench
 
 bench: $(DEV_STAMP)
 	$(BIN)/python -m bench.kinematics

@@ -18,6 +18,9 @@ from __future__ import annotations
 import json
 import statistics
 import time
+from collections.abc import Callable, Iterable
+from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -32,8 +35,12 @@ from planner.robots.cabin8 import Cabin8
 MESHES = REFERENCE_DIR
 
 
-def timed(fn, items) -> list[float]:  # type: ignore[no-untyped-def]
-    out = []
+def _motion(world: Any, edge: tuple[Any, Any]) -> object:
+    return world.check_motion(*edge)
+
+
+def timed(fn: Callable[[Any], object], items: Iterable[Any]) -> list[float]:
+    out: list[float] = []
     for it in items:
         t0 = time.perf_counter()
         fn(it)
@@ -73,10 +80,11 @@ def main() -> None:
             step = rng.normal(size=8)
             step *= 0.15 / np.linalg.norm(step)
             edges.append((q, q + step))
-        timed(lambda e, w=world: w.check_motion(*e), edges[:20])
-        t_edge = timed(lambda e, w=world: w.check_motion(*e), edges[:150])
-        timed(lambda e, w=ref: w.check_motion(*e), edges[:20])
-        t_edge_ref = timed(lambda e, w=ref: w.check_motion(*e), edges[:150])
+        motion, motion_ref = partial(_motion, world), partial(_motion, ref)
+        timed(motion, edges[:20])
+        t_edge = timed(motion, edges[:150])
+        timed(motion_ref, edges[:20])
+        t_edge_ref = timed(motion_ref, edges[:150])
         reports = [world.check_motion(*e) for e in edges[:150]]
         certified = sum(r.valid for r in reports)
         certified_ref = sum(ref.check_motion(*e).valid for e in edges[:150])

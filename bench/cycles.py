@@ -95,7 +95,7 @@ def exhaustive(run: CampaignRun) -> tuple[bool, list[dict[str, Any]]]:
     jobs = [run.job(u, s) for u, s in queries]
     rows = run.plan(jobs)
     ok = {(u, s): row.get("status") == "succeeded" for (u, s), row in zip(queries, rows, strict=True)}
-    reach = {frozenset()}
+    reach: set[frozenset[str]] = {frozenset()}
     for size in range(len(ids)):
         reach = {s | {u} for s in reach if len(s) == size for u in ids if u not in s and ok[(u, s)]}
     return bool(reach), rows

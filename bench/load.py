@@ -305,22 +305,21 @@ def main() -> None:
         stop.set()
         health_s, probe_status_s, slow = out.get(timeout=30)
         prober.join()
-        for r in results:  # parsed after the load: a client's own work, on its own machine in a plant
-            r["doc"] = orjson.loads(r.pop("body"))
+        for res in results:  # parsed after the load: a client's own work, on its own machine in a plant
+            res["doc"] = orjson.loads(res.pop("body"))
 
-        ok = [r for r in results if r["doc"]["status"] == "succeeded"]
-        stored_pass = sum(bool(r["doc"]["result"]["report"]["gate"]["passed"]) for r in ok)
+        ok = [res for res in results if res["doc"]["status"] == "succeeded"]
+        stored_pass = sum(bool(res["doc"]["result"]["report"]["gate"]["passed"]) for res in ok)
         regate = 0
         with httpx.Client(base_url=url, timeout=300, headers=headers) as c:
-            for r in ok:
-                rep = c.post(
-                    "/api/v1/plans:validate", json={"scenario": r["scenario"], "profile": r["doc"]["result"]}
-                )
+            for res in ok:
+                body = {"scenario": res["scenario"], "profile": res["doc"]["result"]}
+                rep = c.post("/api/v1/plans:validate", json=body)
                 regate += bool(rep.status_code == 200 and rep.json()["passed"])
         by_name: dict[str, list[float]] = {}
         overhead: list[float] = []
-        for r in ok:
-            d = r["doc"]
+        for res in ok:
+            d = res["doc"]
             run_s = d["finished_at"] - d["started_at"]
             by_name.setdefault(d["scenario"]["name"], []).append(run_s)
             overhead.append(run_s - float(d["result"]["report"]["planning_time_s"]))

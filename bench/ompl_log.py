@@ -209,7 +209,7 @@ def generalization_experiments(
             opts = dict(rec.get("options") or {})
             settings = {"preset": "product", **{k: str(v) for k, v in opts.items()}}
             entries.append(PlannerEntry(variant_name(opts), settings, [run_of(rec)]))
-        times = [float(r["time"]) for e in entries for r in e.runs if r.get("time") is not None]
+        times = [float(t) for e in entries for r in e.runs if isinstance(t := r.get("time"), int | float)]
         props: dict[str, tuple[str, str | float | int]] = {"generator_seed": ("INTEGER", int(seed))}
         if case.get("goal") is not None:
             props["goal_kind"] = ("TEXT", str(case["goal"]))
@@ -269,7 +269,7 @@ def cycle_experiment(
         version: The planner's version.
     """
     runs = [cycle_run_of(r) for r in rows]
-    total = float(sum(float(r["time"]) for r in runs if r.get("time") is not None))
+    total = sum((float(t) for r in runs if isinstance(t := r.get("time"), int | float)), 0.0)
     return Experiment(
         name=name,
         planners=[PlannerEntry("cabinplan_cycle_default", {"preset": "product"}, runs)],

@@ -83,7 +83,11 @@ def _generated(count: int, seed: int, runs: int, folder: Path) -> None:
     from planner.generate import NEW_FAMILIES, GeneratorOptions, generate_case, write_case
 
     out = folder / "out.json"
-    first, first_cached, later, plan_first, plan_later = [], [], [], [], []
+    first: list[float] = []
+    first_cached: list[float] = []
+    later: list[float] = []
+    plan_first: list[float] = []
+    plan_later: list[float] = []
     print(
         f"\ngenerated cabins (seed {seed}): wall time outside planning_time_s [first <= 2 s, later <= 0.8 s]"
     )

@@ -118,9 +118,9 @@ def tree_cpu_s() -> float:
     ticks, todo, total = os.sysconf("SC_CLK_TCK"), [os.getpid()], 0
     while todo:
         pid = todo.pop()
-        fields = stats.get(pid)
-        if fields is not None:
-            total += sum(int(x) for x in fields[11:15])  # utime, stime, cutime, cstime
+        found = stats.get(pid)
+        if found is not None:
+            total += sum(int(x) for x in found[11:15])  # utime, stime, cutime, cstime
         todo.extend(children.get(pid, []))
     return total / ticks
 
