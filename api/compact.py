@@ -174,11 +174,10 @@ def document_json(document: Any) -> bytes | None:
 
     The worker sends it with the packed blob (bytes: no str to encode, pickle and decode on the way), so
     the server answers a finished job's first read without unpacking it (a 3-5 MB plan: about 10-25 ms of
-    the server's CPU there, 5-7 ms here). The same orjson call on
-    the same values: the skeleton's numbers as JSON reads them back (ints stay ints, floats round-trip)
-    and the packed arrays as float64, so the text is the same, character for character (tested on plan,
-    refusal and campaign documents). ``None`` for a document orjson cannot write (an integer beyond 64
-    bits): the server then unpacks the stored blob.
+    the server's CPU there, 5-7 ms here). The same orjson call on the same values: the skeleton's numbers
+    as JSON reads them back (ints stay ints, floats round-trip) and the packed arrays as float64, so the
+    text is the same, byte for byte (tested on arrays of every kind and on a served plan). ``None`` for
+    a document orjson cannot write (an integer beyond 64 bits): the server then unpacks the stored blob.
     """
 
     def normal(value: Any) -> Any:  # arrays as unpacking gives them: float64, C order; others as lists

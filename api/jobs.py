@@ -556,7 +556,7 @@ class ProcessJobRunner:
                 self._kill(r)
         if written:
             if served is not None:
-                results.remember(r.job_id, bytes(served))
+                results.remember(r.job_id, served)
             reason = values.get("reason")
             self.metrics.job_outcomes.labels(status=status, reason=str(reason or "")).inc()
             self.metrics.job_duration.labels(status=status).observe(time.monotonic() - r.started)

@@ -38,12 +38,8 @@ class JobWaiters:
         """Job ``job_id`` ended (or changed state): wake the requests waiting on it. Any thread."""
         with self._lock:
             waiting = bool(self._events.get(job_id))
-        loop = self._loop
-        if waiting and loop is not None and not loop.is_closed():
-            try:
-                loop.call_soon_threadsafe(self._set, job_id)
-            except RuntimeError:  # the loop closed in between (shutdown): nobody waits any more
-                pass
+        if waiting:
+            self._on_loop(self._set, job_id)
 
     def close(self) -> None:
         """The service is shutting down: every waiting request answers now, and later ones do not wait.
@@ -52,13 +48,19 @@ class JobWaiters:
         graceful shutdown does not wait out the long polls; the events are set on the loop's own thread.
         """
         self._closing = True
-        loop = self._loop
-        if loop is None or loop.is_closed():
+        if self._loop is None:  # never bound: no loop thread to hand it to
             self._release_all()
+        else:
+            self._on_loop(self._release_all)
+
+    def _on_loop(self, fn: Callable[..., None], *args: str) -> None:
+        """Run ``fn(*args)`` on the bound loop's thread (waking its select); nothing once it is closed."""
+        loop = self._loop
+        if loop is None or loop.is_closed():  # no loop, or it is gone (shutdown): nobody waits any more
             return
         try:
-            loop.call_soon_threadsafe(self._release_all)
-        except RuntimeError:  # the loop closed in between: nobody waits any more
+            loop.call_soon_threadsafe(fn, *args)
+        except RuntimeError:  # the loop closed in between
             pass
 
     def _release_all(self) -> None:

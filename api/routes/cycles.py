@@ -303,8 +303,8 @@ def _scene_document(ctx: AppContext, kind: JobKind, row: Job) -> dict[str, Any]:
     from planner.task.campaign import cycle_document
     from planner.task.campaign_schema import campaign_from_dict
 
-    text = jobroutes.result_text(ctx, row)
-    result: dict[str, Any] = json.loads(text) if text else {}
+    found = jobroutes.result_json(ctx, row)
+    result: dict[str, Any] = json.loads(found) if found else {}
     base = {
         "job_id": row.id,
         "status": row.status,
@@ -336,7 +336,7 @@ def _scene_document(ctx: AppContext, kind: JobKind, row: Job) -> dict[str, Any]:
 
 def _scene(kind: JobKind, ctx: AppContext, tenant: str, job_id: str) -> Response:
     row = _finished(ctx, kind, tenant, job_id)
-    digest = hashlib.sha256((jobroutes.result_text(ctx, row) or "").encode()).hexdigest()
+    digest = hashlib.sha256(jobroutes.result_json(ctx, row) or b"").hexdigest()
     key = f"{row.id}:{row.status}:{digest}"
     body = _SCENES.get(key)
     if body is None:

@@ -19,13 +19,14 @@ from fastapi import APIRouter, Query, Response
 from api.auth import CurrentPrincipal
 from api.problems import Problem
 from api.routes.deps import Ctx
-from api.routes.jobroutes import result_text
-from api.routes.scene import _LRU, _finished_job, _resolved
+from api.routes.jobroutes import result_json
+from api.routes.scene import _finished_job, _resolved
 from planner.core.exceptions import InvalidInput
+from planner.core.lru import BoundedLRU
 
 router = APIRouter(tags=["exports"])
 
-_EXPORTS = _LRU(8)
+_EXPORTS: BoundedLRU[str, bytes] = BoundedLRU(8)
 _FILE_SUFFIX = {"ros2-json": "json", "ros2-yaml": "yaml", "mcap": "mcap"}
 
 
@@ -55,13 +56,13 @@ def get_trajectory(
     row = _finished_job(ctx, principal.tenant, plan_id)
     if row.status != "succeeded":
         raise Problem(409, "plan_not_succeeded", f"plan {plan_id} is {row.status}: it has no trajectory")
-    text = result_text(ctx, row) or ""
-    digest = hashlib.sha256(text.encode()).hexdigest()
+    found = result_json(ctx, row) or b""
+    digest = hashlib.sha256(found).hexdigest()
     key = f"{row.id}:{digest}:{format}:{spacing_s!r}"
     body = _EXPORTS.get(key)
     media = {"ros2-json": "application/json", "ros2-yaml": "application/yaml", "mcap": "application/x-mcap"}
     if body is None:
-        doc: dict[str, Any] = json.loads(text)
+        doc: dict[str, Any] = json.loads(found)
         clearance = None
         if format == "mcap":
             try:  # the exact clearance per frame needs the plan's cabin; a deleted one leaves it out

@@ -336,7 +336,6 @@ def cancel_or_delete(ctx: AppContext, kind: JobKind, tenant: str, job_id: str) -
     if row.status in TERMINAL_STATES:
         ctx.jobs.delete_finished([job_id])
         forget_result(job_id)
-        ctx.waiters.notify(job_id)  # a long poll of the deleted job answers 404 now
         return Response(status_code=204)
     outcome = ctx.jobs.cancel([job_id], "cancelled by the client")
     ctx.waiters.notify(job_id)  # a queued job is cancelled now (a running one when its owner kills it)

@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import threading
-from collections import OrderedDict
 from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import lru_cache
@@ -38,10 +36,11 @@ from api.jobkinds import PLAN
 from api.problems import Problem
 from api.routes.deps import Ctx
 from api.routes.inputs import empty_dir
-from api.routes.jobroutes import result_text
+from api.routes.jobroutes import result_json
 from api.routes.pprs6 import Orientation, PosePath
 from api.store import scenario_mesh_resolver
 from planner.core.exceptions import InvalidInput, InvalidMesh
+from planner.core.lru import BoundedLRU
 from planner.scenario import ResolvedScenario, resolve_scenario, scenario_from_dict
 
 router = APIRouter(tags=["viewer"])
@@ -49,31 +48,8 @@ router = APIRouter(tags=["viewer"])
 _CACHE_SIZE = 16
 
 
-class _LRU:
-    """A small thread-safe LRU of encoded documents (routes run in the thread pool)."""
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self._data: OrderedDict[str, bytes] = OrderedDict()
-        self._lock = threading.Lock()
-
-    def get(self, key: str) -> bytes | None:
-        with self._lock:
-            value = self._data.get(key)
-            if value is not None:
-                self._data.move_to_end(key)
-            return value
-
-    def put(self, key: str, value: bytes) -> None:
-        with self._lock:
-            self._data[key] = value
-            self._data.move_to_end(key)
-            while len(self._data) > self.size:
-                self._data.popitem(last=False)
-
-
-_SCENES = _LRU(_CACHE_SIZE)
-_GLBS = _LRU(4)
+_SCENES: BoundedLRU[str, bytes] = BoundedLRU(_CACHE_SIZE)
+_GLBS: BoundedLRU[str, bytes] = BoundedLRU(4)
 
 
 def _finished_job(ctx: AppContext, tenant: str, plan_id: str) -> Job:
@@ -123,8 +99,8 @@ def _scene_document(ctx: AppContext, row: Job) -> dict[str, Any]:
     from planner.documents.scene import plan_scene, refusal_scene
     from planner.timing.profile import DriveProfile
 
-    text = result_text(ctx, row)
-    result: dict[str, Any] = json.loads(text) if text else {}
+    found = result_json(ctx, row)
+    result: dict[str, Any] = json.loads(found) if found else {}
     sc = _resolved(ctx, row)
     base: dict[str, Any] = {
         "plan_id": row.id,
@@ -159,7 +135,7 @@ def _scene_document(ctx: AppContext, row: Job) -> dict[str, Any]:
 def get_scene(plan_id: str, ctx: Ctx, principal: CurrentPrincipal) -> Response:
     """The scene document of a finished plan (see :mod:`planner.documents.scene`); 409 while it is active."""
     row = _finished_job(ctx, principal.tenant, plan_id)
-    digest = hashlib.sha256((result_text(ctx, row) or "").encode()).hexdigest()
+    digest = hashlib.sha256(result_json(ctx, row) or b"").hexdigest()
     key = f"{row.id}:{row.status}:{digest}"
     body = _SCENES.get(key)
     if body is None:

@@ -1,8 +1,8 @@
 """A thread-safe least-recently-used cache bounded by entry count and, optionally, by total weight.
 
 One implementation for the caches of immutable, content-keyed things a process keeps: parsed meshes (by
-their bytes' hash: :mod:`planner.meshio.load`), the service's result texts (:mod:`api.results`) and
-scene documents. The most recent entry is always kept, even when it alone exceeds the weight bound (a
+their bytes' hash: :mod:`planner.meshio.load`), single-configuration deflections of the stiffness model,
+and in the service the result documents (:mod:`api.results`), scenes, glTF cabins and exports. The most recent entry is always kept, even when it alone exceeds the weight bound (a
 cache that refused its largest item would redo the largest work every time).
 """
 

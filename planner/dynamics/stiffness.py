@@ -56,9 +56,7 @@ stiffness document of the CLI and the API (payload and wrench inputs, the JSON r
 
 from __future__ import annotations
 
-import threading
 import weakref
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -66,6 +64,7 @@ import numpy as np
 
 from planner.core.description import StiffnessSpec
 from planner.core.exceptions import InvalidInput, InvalidRobotDescription
+from planner.core.lru import BoundedLRU
 from planner.core.types import Array
 from planner.dynamics.beams import (
     beam_compliance,
@@ -182,9 +181,8 @@ class StiffnessModel:
         #: Deflections of single configurations already evaluated, by (q, load case): a cycle asks the same
         #: ones several times (a load change's two sides in the plan, the gate and the events); the model
         #: costs 1-2 ms a call whatever the batch, so repeats are worth keeping (the last _MEMO of them).
-        #: The model is shared by the threads of a process (:func:`stiffness_model`): one lock guards it.
-        self._memo: OrderedDict[bytes, Array] = OrderedDict()
-        self._memo_lock = threading.Lock()
+        #: The model is shared by the threads of a process (:func:`stiffness_model`): the memo is thread-safe.
+        self._memo: BoundedLRU[bytes, Array] = BoundedLRU(_MEMO)
 
     # ------------------------------------------------------------------ geometry
     def _beam(self, name: str, p0: Array, p1: Array, z_ref: Array, point: Array) -> Array:
@@ -329,17 +327,12 @@ class StiffnessModel:
         if q2.shape[0] != 1:
             return self._deflections(q2, load)
         key = q2.tobytes() + load.key()
-        with self._memo_lock:
-            hit = self._memo.get(key)
-            if hit is not None:
-                self._memo.move_to_end(key)
-                return hit.copy()
+        hit = self._memo.get(key)
+        if hit is not None:
+            return hit.copy()
         x = self._deflections(q2, load)
         x.flags.writeable = False
-        with self._memo_lock:
-            self._memo[key] = x
-            if len(self._memo) > _MEMO:
-                self._memo.popitem(last=False)
+        self._memo.put(key, x)
         return x.copy()
 
     def _deflections(self, q2: Array, load: LoadCase) -> Array:
