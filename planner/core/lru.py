@@ -2,8 +2,9 @@
 
 One implementation for the caches of immutable, content-keyed things a process keeps: parsed meshes (by
 their bytes' hash: :mod:`planner.meshio.load`), single-configuration deflections of the stiffness model,
-and in the service the result documents (:mod:`api.results`), scenes, glTF cabins and exports. The most recent entry is always kept, even when it alone exceeds the weight bound (a
-cache that refused its largest item would redo the largest work every time).
+and in the service the result documents (:mod:`api.results`), scenes, glTF cabins and exports. The most
+recent entry is always kept, even when it alone exceeds the weight bound (a cache that refused its
+largest item would redo the largest work every time).
 """
 
 from __future__ import annotations
