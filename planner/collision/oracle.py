@@ -19,6 +19,7 @@ import numpy as np
 
 from planner.collision.bodies import BodySet, segment_reach_bounds
 from planner.collision.kernels.bounds import state_bounds
+from planner.collision.kernels.codes import MAX_LEVELS
 from planner.collision.motion import limit_samples
 from planner.collision.obstacles import Obstacle, ObstacleSet
 from planner.collision.reports import BodyState, MotionReport, StateReport, body_contact, limit_contacts
@@ -274,7 +275,6 @@ class ReferenceWorld(CollisionWorld):
             return MotionReport(False, n_fine + 1, 0, float(t_fine[i]), contacts)
         probes = self._probes
         before = probes.queries
-        levels = (4 * motion_margin, 2 * motion_margin, motion_margin)
         tasks: list[tuple[bool, int, float]] = []
         if probes.cabin_obj is not None:
             tasks += [(True, b, float(reach[b])) for b in range(self._n_bodies)]
@@ -326,11 +326,19 @@ class ReferenceWorld(CollisionWorld):
                 # back level by level; where the bound proves a margin, only with ``probe_when_proven``.
                 exact = not is_cabin and bool(self._kernel.exact_pair[idx])  # E is the exact spare clearance
                 optimistic = D > 0.0 and not exact and (E == 0.0 or self.probe_when_proven)
-                trials = [min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))] if optimistic else []
-                trials += [lv for lv in levels if E == 0.0 and not exact]
+                first = min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))
+                trials = [first] if optimistic and first > E else []
+                if E == 0.0 and not exact:
+                    # Then the level proven last time halved down to the margin, strictly decreasing (a
+                    # level at or above one that hit would hit too), at most MAX_LEVELS in all.
+                    level = max(last, 2.0 * motion_margin)
+                    while level > motion_margin and len(trials) < MAX_LEVELS - 1:
+                        if level < (trials[-1] if trials else np.inf):
+                            trials.append(level)
+                        level *= 0.5
+                    if motion_margin < (trials[-1] if trials else np.inf):
+                        trials.append(motion_margin)
                 for level in trials:
-                    if level <= E:
-                        continue
                     if not probes.hit(st, is_cabin, idx, base + level):
                         E = level
                         break

@@ -345,8 +345,11 @@ class CollisionWorld(Generic[RobotT]):
         |t' - t| <= E / D is then clear, so the next check is at ``t + (E + motion_margin) / D`` and must
         prove at least ``motion_margin``. A check that cannot prove ``motion_margin`` is refused (it may be
         a real contact). Where the bound proves nothing, the first probe asks for twice the margin proven
-        last time (longer steps); with ``probe_when_proven`` (the reference route's setting) also where
-        it does -- by default not, as a state costs a few microseconds and an FCL probe tens. Limits and
+        last time (longer steps), then for that margin again and its halves down to ``motion_margin``
+        (the spare clearance changes little from state to state; no level at or above one that hit is
+        asked, as a larger grown body hits too); with ``probe_when_proven`` (the reference route's setting)
+        the first probe also where the bound proves a margin -- by default not, as a state costs a few
+        microseconds and an FCL probe tens. Limits and
         margins (smooth functions of q) are checked at every joint step of at most ``LIMIT_STEP``
         (5 mm / 5 mrad) along the segment. The walk itself is :mod:`planner.collision.motion`.
 

@@ -15,7 +15,9 @@ WALK_DONE, WALK_PROBE, WALK_FAIL, WALK_GROW = 0, 1, 2, 3
 CI_TASK, CI_I, CI_PHASE, CI_N, CI_COUNT, CI_SLOT, CI_LEVELS, CI_CABIN = 0, 1, 2, 3, 4, 5, 6, 7
 CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_PROBE_PROVEN = range(9)
 CF_LEVEL0 = 9
-CI_SIZE, CF_SIZE = 8, 13
+#: Most probe levels the walk lists at one state (``cf[CF_LEVEL0:]``).
+MAX_LEVELS = 16
+CI_SIZE, CF_SIZE = 8, CF_LEVEL0 + MAX_LEVELS
 
 #: ``cover_walk`` state (``ci``): the task and piece it is at, the sample/task of a pending exact distance.
 CW_TASK, CW_POS, CW_K, CW_PENDING, CW_SIZE = 0, 1, 2, 3, 4

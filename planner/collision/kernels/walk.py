@@ -35,6 +35,7 @@ from planner.collision.kernels.codes import (
     CI_PHASE,
     CI_SLOT,
     CI_TASK,
+    MAX_LEVELS,
     WALK_DONE,
     WALK_FAIL,
     WALK_GROW,
@@ -189,6 +190,25 @@ def _walk_bound(s, is_cabin, idx, threshold, u, grid, poses, cabin, pairs, scrat
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
+def probe_levels(cf: np.ndarray, m: int, above: float, start: float, mm: float) -> int:
+    """Append the levels ``start``, ``start / 2``, ... above ``mm``, then ``mm``, to ``cf[CF_LEVEL0 + m:]``.
+
+    Only levels strictly below ``above`` (the last one listed: a grown body that hit at a level hits at
+    every larger one) and at most ``MAX_LEVELS`` in all, the margin always last. Returns the new count.
+    """
+    level = start
+    while level > mm and m < MAX_LEVELS - 1:
+        if level < above:
+            cf[CF_LEVEL0 + m] = above = level
+            m += 1
+        level *= 0.5
+    if mm < above:
+        cf[CF_LEVEL0 + m] = mm
+        m += 1
+    return m
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
 def motion_walk(
     ci: np.ndarray,
     cf: np.ndarray,
@@ -270,15 +290,16 @@ def motion_walk(
             free = _walk_bound(s, is_cabin, idx, threshold, u, grid, poses, cabin, pairs, scratch) - base
             E = free if free >= mm else 0.0
             m = 0
+            above = math.inf  # the last level listed: a level at or above one that hit would hit too
             if D > 0.0 and not exact and (E == 0.0 or cf[CF_PROBE_PROVEN] != 0.0):
                 level = min(0.3, max(2.0 * cf[CF_LAST], 2.0 * E, 4.0 * mm))
                 if level > E:
-                    cf[CF_LEVEL0 + m] = level
+                    cf[CF_LEVEL0 + m] = above = level
                     m += 1
             if E == 0.0 and not exact:
-                for level in (4 * mm, 2 * mm, mm):
-                    cf[CF_LEVEL0 + m] = level
-                    m += 1
+                # Then the level proven last time (the spare clearance changes little from state to state)
+                # halved down to the margin, strictly decreasing (see ``probe_levels``).
+                m = probe_levels(cf, m, above, max(cf[CF_LAST], 2.0 * mm), mm)
             if m > 0:
                 ci[CI_SLOT] = s
                 ci[CI_LEVELS] = m
