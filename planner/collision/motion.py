@@ -101,8 +101,10 @@ class CertifiedMotion:
         cf[walk.CF_PROBE_PROVEN] = probe_when_proven
         n_cabin = n_bodies if has_cabin else 0
         before = self.probes.queries
+        walk_call = k.motion_walk  # checks every array once; the loop's later calls resume unchecked
         while True:
-            code = k.motion_walk(ci, cf, q_a, q_b, dq, reach, pair_reach, d, slot_of, poses, cabin, pairs)
+            code = walk_call(ci, cf, q_a, q_b, dq, reach, pair_reach, d, slot_of, poses, cabin, pairs)
+            walk_call = k.motion_walk_resume
             task = int(ci[walk.CI_TASK])
             is_cabin = task < n_cabin
             idx = task if is_cabin else task - n_cabin

@@ -340,6 +340,32 @@ class Kernels:
             check_array(pairs, "pairs", F8, 2, out=True, shape=(cap, p)),
         )
 
+    def motion_walk_resume(
+        self,
+        ci: IntArray,
+        cf: Array,
+        q_a: Array,
+        q_b: Array,
+        dq: Array,
+        reach: Array,
+        pair_reach: Array,
+        d: KernelData,
+        slot_of: IntArray,
+        poses: Array,
+        cabin: Array,
+        pairs: Array,
+    ) -> int:
+        """:meth:`motion_walk` again on the arrays its last call accepted, without checking them.
+
+        For the walk's own loop only (:class:`planner.collision.motion.CertifiedMotion`): between the calls
+        the kernel alone writes the walk's state, and the caller only writes probe results into ``cf`` and
+        replaces a full store by a larger one of the same kind (the kernel's ``WALK_GROW``). The checks of
+        :meth:`motion_walk` cost about as much as a resumed call (tens of thousands a plan).
+        """
+        return self.module.motion_walk(
+            ci, cf, q_a, q_b, dq, reach, pair_reach, d.fbuf, d.ibuf, d.grid, slot_of, poses, cabin, pairs
+        )
+
     def obstacle_bounds(self, poses: Array, d: ObstacleKernelData, threshold: Array) -> Array:
         """:func:`.obstacles.obstacle_bounds`: bounds (B, O) at poses (B, 13), fine up to ``threshold``."""
         d = _obstacles(d)
