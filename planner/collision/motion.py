@@ -101,10 +101,12 @@ class CertifiedMotion:
         cf[walk.CF_PROBE_PROVEN] = probe_when_proven
         n_cabin = n_bodies if has_cabin else 0
         before = self.probes.queries
-        walk_call = k.motion_walk  # checks every array once; the loop's later calls resume unchecked
+        resumed = False  # the first call checks every array; the loop's later calls resume unchecked
         while True:
-            code = walk_call(ci, cf, q_a, q_b, dq, reach, pair_reach, d, slot_of, poses, cabin, pairs)
-            walk_call = k.motion_walk_resume
+            code = k.motion_walk(
+                ci, cf, q_a, q_b, dq, reach, pair_reach, d, slot_of, poses, cabin, pairs, resumed=resumed
+            )
+            resumed = True
             task = int(ci[walk.CI_TASK])
             is_cabin = task < n_cabin
             idx = task if is_cabin else task - n_cabin

@@ -305,13 +305,24 @@ class Kernels:
         poses: Array,
         cabin: Array,
         pairs: Array,
+        resumed: bool = False,
     ) -> int:
         """:func:`.walk.motion_walk` on a world's data (resumable; the state store is written in place).
 
         Besides the types and shapes, the walk's own bookkeeping is checked before it resumes: ``slot_of``
         has a slot for each of the n + 1 states (n = ``ci[CI_N]`` >= 1), the store holds the states used
         so far, and every recorded slot lies inside the store.
+
+        ``resumed``: the call resumes on the arrays the last call accepted, unchecked -- for the walk's own
+        loop only (:class:`planner.collision.motion.CertifiedMotion`), where between the calls the kernel
+        alone writes the walk's state and the caller only writes probe results into ``cf`` and replaces a
+        full store by a larger one of the same kind (``WALK_GROW``). The checks cost about as much as a
+        resumed call (tens of thousands a plan set).
         """
+        if resumed:
+            return self.module.motion_walk(
+                ci, cf, q_a, q_b, dq, reach, pair_reach, d.fbuf, d.ibuf, d.grid, slot_of, poses, cabin, pairs
+            )
         d = _data(d)
         b, p, n_j = d.n_bodies, len(d.pair_a), d.n_joints
         ci = check_array(ci, "ci", I8, 1, out=True, shape=(codes.CI_SIZE,))
@@ -338,32 +349,6 @@ class Kernels:
             poses,
             check_array(cabin, "cabin", F8, 2, out=True, shape=(cap, b)),
             check_array(pairs, "pairs", F8, 2, out=True, shape=(cap, p)),
-        )
-
-    def motion_walk_resume(
-        self,
-        ci: IntArray,
-        cf: Array,
-        q_a: Array,
-        q_b: Array,
-        dq: Array,
-        reach: Array,
-        pair_reach: Array,
-        d: KernelData,
-        slot_of: IntArray,
-        poses: Array,
-        cabin: Array,
-        pairs: Array,
-    ) -> int:
-        """:meth:`motion_walk` again on the arrays its last call accepted, without checking them.
-
-        For the walk's own loop only (:class:`planner.collision.motion.CertifiedMotion`): between the calls
-        the kernel alone writes the walk's state, and the caller only writes probe results into ``cf`` and
-        replaces a full store by a larger one of the same kind (the kernel's ``WALK_GROW``). The checks of
-        :meth:`motion_walk` cost about as much as a resumed call (tens of thousands a plan).
-        """
-        return self.module.motion_walk(
-            ci, cf, q_a, q_b, dq, reach, pair_reach, d.fbuf, d.ibuf, d.grid, slot_of, poses, cabin, pairs
         )
 
     def obstacle_bounds(self, poses: Array, d: ObstacleKernelData, threshold: Array) -> Array:
