@@ -58,12 +58,15 @@ class CertifiedMotion:
         own: float,
         ratio: float | None,
         probe_when_proven: bool,
+        min_margin: float | None = None,
     ) -> MotionReport:
         """The motion report of q_a -> q_b (contiguous (8,) joints; arguments already validated).
 
         ``own`` is the self-clearance, ``ratio`` a floor on the link-height ratio the reach bounds assume,
-        ``probe_when_proven`` the probe policy (see ``CollisionWorld.check_motion``).
+        ``probe_when_proven`` the probe policy, ``min_margin`` the smallest margin the walk may adapt to
+        near a tight state (None: ``motion_margin``; see ``CollisionWorld.check_motion``).
         """
+        floor = motion_margin if min_margin is None else min_margin
         d = self.data
         dq = q_b - q_a
         adq = np.abs(dq)
@@ -85,7 +88,8 @@ class CertifiedMotion:
         )
         has_cabin = self.probes.cabin_obj is not None
         d_max = max([*(reach.tolist() if has_cabin else []), *pair_reach.tolist()], default=0.0)
-        n = int(max(1, np.ceil(d_max / motion_margin)))
+        # One schedule step never exceeds the smallest step the walk may take (at least ``floor`` of motion).
+        n = int(max(1, np.ceil(d_max / floor)))
         n_bodies = len(self.bodies.names)
         cap = min(n + 1, 32)
         slot_of = np.full(n + 1, -1, dtype=np.int64)
@@ -96,6 +100,8 @@ class CertifiedMotion:
         cf = np.zeros(walk.CF_SIZE)
         ci[walk.CI_N], ci[walk.CI_CABIN] = n, has_cabin
         cf[walk.CF_CLEARANCE], cf[walk.CF_OWN], cf[walk.CF_MARGIN] = clearance, own, motion_margin
+        cf[walk.CF_FLOOR] = floor
+        cf[walk.CF_SMALLEST] = motion_margin
         # Exact pair distances where they are small (beyond, the bounds allow long steps anyway).
         cf[walk.CF_THRESHOLD] = own + 0.06
         cf[walk.CF_PROBE_PROVEN] = probe_when_proven
@@ -112,7 +118,10 @@ class CertifiedMotion:
             idx = task if is_cabin else task - n_cabin
             base = clearance if is_cabin else own
             if code == walk.WALK_DONE:
-                return MotionReport(True, int(ci[walk.CI_COUNT]), self.probes.queries - before)
+                queries = self.probes.queries - before
+                return MotionReport(
+                    True, int(ci[walk.CI_COUNT]), queries, smallest_margin_m=float(cf[walk.CF_SMALLEST])
+                )
             if code == walk.WALK_GROW:
                 grow = poses.shape[0]
                 poses = np.concatenate([poses, np.empty_like(poses[:grow])])
@@ -120,11 +129,13 @@ class CertifiedMotion:
                 pairs = np.concatenate([pairs, np.empty_like(pairs[:grow])])
             elif code == walk.WALK_FAIL:
                 contact = body_contact(
-                    self.bodies.names, self.bodies.pairs, is_cabin, idx, base + motion_margin
+                    self.bodies.names, self.bodies.pairs, is_cabin, idx, base + float(cf[walk.CF_LOCAL])
                 )
                 states = int(ci[walk.CI_COUNT])
                 t_fail = float(cf[walk.CF_TFAIL])
-                return MotionReport(False, states, self.probes.queries - before, t_fail, (contact,))
+                queries = self.probes.queries - before
+                smallest = float(cf[walk.CF_SMALLEST])
+                return MotionReport(False, states, queries, t_fail, (contact,), smallest)
             else:  # WALK_PROBE: the first level at which the grown body is clear becomes the spare clearance
                 slot = int(ci[walk.CI_SLOT])
                 st = BodyState(poses[slot], cabin[slot], pairs[slot])
@@ -138,7 +149,8 @@ class CertifiedMotion:
                     # Every grown body hit. A grown box is a larger box: near its edges and corners it
                     # overstates the clearance it tests by up to (sqrt 3 - 1) times the growth, so the exact
                     # distance (milliseconds against a mesh, asked only here) decides.
-                    if levels and min(levels) <= motion_margin + 1e-12:
+                    local = float(cf[walk.CF_LOCAL])  # the margin the state must prove
+                    if levels and min(levels) <= local + 1e-12:
                         exact_spare = self.probes.distance(st, is_cabin, idx)[0] - base
-                        if exact_spare >= motion_margin:
+                        if exact_spare >= local:
                             cf[walk.CF_E] = exact_spare

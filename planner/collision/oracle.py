@@ -250,18 +250,36 @@ class ReferenceWorld(CollisionWorld):
         return segment_reach_bounds(model, self.bodies, end + model.slope_deviation(q_a, q_b))
 
     def _walk(
-        self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
+        self,
+        q_a: Array,
+        q_b: Array,
+        clearance: float,
+        motion_margin: float,
+        own: float,
+        ratio: float | None,
+        min_margin: float | None = None,
     ) -> MotionReport:
         """The motion walk of ``check_motion``: the cabin's and the pairs' in Python, then the obstacles'."""
-        rep = self._cabin_walk(q_a, q_b, clearance, motion_margin, own, ratio)
+        floor = motion_margin if min_margin is None else min_margin
+        rep = self._cabin_walk(q_a, q_b, clearance, motion_margin, own, ratio, floor)
         if not rep.valid or self.obstacles is None:
             return rep
-        return self._obstacle_walk(q_a, q_b, clearance, motion_margin, rep)
+        return self._obstacle_walk(q_a, q_b, clearance, floor, rep)
 
     def _cabin_walk(
-        self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
+        self,
+        q_a: Array,
+        q_b: Array,
+        clearance: float,
+        motion_margin: float,
+        own: float,
+        ratio: float | None,
+        floor: float,
     ) -> MotionReport:
-        """The cabin's and the pairs' walk in Python: the schedule the compiled walk follows."""
+        """The cabin's and the pairs' walk in Python: the schedule the compiled walk follows.
+
+        ``floor``: the smallest margin the walk adapts to near a tight state (see ``check_motion``).
+        """
         dq = q_b - q_a
         rho, pair_rho = self._segment_reach(q_a, q_b, ratio)
         reach = rho @ np.abs(dq)
@@ -284,8 +302,8 @@ class ReferenceWorld(CollisionWorld):
         # neighbouring states; each task's next check is snapped down onto it (a shorter step stays
         # certified).
         d_max = max((d for _, _, d in tasks), default=0.0)
-        # Not capped: one schedule step must never exceed a proven step (at least 2 motion_margin of motion).
-        n = int(max(1, np.ceil(d_max / motion_margin)))
+        # Not capped: one schedule step must never exceed a proven step (at least ``floor`` of motion).
+        n = int(max(1, np.ceil(d_max / floor)))
 
         def t_of(i: int) -> float:
             return i / n
@@ -307,6 +325,7 @@ class ReferenceWorld(CollisionWorld):
         # Both end states: a task whose spare clearance at the two ends covers the segment from both sides
         # (free_0 / D + free_1 / D >= 1) needs nothing in between.
         s0, s1 = state(0), state(n)
+        smallest = motion_margin  # the smallest margin any task stepped with
         for is_cabin, idx, D in tasks:
             base = clearance if is_cabin else own
             f0, f1 = spare(s0, is_cabin, idx, base), spare(s1, is_cabin, idx, base)
@@ -317,40 +336,53 @@ class ReferenceWorld(CollisionWorld):
                 if self._carriage_clearance(q_a[chain.D1], q_b[chain.D1]) > clearance:
                     continue
             t_stop = 1.0 - f1 / D if f1 >= motion_margin and D > 0.0 else 1.0
-            i, last = 0, motion_margin
+            # ``local``: the margin the state must prove; ``prev``, ``e_prev``: the last state proven, its E.
+            i, last, local, prev, e_prev = 0, motion_margin, motion_margin, -1, 0.0
             while True:
                 st = state(i)
                 free = spare(st, is_cabin, idx, base)
-                E = free if free >= motion_margin else 0.0
+                E = free if free >= local else 0.0
                 # Probe for more spare clearance than the bound proves (twice what held last time), then fall
                 # back level by level; where the bound proves a margin, only with ``probe_when_proven``.
                 exact = not is_cabin and bool(self._kernel.exact_pair[idx])  # E is the exact spare clearance
                 optimistic = D > 0.0 and not exact and (E == 0.0 or self.probe_when_proven)
-                first = min(0.3, max(2.0 * last, 2.0 * E, 4.0 * motion_margin))
+                first = min(0.3, max(2.0 * last, 2.0 * E, 4.0 * local))
                 trials = [first] if optimistic and first > E else []
                 if E == 0.0 and not exact:
                     # Then the level proven last time halved down to the margin, strictly decreasing (a
                     # level at or above one that hit would hit too), at most MAX_LEVELS in all.
-                    level = max(last, 2.0 * motion_margin)
-                    while level > motion_margin and len(trials) < MAX_LEVELS - 1:
+                    level = max(last, 2.0 * local)
+                    while level > local and len(trials) < MAX_LEVELS - 1:
                         if level < (trials[-1] if trials else np.inf):
                             trials.append(level)
                         level *= 0.5
-                    if motion_margin < (trials[-1] if trials else np.inf):
-                        trials.append(motion_margin)
+                    if local < (trials[-1] if trials else np.inf):
+                        trials.append(local)
                 for level in trials:
                     if not probes.hit(st, is_cabin, idx, base + level):
                         E = level
                         break
                 if E == 0.0 and not exact:  # every grown body hit: the exact distance decides
                     exact_spare = probes.distance(st, is_cabin, idx)[0] - base
-                    E = exact_spare if exact_spare >= motion_margin else 0.0
-                last = max(E, motion_margin)
+                    E = exact_spare if exact_spare >= local else 0.0
+                last = max(E, local)
                 if E == 0.0:
-                    contact = body_contact(self.names, self.bodies.pairs, is_cabin, idx, base + motion_margin)
-                    return MotionReport(False, len(cache), probes.queries - before, t_of(i), (contact,))
+                    if local <= floor:
+                        contact = body_contact(self.names, self.bodies.pairs, is_cabin, idx, base + local)
+                        queries = probes.queries - before
+                        return MotionReport(False, len(cache), queries, t_of(i), (contact,), smallest)
+                    # Halve the margin and step again from the last proven state (or ask the first again).
+                    local = max(floor, 0.5 * local)
+                    smallest = min(smallest, local)
+                    if prev >= 0:
+                        back = int(np.floor((t_of(prev) + (e_prev + local) / D) * n + 1e-9))
+                        i = min(i, max(prev + 1, back))
+                    continue
+                prev, e_prev = i, E
+                if E >= 2.0 * local:  # room again: back towards the walk's margin
+                    local = min(motion_margin, 2.0 * local)
                 # Done when the proven interval reaches the end state's own certified interval.
                 if i == n or D <= 0.0 or t_of(i) + E / D >= t_stop:
                     break
-                i = min(n, max(i + 1, int(np.floor((t_of(i) + (E + motion_margin) / D) * n + 1e-9))))
-        return MotionReport(True, len(cache), probes.queries - before)
+                i = min(n, max(i + 1, int(np.floor((t_of(i) + (E + local) / D) * n + 1e-9))))
+        return MotionReport(True, len(cache), probes.queries - before, smallest_margin_m=smallest)

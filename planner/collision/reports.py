@@ -51,6 +51,9 @@ class MotionReport:
     #: Segment parameter t in [0, 1] of the state that failed (None if valid).
     t_fail: float | None = None
     contacts: tuple[Contact, ...] = ()
+    #: The smallest margin the walk stepped with [m]: the one asked for, or less where an adaptive walk
+    #: (``min_margin``) met a tight state (None: no walk, e.g. a limit failed first).
+    smallest_margin_m: float | None = None
 
 
 @dataclass(frozen=True)

@@ -335,6 +335,7 @@ class CollisionWorld(Generic[RobotT]):
         motion_margin: float = DEFAULT_MOTION_MARGIN_M,
         self_clearance: float | None = None,
         reach_ratio: float | None = None,
+        min_margin: float | None = None,
     ) -> MotionReport:
         """Certify that the straight joint-space motion q_a -> q_b keeps ``clearance`` everywhere.
 
@@ -353,6 +354,17 @@ class CollisionWorld(Generic[RobotT]):
         margins (smooth functions of q) are checked at every joint step of at most ``LIMIT_STEP``
         (5 mm / 5 mrad) along the segment. The walk itself is :mod:`planner.collision.motion`.
 
+        **Adaptive margin** (``min_margin`` below ``motion_margin``). A state that cannot prove the step's
+        margin is not a refusal while the margin can shrink: the margin is halved (not below
+        ``min_margin``) and the walk steps again from the last state it proved, by that state's spare
+        clearance and the new margin, so the new state lies closer (or the first state is asked again);
+        where a state proves twice the margin, the margin doubles back towards ``motion_margin``. Only a
+        state that cannot prove ``min_margin`` is refused. The schedule is that of ``min_margin`` (no step
+        ever exceeds what a state proved). So one walk certifies a motion that keeps ``clearance +
+        min_margin`` with small steps only where it is tight, where a walk retried with a smaller margin
+        walked all of it again (:func:`planner.plan.motion.certify_motion`). None: ``motion_margin``
+        throughout, the walk described above.
+
         ``self_clearance`` overrides the world's self-clearance for this check and ``reach_ratio`` raises
         the link-height ratio the reach bounds assume (both used by :meth:`check_path`).
         """
@@ -363,17 +375,33 @@ class CollisionWorld(Generic[RobotT]):
                 f"motion_margin: must be in [{MIN_MOTION_MARGIN_M}, 0.1] m, got {motion_margin}",
                 field="motion_margin",
             )
+        if min_margin is not None and not (np.isfinite(min_margin) and MIN_MOTION_MARGIN_M <= min_margin):
+            raise InvalidInput(
+                f"min_margin: must be at least {MIN_MOTION_MARGIN_M} m, got {min_margin}", field="min_margin"
+            )
+        floor = None if min_margin is None else min(float(min_margin), float(motion_margin))
         n = self.model.n_joints
-        return self._walk(_joints(q_a, n), _joints(q_b, n), clearance, motion_margin, own, reach_ratio)
+        return self._walk(_joints(q_a, n), _joints(q_b, n), clearance, motion_margin, own, reach_ratio, floor)
 
     def _walk(
-        self, q_a: Array, q_b: Array, clearance: float, motion_margin: float, own: float, ratio: float | None
+        self,
+        q_a: Array,
+        q_b: Array,
+        clearance: float,
+        motion_margin: float,
+        own: float,
+        ratio: float | None,
+        min_margin: float | None = None,
     ) -> MotionReport:
         """The motion walk of :meth:`check_motion` on validated arguments (the obstacles' walk after it)."""
-        rep = self._motion.check(q_a, q_b, clearance, motion_margin, own, ratio, self.probe_when_proven)
+        rep = self._motion.check(
+            q_a, q_b, clearance, motion_margin, own, ratio, self.probe_when_proven, min_margin
+        )
         if not rep.valid or self.obstacles is None:
             return rep
-        return self._obstacle_walk(q_a, q_b, clearance, motion_margin, rep)
+        # Each obstacle state steps by its exact spare clearance: the margin only sets what it must prove.
+        floor = motion_margin if min_margin is None else min_margin
+        return self._obstacle_walk(q_a, q_b, clearance, floor, rep)
 
     def _obstacle_walk(
         self, q_a: Array, q_b: Array, clearance: float, margin: float, rep: MotionReport
@@ -402,13 +430,14 @@ class CollisionWorld(Generic[RobotT]):
                 if d < clearance + margin:
                     contact = obstacle_contact(self.names[b], obs.names[o], clearance + margin)
                     queries = rep.fcl_queries + obs.queries - queries0
-                    return MotionReport(False, states, queries, t, (contact,))
+                    return MotionReport(False, states, queries, t, (contact,), rep.smallest_margin_m)
                 if D[b] <= 0.0:
                     break
                 t += (d - clearance) / float(D[b])
                 if t >= 1.0:
                     break
-        return MotionReport(True, states, rep.fcl_queries + obs.queries - queries0)
+        queries = rep.fcl_queries + obs.queries - queries0
+        return MotionReport(True, states, queries, smallest_margin_m=rep.smallest_margin_m)
 
     def check_path(
         self,

@@ -25,7 +25,7 @@ from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 from planner.kinematics import chain
-from planner.plan.motion import MAX_RETRIES, OPTIONAL_RETRIES, motion_clear
+from planner.plan.motion import motion_clear
 from planner.timing import acc_reference, stages
 from planner.timing.stage import TimingFactory
 
@@ -351,19 +351,8 @@ class PlanContext:
 
     def motion_ok(self, q_a: Array, q_b: Array) -> bool:
         """A planner motion: certified clear by the planner's clearance, holdable along its length."""
-        return self._motion_ok(q_a, q_b, MAX_RETRIES)
-
-    def optional_motion_ok(self, q_a: Array, q_b: Array) -> bool:
-        """An optional motion (a corner cut): as :meth:`motion_ok`, with fewer margin retries.
-
-        Certified the same way when it passes; refused sooner near a tight state
-        (:data:`~planner.plan.motion.OPTIONAL_RETRIES`), which costs only the time the cut would save.
-        """
-        return self._motion_ok(q_a, q_b, OPTIONAL_RETRIES)
-
-    def _motion_ok(self, q_a: Array, q_b: Array, retries: int) -> bool:
         self.tick()
         c = self.clearances
-        return motion_clear(
-            self.world, q_a, q_b, c.planner_m, c.motion_margin_m, retries
-        ) and self.forces.segment_ok(q_a, q_b)
+        return motion_clear(self.world, q_a, q_b, c.planner_m, c.motion_margin_m) and self.forces.segment_ok(
+            q_a, q_b
+        )

@@ -27,7 +27,7 @@ def search(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Arra
     """Certified waypoints from the start to one of the targets (and which), corners cut for time."""
     waypoints, k = _cascade(ctx, q_start, targets)
     if len(waypoints) > 2 and ctx.simplify:
-        waypoints, stats = cut_corners(ctx.robot, waypoints, ctx.optional_motion_ok, deadline=ctx.out_of_time)
+        waypoints, stats = cut_corners(ctx.robot, waypoints, ctx.motion_ok, deadline=ctx.out_of_time)
         ctx.report.setdefault("search", {})["corner_cuts"] = {
             "cuts": stats.cuts,
             "checks": stats.checks,

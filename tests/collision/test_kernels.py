@@ -135,6 +135,54 @@ def test_motion_reports_equal_the_reference_walk(
     assert max(r.states_checked for r in reports) > 32  # the state store had to grow
 
 
+@pytest.mark.parametrize("probe_when_proven", [False, True])
+def test_adaptive_motion_reports_equal_the_reference_walk(
+    robot: Cabin8, worlds: tuple[CollisionWorld, ...], probe_when_proven: bool
+) -> None:
+    """With a smaller ``min_margin`` (halved near tight states): the same report, field for field."""
+    fast, ref = worlds
+    rng = np.random.default_rng(47)
+    starts = [q for q in along_rail(robot, 120, seed=47) if ref.is_valid(q, 0.03)]
+    adapted = 0
+    saved = (fast.probe_when_proven, ref.probe_when_proven)
+    fast.probe_when_proven = ref.probe_when_proven = probe_when_proven
+    try:
+        for k, q in enumerate(starts):
+            step = rng.normal(size=8)
+            step *= (0.15 if k % 3 else 0.8) / np.linalg.norm(step)
+            for clearance, margin in ((0.01, 0.005), (0.03, 0.008)):
+                expected = ref.check_motion(q, q + step, clearance, margin, min_margin=0.0005)
+                assert fast.check_motion(q, q + step, clearance, margin, min_margin=0.0005) == expected
+                adapted += expected.valid and not fast.check_motion(q, q + step, clearance, margin).valid
+    finally:
+        fast.probe_when_proven, ref.probe_when_proven = saved
+    assert adapted > 0  # some motions only the adaptive walk certifies
+
+
+def test_an_adaptive_walk_certifies_only_what_keeps_the_clearance(
+    robot: Cabin8, worlds: tuple[CollisionWorld, ...]
+) -> None:
+    """Motions only the adaptive walk certifies keep the clearance at 400 states each (exact distances)."""
+    fast = worlds[0]
+    rng = np.random.default_rng(53)
+    clearance, checked = 0.03, 0
+    for q in [q for q in along_rail(robot, 1500, seed=53) if fast.is_valid(q, clearance)]:
+        step = rng.normal(size=8)
+        step *= 0.3 / np.linalg.norm(step)
+        rep = fast.check_motion(q, q + step, clearance, 0.008, min_margin=0.0005)
+        if not rep.valid or fast.check_motion(q, q + step, clearance, 0.008).valid:
+            continue
+        for t in np.linspace(0.0, 1.0, 400):
+            assert fast.min_distance(q + t * step, include_self=False).distance_m >= clearance - 1e-9
+            closest = fast.min_distance(q + t * step, include_self=True)  # a pair's, or the cabin's again
+            need = clearance if fast.is_environment(closest.bodies[1]) else fast.self_clearance
+            assert closest.distance_m >= need - 1e-9
+        checked += 1
+        if checked == 4:
+            break
+    assert checked == 4, "too few motions needed the adaptive margin"
+
+
 def test_default_probe_policy_certifies_as_much_with_fewer_queries(
     robot: Cabin8, worlds: tuple[CollisionWorld, ...]
 ) -> None:

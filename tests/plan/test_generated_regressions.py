@@ -157,15 +157,18 @@ def test_an_insertion_inside_the_slack_band_is_refused_with_what_blocks_it(tmp_p
     """Bay goal (seed 1, case 14): its clear goal postures keep 11.6-11.7 mm between slide and cabin.
 
     That is inside the band the planner does not promise (requested 10 mm + 2 mm); the generator's own
-    witness keeps 10.8 mm. No motion can leave such a goal, so the approach is refused, and the refusal
-    names the step that fails (the closest bodies against the 12 mm a motion needs), not a goal posture
-    that was rejected anyway.
+    witness keeps 10.8 mm. No motion can leave such a goal with a margin, so the approach was refused, and
+    the refusal names the step that fails (the closest bodies against the 12 mm a motion needs), not a goal
+    posture that was rejected anyway.
 
     The goal postures' polish depends on the last bits of numpy's vector loops, which numpy picks by CPU:
     on an AMD EPYC without AVX-512 (numpy's X86_V3 loops) one posture polishes to 12.0016 mm, just outside
     the band, and its line is kept; with ``NPY_DISABLE_CPU_FEATURES=X86_V3`` the best keeps 11.96 mm and
-    the approach is refused. Either outcome is checked for what it claims: a kept line's goal keeps the
-    12 mm a motion needs (exact distance) and the plan passes the gate; a refusal names slide and cabin.
+    the approach is refused. And since the walk adapts its margin within one walk (it arrives at a state
+    with only the clearance to spare, as its last step's bound covers it), a line into a goal of 11.67 mm
+    may be certified too. Either outcome is checked for what it claims: a kept line's goal keeps the
+    planner's clearance (exact distance) and the plan passes the gate with the requested clearance; a
+    refusal names slide and cabin.
     """
     from planner.core.exceptions import ApproachInfeasible
     from planner.plan.evidence import describe
@@ -184,7 +187,7 @@ def test_an_insertion_inside_the_slack_band_is_refused_with_what_blocks_it(tmp_p
         kept = [x.line for x in lines if x is not None and x.line is not None]
         assert kept
         for line in kept:
-            assert ctx.world.min_distance(line[-1]).distance_m >= c.planner_m + MIN_MARGIN_M
+            assert ctx.world.min_distance(line[-1]).distance_m >= c.planner_m
         result = run_stages(PlanContext.build(sc))
         assert result.gate.passed and result.gate.min_clearance_m >= c.requested_m
         return

@@ -19,11 +19,15 @@ from planner.collision.kernels.buffers import Packed
 from planner.collision.kernels.codes import (
     CF_CLEARANCE,
     CF_E,
+    CF_EPREV,
+    CF_FLOOR,
     CF_LAST,
     CF_LEVEL0,
+    CF_LOCAL,
     CF_MARGIN,
     CF_OWN,
     CF_PROBE_PROVEN,
+    CF_SMALLEST,
     CF_TFAIL,
     CF_THRESHOLD,
     CF_TSTOP,
@@ -33,6 +37,7 @@ from planner.collision.kernels.codes import (
     CI_LEVELS,
     CI_N,
     CI_PHASE,
+    CI_PREV,
     CI_SLOT,
     CI_TASK,
     MAX_LEVELS,
@@ -280,26 +285,28 @@ def motion_walk(
                         continue
             cf[CF_TSTOP] = 1.0 - f1 / D if f1 >= mm and D > 0.0 else 1.0
             ci[CI_I] = 0
-            cf[CF_LAST] = mm
+            ci[CI_PREV] = -1
+            cf[CF_LAST] = cf[CF_LOCAL] = mm
             ci[CI_PHASE] = phase = 2
         i = ci[CI_I]
+        local = cf[CF_LOCAL]  # the margin this state must prove (the walk's, or less near a tight state)
         if phase == 2:  # at state i: the bound's spare clearance, then probes if they can prove more
             s = _walk_state(i, ci, q_a, dq, u, slot_of, poses, cabin, pairs)
             if s < 0:
                 return WALK_GROW
             free = _walk_bound(s, is_cabin, idx, threshold, u, grid, poses, cabin, pairs, scratch) - base
-            E = free if free >= mm else 0.0
+            E = free if free >= local else 0.0
             m = 0
             above = math.inf  # the last level listed: a level at or above one that hit would hit too
             if D > 0.0 and not exact and (E == 0.0 or cf[CF_PROBE_PROVEN] != 0.0):
-                level = min(0.3, max(2.0 * cf[CF_LAST], 2.0 * E, 4.0 * mm))
+                level = min(0.3, max(2.0 * cf[CF_LAST], 2.0 * E, 4.0 * local))
                 if level > E:
                     cf[CF_LEVEL0 + m] = above = level
                     m += 1
             if E == 0.0 and not exact:
                 # Then the level proven last time (the spare clearance changes little from state to state)
                 # halved down to the margin, strictly decreasing (see ``probe_levels``).
-                m = probe_levels(cf, m, above, max(cf[CF_LAST], 2.0 * mm), mm)
+                m = probe_levels(cf, m, above, max(cf[CF_LAST], 2.0 * local), local)
             if m > 0:
                 ci[CI_SLOT] = s
                 ci[CI_LEVELS] = m
@@ -308,15 +315,30 @@ def motion_walk(
                 return WALK_PROBE
         else:  # phase 1: the caller's probe result
             E = cf[CF_E]
-        cf[CF_LAST] = max(E, mm)
+        cf[CF_LAST] = max(E, local)
         t = i / n
         if E == 0.0:
-            cf[CF_TFAIL] = t
-            return WALK_FAIL
+            if local <= cf[CF_FLOOR]:
+                cf[CF_TFAIL] = t
+                return WALK_FAIL
+            # Near a tight state: halve the margin and step again from the last proven state (or test the
+            # first state again): the new state is no farther than the proven margin and the new one reach.
+            local = cf[CF_LOCAL] = max(cf[CF_FLOOR], 0.5 * local)
+            cf[CF_SMALLEST] = min(cf[CF_SMALLEST], local)
+            prev = ci[CI_PREV]
+            if prev >= 0:
+                back = int(math.floor((prev / n + (cf[CF_EPREV] + local) / D) * n + 1e-9))
+                ci[CI_I] = min(i, max(prev + 1, back))
+            ci[CI_PHASE] = 2
+            continue
+        ci[CI_PREV] = i
+        cf[CF_EPREV] = E
+        if E >= 2.0 * local:  # room again: back towards the walk's margin
+            local = cf[CF_LOCAL] = min(mm, 2.0 * local)
         if i == n or D <= 0.0 or t + E / D >= cf[CF_TSTOP]:
             ci[CI_TASK] += 1
             ci[CI_PHASE] = 0
             continue
-        ci[CI_I] = min(n, max(i + 1, int(math.floor((t + (E + mm) / D) * n + 1e-9))))
+        ci[CI_I] = min(n, max(i + 1, int(math.floor((t + (E + local) / D) * n + 1e-9))))
         ci[CI_PHASE] = 2
     return WALK_DONE
