@@ -101,6 +101,9 @@ class GateContext:
     T_line_goal: Array | None = None
     clearance: ClearanceAlong | None = None
     peaks: dict[str, float] = field(default_factory=dict)
+    #: The predicted payload-frame deflection the sagging certificate used: (sample indices, twists (K, 6))
+    #: (set by ``collision``).
+    deflection: tuple[IntArray, Array] | None = None
 
 
 #: A check of the gate: a function of the profile and the shared context, giving its outcome (None: the
@@ -232,7 +235,8 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     )
     if not (req.deflection_check and robot.desc.stiffness is not None):
         return Check("collision", True, done)
-    q_def, sag = deflected_joints(robot, ctx.q, req.payload, req.T_tool_payload)
+    q_def, sag, idx, x = _deflections(robot, [ctx.q], req.payload, req.T_tool_payload)[0]
+    ctx.deflection = (idx, x)
     rep_def = sagging_certificate(world, q_def, req.clearance_m, req.motion_margin_m, along)
     if rep_def.valid:
         return Check(
@@ -315,14 +319,16 @@ def validate_profile(
     c = ctx.clearance
     if c is None:  # no cabin nor obstacle (inf), or no figure measured here (nan)
         measured = ctx.q is not None and req.collision
-        return GateReport(tuple(checks), n, float("inf") if measured else float("nan"), peaks)
+        return GateReport(
+            tuple(checks), n, float("inf") if measured else float("nan"), peaks, deflection=ctx.deflection
+        )
     where = {
         "t_s": float(profile.t[c.sample]),
         "sample": c.sample,
         "bodies": list(c.bodies),
         "tolerance_m": c.tolerance_m,
     }
-    return GateReport(tuple(checks), n, c.distance_m, peaks, c.bound_m, where)
+    return GateReport(tuple(checks), n, c.distance_m, peaks, c.bound_m, where, ctx.deflection)
 
 
 def clearance_probe_indices(n: int) -> IntArray:
@@ -431,6 +437,13 @@ def deflected_joints_of(
     overhead): a cycle's legs of the same load share one evaluation. Each path's result is the same as
     its own :func:`deflected_joints` (the model is evaluated row by row).
     """
+    return [(q, sag) for q, sag, _, _ in _deflections(robot, paths, payload, T_tool_payload)]
+
+
+def _deflections(
+    robot: Cabin8, paths: Sequence[Array], payload: RigidPayload | None, T_tool_payload: Array
+) -> list[tuple[Array, float, IntArray, Array]]:
+    """(q', the largest translation, the sample indices, the payload-frame twists (K, 6) there) per path."""
     from scipy.spatial.transform import Rotation
 
     from planner.dynamics.stiffness import stiffness_model
@@ -461,5 +474,5 @@ def deflected_joints_of(
         start = stop
         steps = np.arange(len(q))
         correction = np.column_stack([np.interp(steps, idx, dq[:, j]) for j in range(8)])
-        out.append((q + correction, float(np.linalg.norm(x[:, :3], axis=1).max())))
+        out.append((q + correction, float(np.linalg.norm(x[:, :3], axis=1).max()), idx, x))
     return out

@@ -9,7 +9,7 @@ workspace, forces, goal, approach, collision; pprs6: pose path, singularity).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -55,6 +55,10 @@ class GateReport:
     #: Where ``min_clearance_m`` is: ``{"t_s", "sample", "bodies": [a, b], "tolerance_m"}`` (b "cabin" for
     #: the cabin; no sample's exact distance is below ``min_clearance_m`` by more than ``tolerance_m``).
     min_clearance_at: dict[str, Any] | None = None
+    #: The payload frame's predicted static deflection the sagging certificate used: (sample indices (K,),
+    #: twists (K, 6) [m, rad]); None where the gate did not evaluate it. Not part of :meth:`to_dict`: the
+    #: plan's report publishes it (``report.deflection``), from these numbers.
+    deflection: tuple[Any, Any] | None = field(default=None, compare=False, repr=False)
 
     @property
     def passed(self) -> bool:

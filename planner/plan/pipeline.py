@@ -82,7 +82,7 @@ def run_stages(ctx: PlanContext) -> PlanResult:
     ctx.progress("timing", 0.75)  # each try of timing and gate is its own stage (timing_0, validate_0, ...)
     profile, gate, timed = time_and_validate(ctx, legs, requirements_for(sc, ctx.payload, commanded))
 
-    deflection = deflection_report(ctx, profile, compensation)
+    deflection = deflection_report(ctx, profile, compensation, gate)
     ctx.report.update(legs=len(legs), leg_durations_s=[round(tp.duration, 4) for tp in timed])
     duration_report(ctx, profile, line)
     ctx.report["planning_time_s"] = ctx.elapsed()

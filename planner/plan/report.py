@@ -9,6 +9,7 @@ import numpy as np
 from planner.core.types import Array
 from planner.dynamics.compensation import Compensation
 from planner.dynamics.stiffness import StaticDeflection, stiffness_model
+from planner.gate.drive_checks import GateReport
 from planner.gate.requirements import deflection_sample_indices, stiffness_provenance
 from planner.plan.context import PlanContext
 from planner.plan.goals import GoalCandidate
@@ -45,8 +46,14 @@ def duration_report(ctx: PlanContext, profile: DriveProfile, line: GoalCandidate
         )
 
 
-def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensation | None) -> Array | None:
-    """Predicted payload-frame deflection along the profile into the report; (N, 6) or None."""
+def deflection_report(
+    ctx: PlanContext, profile: DriveProfile, comp: Compensation | None, gate: GateReport | None = None
+) -> Array | None:
+    """Predicted payload-frame deflection along the profile into the report; (N, 6) or None.
+
+    The numbers the gate's sagging certificate used where it evaluated them (``gate.deflection``: the
+    same model, load and samples), else the model's own evaluation.
+    """
     sc = ctx.sc
     if ctx.robot.desc.stiffness is None or not sc.deflection_series:
         _goal_report(ctx, comp)
@@ -55,8 +62,11 @@ def deflection_report(ctx: PlanContext, profile: DriveProfile, comp: Compensatio
     # The deflection is a smooth function of the configuration: predicted at up to a few hundred samples
     # where the robot moves (deflection_sample_indices) and interpolated in between, for the report and plot.
     n = len(profile.joints)
-    idx = deflection_sample_indices(profile.joints)
-    x_at = stiffness_model(ctx.robot).deflection_along(profile.joints[idx], ctx.payload, T_tool_payload)
+    if gate is not None and gate.deflection is not None and len(profile.joints) == gate.samples:
+        idx, x_at = gate.deflection
+    else:
+        idx = deflection_sample_indices(profile.joints)
+        x_at = stiffness_model(ctx.robot).deflection_along(profile.joints[idx], ctx.payload, T_tool_payload)
     x = np.column_stack([np.interp(np.arange(n), idx, x_at[:, j]) for j in range(6)])
     tr, rot = np.linalg.norm(x[:, :3], axis=1), np.linalg.norm(x[:, 3:], axis=1)
     every = -(-len(idx) // 100)  # at most 100 points of the series in the report
