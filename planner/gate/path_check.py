@@ -21,6 +21,9 @@ DENSE_POINTS = 4000
 #: ... and at least this many in every piece (a short blend between long lines).
 PIECE_POINTS = 64
 NEWTON_STEPS = 6
+#: A sample's Newton iteration stops once its step is below this fraction of the leg's parameter length
+#: (at least 1): a step that small moves the nearest point by far less than the path tolerance.
+NEWTON_TOL = 1e-12
 
 
 def path_deviation(q: Array, legs: tuple[JointPath, ...], leg_of: IntArray | None = None) -> Array:
@@ -57,12 +60,18 @@ def _distance_to(leg: JointPath, q: Array) -> Array:
     dense, _, _ = leg.evaluate(grid)
     d0, idx = cKDTree(dense).query(q)
     s = grid[idx]
+    active = np.arange(len(q))  # the samples whose Newton step still moves s
     for _ in range(NEWTON_STEPS):
-        p, dp, ddp = leg.evaluate(s)
-        r = p - q
+        p, dp, ddp = leg.evaluate(s[active])
+        r = p - q[active]
         g = np.einsum("ij,ij->i", r, dp)
         h = np.einsum("ij,ij->i", dp, dp) + np.einsum("ij,ij->i", r, ddp)
-        s = np.clip(s - g / np.where(h > 1e-12, h, 1e-12), 0.0, leg.length)
+        s_new = np.clip(s[active] - g / np.where(h > 1e-12, h, 1e-12), 0.0, leg.length)
+        moved = np.abs(s_new - s[active]) > NEWTON_TOL * max(leg.length, 1.0)
+        s[active] = s_new
+        active = active[moved]
+        if len(active) == 0:
+            break
     d = np.linalg.norm(leg.evaluate(s)[0] - q, axis=1)
     return np.asarray(np.minimum(d, d0), dtype=float)
 
