@@ -144,8 +144,8 @@ def motion_evidence(
 
     At the walk's failing fraction t (q = q_a + t (q_b - q_a)): a limit or margin contact gives
     :func:`limit_evidence` there; a clearance failure the bodies short of ``required_m`` + the adaptive
-    walk's smallest margin (:data:`MIN_MARGIN_M`: a state with more spare clearance would have been walked
-    again with a smaller margin), or, when the walk stopped at a larger margin, of ``required_m`` + that
+    walk's smallest margin (:data:`MIN_MARGIN_M`: the walk halves its margin down to it before it refuses a
+    state), or, when the walk stopped at a larger margin, of ``required_m`` + that
     margin, the requirement the walk failed on. Only a failing measurement is returned: None when the walk
     gives no failing state or the state measures clear of both (``where(t)`` names the place).
     """
