@@ -10,6 +10,8 @@ The pure-Python walk with the same schedule is :mod:`planner.collision.oracle` (
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from planner.collision.bodies import BodySet
@@ -28,6 +30,34 @@ LIMIT_STEP = 0.005
 def limit_samples(dq: Array) -> int:
     """Number of pieces n of the limit samples t_i = i / n: joint steps of at most ``LIMIT_STEP``."""
     return int(min(10_000, max(1, np.ceil(float(np.abs(dq).max()) / LIMIT_STEP))))
+
+
+@dataclass(frozen=True)
+class Walk:
+    """What one certified walk proves and how (see ``CollisionWorld.check_motion``).
+
+    Attributes:
+        clearance: The clearance every body keeps from the cabin [m].
+        margin: The margin every state proves beyond it [m] (the walk's steps).
+        own: The self-clearance every checked pair keeps [m].
+        ratio: A floor on the link-height ratio the reach bounds assume (None: the segment's own).
+        min_margin: The smallest margin the walk adapts to near a tight state [m] (None: ``margin``).
+    """
+
+    clearance: float
+    margin: float
+    own: float
+    ratio: float | None = None
+    min_margin: float | None = None
+
+    @property
+    def floor(self) -> float:
+        """The smallest margin a state must prove [m]."""
+        return self.margin if self.min_margin is None else self.min_margin
+
+    def values(self) -> tuple[float, float, float, float | None, float]:
+        """(clearance, margin, own, ratio, floor)."""
+        return self.clearance, self.margin, self.own, self.ratio, self.floor
 
 
 class CertifiedMotion:
@@ -49,24 +79,12 @@ class CertifiedMotion:
         self.probes = probes
         self.kernels = kernels
 
-    def check(
-        self,
-        q_a: Array,
-        q_b: Array,
-        clearance: float,
-        motion_margin: float,
-        own: float,
-        ratio: float | None,
-        probe_when_proven: bool,
-        min_margin: float | None = None,
-    ) -> MotionReport:
+    def check(self, q_a: Array, q_b: Array, spec: Walk, probe_when_proven: bool) -> MotionReport:
         """The motion report of q_a -> q_b (contiguous (8,) joints; arguments already validated).
 
-        ``own`` is the self-clearance, ``ratio`` a floor on the link-height ratio the reach bounds assume,
-        ``probe_when_proven`` the probe policy, ``min_margin`` the smallest margin the walk may adapt to
-        near a tight state (None: ``motion_margin``; see ``CollisionWorld.check_motion``).
+        ``spec``: what the walk proves; ``probe_when_proven``: the probe policy (see ``check_motion``).
         """
-        floor = motion_margin if min_margin is None else min_margin
+        clearance, motion_margin, own, ratio, floor = spec.values()
         d = self.data
         dq = q_b - q_a
         adq = np.abs(dq)

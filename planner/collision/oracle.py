@@ -20,7 +20,7 @@ import numpy as np
 from planner.collision.bodies import BodySet, segment_reach_bounds
 from planner.collision.kernels.bounds import state_bounds
 from planner.collision.kernels.codes import MAX_LEVELS
-from planner.collision.motion import limit_samples
+from planner.collision.motion import Walk, limit_samples
 from planner.collision.obstacles import Obstacle, ObstacleSet
 from planner.collision.reports import BodyState, MotionReport, StateReport, body_contact, limit_contacts
 from planner.collision.world import DEFAULT_CLEARANCE_M, CollisionWorld
@@ -249,37 +249,16 @@ class ReferenceWorld(CollisionWorld):
             end = max(end, ratio)
         return segment_reach_bounds(model, self.bodies, end + model.slope_deviation(q_a, q_b))
 
-    def _walk(
-        self,
-        q_a: Array,
-        q_b: Array,
-        clearance: float,
-        motion_margin: float,
-        own: float,
-        ratio: float | None,
-        min_margin: float | None = None,
-    ) -> MotionReport:
+    def _walk(self, q_a: Array, q_b: Array, spec: Walk) -> MotionReport:
         """The motion walk of ``check_motion``: the cabin's and the pairs' in Python, then the obstacles'."""
-        floor = motion_margin if min_margin is None else min_margin
-        rep = self._cabin_walk(q_a, q_b, clearance, motion_margin, own, ratio, floor)
+        rep = self._cabin_walk(q_a, q_b, spec)
         if not rep.valid or self.obstacles is None:
             return rep
-        return self._obstacle_walk(q_a, q_b, clearance, floor, rep)
+        return self._obstacle_walk(q_a, q_b, spec.clearance, spec.floor, rep)
 
-    def _cabin_walk(
-        self,
-        q_a: Array,
-        q_b: Array,
-        clearance: float,
-        motion_margin: float,
-        own: float,
-        ratio: float | None,
-        floor: float,
-    ) -> MotionReport:
-        """The cabin's and the pairs' walk in Python: the schedule the compiled walk follows.
-
-        ``floor``: the smallest margin the walk adapts to near a tight state (see ``check_motion``).
-        """
+    def _cabin_walk(self, q_a: Array, q_b: Array, spec: Walk) -> MotionReport:
+        """The cabin's and the pairs' walk in Python: the schedule the compiled walk follows."""
+        clearance, motion_margin, own, ratio, floor = spec.values()
         dq = q_b - q_a
         rho, pair_rho = self._segment_reach(q_a, q_b, ratio)
         reach = rho @ np.abs(dq)

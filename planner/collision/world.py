@@ -45,7 +45,7 @@ from planner.collision.clearance_grid import ClearanceGrid, cached_build
 from planner.collision.kernels import buffers, codes
 from planner.collision.kernels.entries import DEFAULT as KERNELS
 from planner.collision.kernels.entries import Kernels
-from planner.collision.motion import CertifiedMotion
+from planner.collision.motion import CertifiedMotion, Walk
 from planner.collision.obstacles import Obstacle, ObstacleSet, obstacle_contact
 from planner.collision.probes import Probes, cabin_bvh
 from planner.collision.reports import (
@@ -381,27 +381,16 @@ class CollisionWorld(Generic[RobotT]):
             )
         floor = None if min_margin is None else min(float(min_margin), float(motion_margin))
         n = self.model.n_joints
-        return self._walk(_joints(q_a, n), _joints(q_b, n), clearance, motion_margin, own, reach_ratio, floor)
+        spec = Walk(clearance, motion_margin, own, reach_ratio, floor)
+        return self._walk(_joints(q_a, n), _joints(q_b, n), spec)
 
-    def _walk(
-        self,
-        q_a: Array,
-        q_b: Array,
-        clearance: float,
-        motion_margin: float,
-        own: float,
-        ratio: float | None,
-        min_margin: float | None = None,
-    ) -> MotionReport:
+    def _walk(self, q_a: Array, q_b: Array, spec: Walk) -> MotionReport:
         """The motion walk of :meth:`check_motion` on validated arguments (the obstacles' walk after it)."""
-        rep = self._motion.check(
-            q_a, q_b, clearance, motion_margin, own, ratio, self.probe_when_proven, min_margin
-        )
+        rep = self._motion.check(q_a, q_b, spec, self.probe_when_proven)
         if not rep.valid or self.obstacles is None:
             return rep
         # Each obstacle state steps by its exact spare clearance: the margin only sets what it must prove.
-        floor = motion_margin if min_margin is None else min_margin
-        return self._obstacle_walk(q_a, q_b, clearance, floor, rep)
+        return self._obstacle_walk(q_a, q_b, spec.clearance, spec.floor, rep)
 
     def _obstacle_walk(
         self, q_a: Array, q_b: Array, clearance: float, margin: float, rep: MotionReport
@@ -514,7 +503,7 @@ class CollisionWorld(Generic[RobotT]):
         threshold = self.self_clearance + 0.06  # exact capsule-pair distances below (as the motion walk)
 
         def walk(k: int, clearance: float, own: float, margin: float) -> MotionReport:
-            return self._walk(qs[k], qs[k + 1], clearance, margin, own, floor)
+            return self._walk(qs[k], qs[k + 1], Walk(clearance, margin, own, floor))
 
         has_cabin = self._probes.cabin_obj is not None
         kernels = (self.kernels, self._kernel, threshold)
