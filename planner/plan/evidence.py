@@ -145,9 +145,8 @@ def motion_evidence(
     At the walk's failing fraction t (q = q_a + t (q_b - q_a)): a limit or margin contact gives
     :func:`limit_evidence` there; a clearance failure the bodies short of ``required_m`` + the adaptive
     walk's smallest margin (:data:`MIN_MARGIN_M`: the walk halves its margin down to it before it refuses a
-    state), or, when the walk stopped at a larger margin, of ``required_m`` + that
-    margin, the requirement the walk failed on. Only a failing measurement is returned: None when the walk
-    gives no failing state or the state measures clear of both (``where(t)`` names the place).
+    state), the requirement the walk failed on. Only a failing measurement is returned: None when the walk
+    gives no failing state or the state measures clear (``where(t)`` names the place).
     """
     rep = motion.report
     if rep.valid or rep.t_fail is None:
@@ -157,11 +156,8 @@ def motion_evidence(
     if any(c.kind == "limit" for c in rep.contacts):
         violations = world.robot.violations(q_at)
         return limit_evidence(violations, q_at, where(t)) if violations else None
-    for margin in dict.fromkeys((MIN_MARGIN_M, max(MIN_MARGIN_M, motion.margin_m))):
-        ev = collision_evidence(world, q_at, required_m, where(t), margin_m=margin)
-        if ev["distance_m"] < ev["required_m"]:
-            return ev
-    return None
+    ev = collision_evidence(world, q_at, required_m, where(t), margin_m=MIN_MARGIN_M)
+    return ev if ev["distance_m"] < ev["required_m"] else None
 
 
 def describe(evidence: dict[str, Any]) -> str:

@@ -60,13 +60,10 @@ class AdaptiveMotion:
         margin_m: The smallest margin the walk stepped with when it passed; the margin it could not prove
             where it failed (the smallest it adapts to, :data:`MIN_MARGIN_M`, or the scenario's margin if
             that is smaller) [m].
-        spare_m: The exact spare clearance measured where the last walk failed [m] (None: it passed, or
-            failed on a limit).
     """
 
     report: MotionReport
     margin_m: float
-    spare_m: float | None = None
 
     @property
     def valid(self) -> bool:
@@ -107,13 +104,12 @@ def certify_motion(
     rep = world.check_motion(q_a, q_b, clearance, margin, min_margin=floor)
     if rep.valid or rep.t_fail is None or any(c.kind == "limit" for c in rep.contacts):
         return AdaptiveMotion(rep, margin if rep.smallest_margin_m is None else rep.smallest_margin_m)
-    q_fail = np.asarray(q_a, dtype=float) + rep.t_fail * (np.asarray(q_b, dtype=float) - q_a)
-    spare = spare_clearance(world, q_fail, clearance)
-    if rep.t_fail == 0.0 and spare >= 0.0:  # no walk can leave q_a: walk towards it instead
+    # No walk can leave q_a, which is itself clear (exact distances, asked only here): walk towards it.
+    if rep.t_fail == 0.0 and spare_clearance(world, np.asarray(q_a, dtype=float), clearance) >= 0.0:
         back = world.check_motion(q_b, q_a, clearance, margin, min_margin=floor)
         if back.valid:
             return AdaptiveMotion(back, margin if back.smallest_margin_m is None else back.smallest_margin_m)
-    return AdaptiveMotion(rep, floor, spare)
+    return AdaptiveMotion(rep, floor)
 
 
 def motion_clear(
