@@ -6,7 +6,9 @@ table leak does not reveal keys that cannot be brute-forced). The admin key come
 ``CABINPLAN_ADMIN_KEY`` and is compared in constant time. Missing or unknown keys give 401, a tenant key
 on an admin route gives 403, and another tenant's objects are simply not found (404). Every
 authenticated request counts against its tenant's rate limit (:mod:`api.ratelimit`): 429 ``rate_limited``
-with ``Retry-After`` beyond it.
+with ``Retry-After`` beyond it. A key found valid is trusted for a second without asking the database
+again (:mod:`api.keycache`); revoking it through this process takes effect at once, through another
+instance sharing the database within that second.
 """
 
 from __future__ import annotations
@@ -78,6 +80,7 @@ def revoke_key(ctx: AppContext, key_id: str) -> bool:
             return False
         if row.revoked_at is None:
             row.revoked_at = now_s()
+    ctx.keys.clear()  # committed: no request of this process accepts it from now on
     return True
 
 
@@ -153,13 +156,18 @@ def _principal(request: Request, key: str | None) -> Principal:
     if admin is not None and hmac.compare_digest(key.encode(), admin.get_secret_value().encode()):
         return Principal(tenant=ADMIN_TENANT, key_id="admin", admin=True)
     digest = key_digest(key)
-    with ctx.db.session() as s:
-        row = s.scalar(select(ApiKey).where(ApiKey.key_sha256 == digest, ApiKey.revoked_at.is_(None)))
-        if row is None:
-            raise _unauthorized("invalid or revoked API key")
-        if row.tenant == LOCAL_TENANT and not is_loopback(request.client.host if request.client else ""):
-            raise _unauthorized("the local default key is accepted from this machine (loopback) only")
-        return Principal(tenant=row.tenant, key_id=row.id)
+    known = ctx.keys.get(digest)
+    if known is None:
+        with ctx.db.session() as s:
+            row = s.scalar(select(ApiKey).where(ApiKey.key_sha256 == digest, ApiKey.revoked_at.is_(None)))
+            if row is None:
+                raise _unauthorized("invalid or revoked API key")
+            known = (row.tenant, row.id)
+        ctx.keys.put(digest, *known)
+    tenant, key_id = known
+    if tenant == LOCAL_TENANT and not is_loopback(request.client.host if request.client else ""):
+        raise _unauthorized("the local default key is accepted from this machine (loopback) only")
+    return Principal(tenant=tenant, key_id=key_id)
 
 
 def require_admin(principal: Annotated[Principal, Depends(authenticate)]) -> Principal:

@@ -1,4 +1,4 @@
-"""The context of one app: settings, database, job store, mesh store, job runner, metrics, rate limiter."""
+"""The context of one app: settings, database, job store, mesh store, job runner, metrics, limiter, keys."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from fastapi import Request
 
 from api.db import Database
 from api.jobstore import JobStore
+from api.keycache import KeyCache
 from api.metrics import ServiceMetrics
 from api.ratelimit import TenantRateLimiter
 from api.settings import Settings
@@ -36,6 +37,8 @@ class AppContext:
     sweep_submitted: Callable[[], None] = lambda: None
     #: Requests waiting for a job to end (``wait_s``), woken by the runner.
     waiters: JobWaiters = field(default_factory=JobWaiters)
+    #: Keys found valid in the last second (:mod:`api.keycache`).
+    keys: KeyCache = field(default_factory=KeyCache)
 
 
 def get_context(request: Request) -> AppContext:

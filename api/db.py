@@ -180,7 +180,10 @@ class Database:
         self.url = url
         self.schema = schema
         self.is_sqlite = url.startswith("sqlite")
-        kwargs: dict[str, Any] = {"pool_pre_ping": True}
+        # A pooled PostgreSQL connection may have been dropped by the server or the network: ping it when
+        # it is checked out. A SQLite connection is a file handle in this process; pinging it is a
+        # query per session for nothing.
+        kwargs: dict[str, Any] = {"pool_pre_ping": not self.is_sqlite}
         if self.is_sqlite:
             kwargs["connect_args"] = {"check_same_thread": False, "timeout": 10.0}
         engine = create_engine(url, **kwargs)

@@ -71,7 +71,11 @@ def read_bytes(label: str, source: MeshSource, limits: MeshLimits) -> bytes:
                 max_bytes=limits.max_bytes,
             )
         with path.open("rb") as fh:
-            data = fh.read(limits.max_bytes + 1)
+            # The size just read, one byte more to see growth: ``read(max_bytes + 1)`` would allocate
+            # the cap (200 MB) for every file, then shrink it (1.7 ms a 0.5 MB cabin under load).
+            data = fh.read(info.st_size + 1)
+            if len(data) > info.st_size:  # it grew since the stat: read on, up to the cap
+                data += fh.read(limits.max_bytes + 1 - len(data))
     except (OSError, TypeError, ValueError) as exc:
         raise error(label, "read", f"cannot read the file: {exc}") from exc
     if len(data) > limits.max_bytes:  # the file grew between stat and read

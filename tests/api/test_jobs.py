@@ -191,6 +191,44 @@ def test_a_failed_terminal_write_is_retried_and_the_process_reaped(tmp_path, mon
         process.is_alive()  # closed: the process object was reaped
 
 
+@pytest.mark.parametrize("claim_fails", [False, True])
+def test_a_finished_jobs_worker_gets_the_next_job_before_its_outcome_is_written(
+    tmp_path, monkeypatch, claim_fails: bool
+) -> None:
+    """The freed worker is handed the next job first, before its outcome is written.
+
+    It plans while the outcome is written; a claim that fails then does not cost the outcome: it is
+    written all the same.
+    """
+    from api.db import Job
+    from api.jobs import _Running
+
+    db, runner = _runner_with_job(tmp_path, status="running", owned=True, meshes={})
+    order: list[tuple[str, str]] = []
+
+    class Pool:
+        def release(self, worker: Any) -> bool:
+            order.append(("release", ""))
+            return True
+
+    def fill() -> None:
+        with db.session() as s:  # what a reader sees when the next job is claimed
+            order.append(("fill", s.get(Job, "j1").status))
+        if claim_fails:
+            raise RuntimeError("database is locked")
+
+    monkeypatch.setattr(runner, "_pool", Pool())
+    monkeypatch.setattr(runner, "_fill", fill)
+    job = _Running("j1", None, deadline=time.monotonic() + 10, started=time.monotonic())  # type: ignore[arg-type]
+    runner._running["j1"] = job
+    job.outcome = {"status": "succeeded", "message": "ok", "packed": None, "json": None}
+    runner._finish(job)
+    assert order == [("release", ""), ("fill", "running")]  # the slot was free, the outcome not yet written
+    with db.session() as s:
+        assert s.get(Job, "j1").status == "succeeded"
+    assert runner.busy() == 0
+
+
 def test_a_mesh_that_cannot_be_fetched_now_requeues_the_job_and_a_deleted_one_fails_it(
     tmp_path, monkeypatch
 ) -> None:

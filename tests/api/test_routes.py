@@ -83,6 +83,52 @@ def test_admin_manages_keys_and_tenants_cannot(idle: Service) -> None:
     _problem(idle.client.get("/api/v1/plans", headers=gamma), 401)
 
 
+def test_a_key_revoked_by_another_instance_is_refused_within_the_key_cache_ttl(idle: Service) -> None:
+    """A revocation by another instance sharing the database is seen within the key cache's TTL.
+
+    Written here straight into the table, as the other instance would; this instance's remembered key is
+    trusted for at most :data:`api.keycache.KEY_CACHE_TTL_S`.
+    """
+    import time
+
+    from api.db import ApiKey
+    from api.keycache import KEY_CACHE_TTL_S
+
+    admin = {"X-API-Key": ADMIN_KEY}
+    created = idle.client.post("/api/v1/keys", json={"tenant": "delta", "name": "x"}, headers=admin).json()
+    delta = {"X-API-Key": created["key"]}
+    assert idle.client.get("/api/v1/plans", headers=delta).status_code == 200  # found valid: remembered
+    ctx = idle.client.app.state.ctx  # type: ignore[attr-defined]
+    with ctx.db.session() as s:  # what another instance's revocation writes
+        s.get(ApiKey, created["id"]).revoked_at = time.time()
+    t_revoked = time.monotonic()
+    while idle.client.get("/api/v1/plans", headers=delta).status_code == 200:
+        assert time.monotonic() - t_revoked < KEY_CACHE_TTL_S
+        time.sleep(0.05)
+    assert time.monotonic() - t_revoked < KEY_CACHE_TTL_S + 0.5
+    _problem(idle.client.get("/api/v1/plans", headers=delta), 401)
+
+
+def test_the_key_cache_forgets_after_its_ttl_and_on_clear(monkeypatch: pytest.MonkeyPatch) -> None:
+    from api import keycache
+
+    now = [100.0]
+    monkeypatch.setattr(keycache.time, "monotonic", lambda: now[0])
+    cache = keycache.KeyCache(ttl_s=1.0)
+    assert cache.get("d") is None
+    cache.put("d", "alpha", "k1")
+    now[0] = 100.999
+    assert cache.get("d") == ("alpha", "k1")
+    now[0] = 101.0
+    assert cache.get("d") is None
+    cache.put("d", "alpha", "k1")
+    cache.clear()
+    assert cache.get("d") is None
+    for k in range(keycache.KEY_CACHE_MAX + 1):  # bounded: a flood of keys never grows it further
+        cache.put(f"d{k}", "alpha", "k")
+    assert len(cache._keys) <= keycache.KEY_CACHE_MAX
+
+
 def test_robots_list_drives_units_and_limits(idle: Service) -> None:
     items = idle.client.get("/api/v1/robots", headers=idle.h()).json()["items"]
     cabin8 = next(r for r in items if r["name"] == "cabin8")

@@ -12,6 +12,7 @@ import io
 import json
 import logging
 import math
+import os
 import struct
 from pathlib import Path
 
@@ -440,6 +441,28 @@ def test_byte_cap_is_checked_before_reading_or_parsing(tmp_path, monkeypatch):
     path = write(tmp_path, "big.stl", junk)
     monkeypatch.setattr(Path, "open", lambda *a, **k: pytest.fail("the file must not be opened"))
     refused("byte_size", path, limits=limits)
+
+
+def test_a_file_that_grows_after_its_size_was_read_is_read_whole_and_capped(tmp_path, monkeypatch):
+    """A file read asks for the size its stat gave, plus one byte to see growth.
+
+    A grown file is read on (never cut at its old size), and refused once it passes the cap.
+    """
+    from planner.meshio.sniff import read_bytes
+
+    data = export(box_mesh(), "stl")
+    path = write(tmp_path, "box.stl", data)
+    real_stat = Path.stat
+
+    def stale(self, *a, **k):  # the stat of the file before it grew by 100 bytes
+        st = real_stat(self, *a, **k)
+        return os.stat_result((*st[:6], st.st_size - 100, *st[7:]))
+
+    assert read_bytes("box.stl", path, MeshLimits()) == data
+    monkeypatch.setattr(Path, "stat", stale)
+    assert read_bytes("box.stl", path, MeshLimits()) == data
+    err = refused("byte_size", path, limits=MeshLimits(max_bytes=len(data) - 1))
+    assert err.details["max_bytes"] == len(data) - 1
 
 
 def test_header_vertex_counts_are_capped_before_parsing(monkeypatch):
