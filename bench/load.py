@@ -8,9 +8,10 @@ prober calls ``/health`` every 50 ms. Prints throughput, p50/p95/max latency of 
 on the idle server first (each cancelled at once), and how many results pass the validation gate: the gate
 report stored with each plan, and an independent re-run of the gate through ``POST /plans:validate``.
 
-In the same run, before the server starts, ``--workers`` in-process planners (one process each, warmed up on
-every scenario first, at the niceness of the service's job processes) plan the same list of plans the
-clients submit: plans a minute in process, next to the service's, and their ratio (the service's overhead:
+In the same run, before the server starts and again after it stopped, ``--workers`` in-process planners (one
+process each, warmed up on every scenario first, at the niceness of the service's job processes) plan the
+same list of plans the clients submit: plans a minute in process (both runs, and their mean: a VM's speed
+drifts by 10-30% over a minute), next to the service's, and their ratio (the service's overhead:
 handing a job to a worker, its documents, the database, the HTTP requests and the clients themselves, which
 share the machine), and the median job overhead (a job's run time minus its own ``planning_time_s``). The
 load average is printed at the start and the end (a shared machine), and the resident memory of the
@@ -219,7 +220,7 @@ def main() -> None:
 
     load_start = os.getloadavg()
     scenarios = reference_scenarios()
-    inproc_rate, inproc_times = in_process_rate(scenarios, args.clients * args.rounds, args.workers)
+    before_rate, inproc_times = in_process_rate(scenarios, args.clients * args.rounds, args.workers)
 
     data = Path(tempfile.mkdtemp(prefix="cabinplan-load-"))
     port = _free_port()
@@ -324,60 +325,6 @@ def main() -> None:
             by_name.setdefault(d["scenario"]["name"], []).append(run_s)
             overhead.append(run_s - float(d["result"]["report"]["planning_time_s"]))
         members = _group_rss(proc.pid)
-        rate = 60 * len(results) / wall
-        load_end = os.getloadavg()
-        print(
-            f"clients {args.clients}, {args.rounds} plans each, workers {args.workers}, "
-            f"scenarios {len(scenarios)} (round robin)"
-        )
-        print(f"load average at start {load_start[0]:.2f}, at end {load_end[0]:.2f} (1 min)")
-        print(f"wall {wall:.1f} s, {len(ok)}/{len(results)} succeeded, throughput {rate:.1f} plans/min")
-        print(
-            f"in process ({args.workers} warm planners, the same {len(results)} plans): "
-            f"{inproc_rate:.1f} plans/min; service / in process {rate / inproc_rate:.0%}"
-        )
-        for name, ts in sorted(by_name.items()):
-            ip = inproc_times.get(name, [float("nan")])
-            print(
-                f"  {name:<22} job run time median {np.median(ts):5.2f} s (n={len(ts)}); "
-                f"in process {np.median(ip):5.2f} s (n={len(ip)})"
-            )
-        print(
-            f"  job overhead (run time, claim to stored outcome, minus the job's own planning_time_s): "
-            f"median {1e3 * np.median(overhead):.0f} ms, p95 {1e3 * np.percentile(overhead, 95):.0f} ms "
-            f"(n={len(overhead)})"
-        )
-        print(
-            f"  CPU time during the load, besides the jobs: server {server_cpu:.1f} s, the clients "
-            f"{clients_cpu:.1f} s (of {2 * wall:.1f} core-seconds)"
-        )
-        print(
-            "  service processes after the run (server, forkserver, job workers): "
-            + ", ".join(f"{name} {rss / 1e6:.0f} MB" for name, rss in members)
-        )
-        failed = [
-            (r["doc"]["scenario"]["name"], r["doc"]["reason"])
-            for r in results
-            if r["doc"]["status"] != "succeeded"
-        ]
-        if failed:
-            print(f"  not succeeded: {failed}")
-        print(f"GET /health under load (prober process):       {_pct(health_s)}")
-        print(f"GET /plans/{{id}} under load (prober process):  {_pct(probe_status_s)}")
-        late = ", ".join(f"{1e3 * dt:.0f} ms at {t:.1f} s" for t, dt in slow[:8])
-        more = " ..." if len(slow) > 8 else ""
-        print(f"  /health calls above 50 ms: {len(slow)} of {len(health_s)} ({late}{more})")
-        print(
-            f"GET /plans/{{id}}?wait_s=30 of the {args.clients} clients (long polls, {len(status_s)} "
-            f"for {len(results)} plans; each waits for its plan): {_pct(status_s)}"
-        )
-        print(f"POST /plans idle (one at a time):               {_pct(idle_post_s)}")
-        print(f"POST /plans under load (first round: {args.clients} at once): {_pct(post_s)}")
-        print(f"  median under load / idle: {np.median(post_s) / np.median(idle_post_s):.1f}x")
-        print(
-            f"gate: {stored_pass}/{len(ok)} stored reports passed, "
-            f"{regate}/{len(ok)} passed POST /plans:validate"
-        )
     finally:
         os.killpg(proc.pid, signal.SIGTERM)
         try:
@@ -385,6 +332,65 @@ def main() -> None:
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
         log.close()
+    # the in-process planners again, the server gone: a VM's speed drifts over a minute (10-30% here)
+    after_rate, after_times = in_process_rate(scenarios, args.clients * args.rounds, args.workers)
+    for name, ts in after_times.items():
+        inproc_times.setdefault(name, []).extend(ts)
+    inproc_rate = 0.5 * (before_rate + after_rate)
+    rate = 60 * len(results) / wall
+    load_end = os.getloadavg()
+    print(
+        f"clients {args.clients}, {args.rounds} plans each, workers {args.workers}, "
+        f"scenarios {len(scenarios)} (round robin)"
+    )
+    print(f"load average at start {load_start[0]:.2f}, at end {load_end[0]:.2f} (1 min)")
+    print(f"wall {wall:.1f} s, {len(ok)}/{len(results)} succeeded, throughput {rate:.1f} plans/min")
+    print(
+        f"in process ({args.workers} warm planners, the same {len(results)} plans, before and after "
+        f"the service's run): {before_rate:.1f} and {after_rate:.1f} plans/min, mean {inproc_rate:.1f}; "
+        f"service / in process {rate / inproc_rate:.0%}"
+    )
+    for name, ts in sorted(by_name.items()):
+        ip = inproc_times.get(name, [float("nan")])
+        print(
+            f"  {name:<22} job run time median {np.median(ts):5.2f} s (n={len(ts)}); "
+            f"in process {np.median(ip):5.2f} s (n={len(ip)})"
+        )
+    print(
+        f"  job overhead (run time, claim to stored outcome, minus the job's own planning_time_s): "
+        f"median {1e3 * np.median(overhead):.0f} ms, p95 {1e3 * np.percentile(overhead, 95):.0f} ms "
+        f"(n={len(overhead)})"
+    )
+    print(
+        f"  CPU time during the load, besides the jobs: server {server_cpu:.1f} s, the clients "
+        f"{clients_cpu:.1f} s (of {2 * wall:.1f} core-seconds)"
+    )
+    print(
+        "  service processes after the run (server, forkserver, job workers): "
+        + ", ".join(f"{name} {rss / 1e6:.0f} MB" for name, rss in members)
+    )
+    failed = [
+        (r["doc"]["scenario"]["name"], r["doc"]["reason"])
+        for r in results
+        if r["doc"]["status"] != "succeeded"
+    ]
+    if failed:
+        print(f"  not succeeded: {failed}")
+    print(f"GET /health under load (prober process):       {_pct(health_s)}")
+    print(f"GET /plans/{{id}} under load (prober process):  {_pct(probe_status_s)}")
+    late = ", ".join(f"{1e3 * dt:.0f} ms at {t:.1f} s" for t, dt in slow[:8])
+    more = " ..." if len(slow) > 8 else ""
+    print(f"  /health calls above 50 ms: {len(slow)} of {len(health_s)} ({late}{more})")
+    print(
+        f"GET /plans/{{id}}?wait_s=30 of the {args.clients} clients (long polls, {len(status_s)} "
+        f"for {len(results)} plans; each waits for its plan): {_pct(status_s)}"
+    )
+    print(f"POST /plans idle (one at a time):               {_pct(idle_post_s)}")
+    print(f"POST /plans under load (first round: {args.clients} at once): {_pct(post_s)}")
+    print(f"  median under load / idle: {np.median(post_s) / np.median(idle_post_s):.1f}x")
+    print(
+        f"gate: {stored_pass}/{len(ok)} stored reports passed, {regate}/{len(ok)} passed POST /plans:validate"
+    )
 
 
 if __name__ == "__main__":
