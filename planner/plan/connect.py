@@ -202,6 +202,7 @@ def via_transit(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple
         ctx.search_motion_ok,
         ctx.opts.seed,
         deadline=ctx.out_of_time,
+        states_ok=ctx.search_states_ok,
     )
     ctx.report.setdefault("search_attempts", []).append({"method": "transit", "found": transit is not None})
     if transit is None:

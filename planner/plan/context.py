@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
@@ -343,6 +344,11 @@ class PlanContext:
         """The sampling planner's extra state check (static forces), ticking the search's progress."""
         self.tick()
         return self.forces.ok(q)
+
+    def search_states_ok(self, qs: Array) -> NDArray[np.bool_]:
+        """:meth:`search_state_ok` of many configurations (N, 8) at once: (N,) verdicts."""
+        self.tick()
+        return np.asarray(self.forces.ratios(qs) <= self.forces.fraction, dtype=bool)
 
     def search_motion_ok(self, q_a: Array, q_b: Array) -> bool:
         """The sampling planner's extra motion check (static forces along it), ticking the progress."""

@@ -108,6 +108,28 @@ def test_seeded_transit_is_reproducible(
     assert (again.candidates_tried, again.state_checks) == (transit.candidates_tried, transit.state_checks)
 
 
+def test_the_pools_posture_condition_batched_gives_the_same_transit(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, transit: Transit
+) -> None:
+    """``states_ok`` (the static forces of the swept pool at once) decides as ``state_ok`` one by one."""
+    assert scenario.goal_q is not None
+    assert transit.candidates_tried > 2  # the pool was swept, so the batched verdicts were used
+    asked: list[int] = []
+
+    def batched(qs: np.ndarray) -> np.ndarray:
+        asked.append(len(qs))
+        return forces.ratios(qs) <= forces.fraction
+
+    args = (world, np.array(scenario.start_q), np.array(scenario.goal_q), CLEARANCE_M, MOTION_MARGIN_M)
+    found = find_transit(*args, forces.ok, forces.segment_ok, 1, states_ok=batched)
+    assert found is not None and asked == [398]  # once, on the swept part of the pool (n_sweep - 2)
+    assert np.array_equal(found.q_a, transit.q_a) and np.array_equal(found.q_b, transit.q_b)
+    assert (found.candidates_tried, found.state_checks) == (transit.candidates_tried, transit.state_checks)
+    # The batched verdicts are the ones used: a pool nothing of which is holdable gives no pool rider.
+    none = find_transit(*args, forces.ok, forces.segment_ok, 1, states_ok=lambda qs: np.zeros(len(qs), bool))
+    assert none is None
+
+
 def test_of_the_riding_postures_the_one_quickest_to_reach_is_taken(
     scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, transit: Transit
 ) -> None:
