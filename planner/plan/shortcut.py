@@ -11,9 +11,11 @@ A -> B with A = C + alpha (P - C) and B = C + beta (N - C), for alpha, beta in :
 and beta in :data:`CUT_ENDS` (1 reaches the neighbouring waypoint itself). The parts P -> A and B -> N lie
 on certified segments, so only the chord needs the certified motion check. The time of a segment is
 estimated as its slowest drive's time at its velocity limit (the drive-map Jacobian at C). For each beta
-the longest certified alpha is found by bisection (a shorter cut stays nearer the certified corner, so
-validity is nearly monotone; a miss only costs time), and the cut with the largest estimated gain is
-kept: at most three checks per beta and corner. Deterministic (no random choices).
+the longest certified alpha is found by trying the fractions longest first, those that would gain enough
+only: a refused chord's walk stops at the first state it cannot prove (0.2 ms on average on cluttered
+and octagonal cabins), a certified one walks the whole chord (5.6 ms), so one certified walk per beta
+costs least (a bisection, which assumed validity monotone in alpha, proved two or three). The cut with
+the largest estimated gain is kept. Deterministic (no random choices).
 """
 
 from __future__ import annotations
@@ -98,17 +100,16 @@ def cut_corners(
                 floor = max(MIN_GAIN_S, best[0] if best is not None else 0.0)
                 if gain.max() <= floor:
                     continue
-                # A shorter cut stays nearer the certified corner: find the longest certified one by
-                # bisection over the fractions (longest first), then keep it if it gains the most so far.
-                lo, hi, found = 0, len(frac) - 1, -1
-                while lo <= hi:
-                    mid = (lo + hi) // 2
+                # The longest certified cut, longest first: a refused chord costs little (its walk stops
+                # at the first state it cannot prove, 0.2 ms on average), a certified one its whole walk
+                # (5.6 ms): one certified walk per beta, where a bisection proved two or three.
+                found = -1
+                for m in np.flatnonzero(gain > floor).tolist():
                     checks += 1
-                    if motion_ok(A[mid], B[mid]):
-                        found, hi = mid, mid - 1
-                    else:
-                        lo = mid + 1
-                if found >= 0 and gain[found] > floor:
+                    if motion_ok(A[m], B[m]):
+                        found = m
+                        break
+                if found >= 0:
                     best = (float(gain[found]), A[found], B[found], float(frac[found]), beta)
             step = 1
             if best is None:

@@ -101,6 +101,37 @@ def test_a_cut_that_is_not_certified_is_not_taken(scenario: ResolvedScenario) ->
     assert stats.cuts == 0 and stats.checks == len(calls) > 0
 
 
+def test_the_longest_certified_cut_is_found_with_one_certified_check_per_end(
+    scenario: ResolvedScenario,
+) -> None:
+    """Fractions are tried longest first, and the first certified one is taken.
+
+    Even where validity is not monotone in alpha (here only the longest and the shortest chords are
+    certified: a bisection from the middle would settle for the shortest cut), and no other chord of that
+    end is walked after it.
+    """
+    from planner.plan.shortcut import CUT_ENDS, CUT_FRACTIONS
+
+    path = _standstill_then_rail(scenario)
+    p, c = path[0], path[1]
+    longest, shortest = CUT_FRACTIONS[0], CUT_FRACTIONS[-1]
+    certified: list[float] = []
+    refused: list[float] = []
+
+    def only_the_extremes(q_a: np.ndarray, q_b: np.ndarray) -> bool:
+        alpha = float(np.linalg.norm(q_a - c) / np.linalg.norm(p - c))  # where the chord starts on P -> C
+        ok = min(abs(alpha - longest), abs(alpha - shortest)) < 1e-9
+        (certified if ok else refused).append(alpha)
+        return ok
+
+    cut, stats = cut_corners(scenario.robot, path[:3], only_the_extremes)
+    assert stats.cuts == 1
+    np.testing.assert_array_equal(cut[0], p)  # alpha = 1: the chord starts at P itself
+    assert not refused  # the longest was tried first and was certified
+    assert len(certified) <= len(CUT_ENDS)  # one certified walk per end, and nothing tried after it
+    assert all(abs(a - longest) < 1e-9 for a in certified)
+
+
 def test_a_tight_insertion_is_certified_by_one_adaptive_walk() -> None:
     """tightbay-insert has segments a walk at the scenario's margin refuses: one adaptive walk certifies them.
 
