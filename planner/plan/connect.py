@@ -3,7 +3,8 @@
 :func:`ompl_attempt` runs the sampling planner (:mod:`planner.plan.ompl_adapter`, the only module that
 imports OMPL) with a motion-check budget and the time left; :func:`via_transit` plans start -> transit
 ride -> target, joining and leaving the ride while the rail moves where a straight connection is certified
-(:func:`ride_connections`), else with OMPL as a local problem first (:func:`connect`).
+(:func:`ride_connections`), else with OMPL as a local problem first (:func:`connect`); :func:`via_relay`
+plans start -> one ride -> a change of posture -> another ride -> target where no single posture rides.
 """
 
 from __future__ import annotations
@@ -31,6 +32,12 @@ DETOUR_RAIL_M = (0.1, -0.1, 0.2, -0.2, 0.35, -0.35, 0.5, -0.5)
 DETOUR_BLEND = (1.0, 0.5, 0.0)
 #: Most certified motion checks a detour search spends (each ~1-3 ms; an OMPL connection needs hundreds).
 DETOUR_MAX_CHECKS = 24
+#: Where a relay (:func:`via_relay`) may change the riding posture: fractions of the rail move, the
+#: middle first.
+RELAY_SPLITS = (0.5, 0.25, 0.75)
+#: Postures of the seeded pool the relay's second ride is searched among: all of them (a pinch that few
+#: postures pass is rarely among the most compact, which the transit search sweeps).
+RELAY_SWEEP = 4000
 
 
 def joint_box(world: CollisionWorld) -> tuple[Array, Array]:
@@ -99,10 +106,13 @@ def ompl_attempt(
     return res.waypoints, res.goal_index
 
 
-def connect(ctx: PlanContext, q_a: Array, targets: list[Array]) -> tuple[Array, int] | None:
+def connect(
+    ctx: PlanContext, q_a: Array, targets: list[Array], local_only: bool = False
+) -> tuple[Array, int] | None:
     """``q_a`` to any target: straight where certified, else OMPL as a local problem, a rail detour, OMPL.
 
-    None when not found.
+    None when not found. ``local_only``: no OMPL attempt in the whole joint box (a relay's connections:
+    when they fail, the search's own full attempt follows).
     """
     for k, q in enumerate(targets):
         if np.allclose(q, q_a, rtol=0.0, atol=1e-12):
@@ -127,6 +137,8 @@ def connect(ctx: PlanContext, q_a: Array, targets: list[Array]) -> tuple[Array, 
     via = detour(ctx, q_a, targets[0])
     if via is not None:
         return via, 0
+    if local_only:
+        return None
     return ompl_attempt(ctx, q_a, targets, max_checks=preset.full_motion_checks, simplify=False)
 
 
@@ -229,6 +241,91 @@ def via_transit(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple
         "waypoints": len(waypoints),
     }
     return waypoints, tail[1]
+
+
+def via_relay(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Array, int] | None:
+    """Start -> a first ride -> a change of posture -> a second ride -> a target; None when none is found.
+
+    Where no single posture rides the whole rail move (the transit search found none), two may: a cabin
+    can pinch the robot twice, each pinch passable only by postures the other stops (a hatch, then a
+    shelf beside the rail). At a split m of the rail move (:data:`RELAY_SPLITS`, in turn):
+
+    1. the second ride: a posture that rides from m to the first target's d1, searched in the whole
+       seeded pool (:data:`RELAY_SWEEP`, most compact first; the first one certified is taken);
+    2. the first ride: the transit search from the start to that posture at m, its riders held to one
+       more condition: the straight change of posture at m, from the ride's end onto the second ride,
+       certified;
+    3. the connections onto the first ride (and off it, while the rail moves, where that is certified)
+       and from the second ride's end to a target, straight or as local problems only
+       (:func:`connect`'s ``local_only``).
+
+    Every motion is certified as in any search; the caller shortcuts the path and cuts its corners.
+    """
+    q_goal = np.asarray(targets[0], dtype=float)
+    d1_a, d1_b = float(q_start[chain.D1]), float(q_goal[chain.D1])
+    c = ctx.clearances
+    for frac in RELAY_SPLITS:
+        q_m = q_goal.copy()
+        q_m[chain.D1] = d1_a + frac * (d1_b - d1_a)
+        second = find_transit(
+            ctx.world,
+            q_m,
+            q_goal,
+            c.planner_m,
+            c.motion_margin_m,
+            ctx.search_state_ok,
+            ctx.search_motion_ok,
+            ctx.opts.seed,
+            n_sweep=RELAY_SWEEP,
+            deadline=ctx.out_of_time,
+            n_riders=1,
+            states_ok=ctx.search_states_ok,
+        )
+        if second is None:
+            continue
+        onto = second.q_a
+
+        def ride_then_change(q_a: Array, q_b: Array, onto: Array = onto) -> bool:
+            return ctx.search_motion_ok(q_a, q_b) and ctx.motion_ok(q_b, onto)
+
+        first = find_transit(
+            ctx.world,
+            q_start,
+            onto,
+            c.planner_m,
+            c.motion_margin_m,
+            ctx.search_state_ok,
+            ride_then_change,
+            ctx.opts.seed,
+            deadline=ctx.out_of_time,
+            states_ok=ctx.search_states_ok,
+        )
+        if first is None:
+            continue
+        head, leave = ride_connections(ctx, q_start, [onto], first.q_a, first.q_b)
+        if head is None:
+            joined = connect(ctx, q_start, [first.q_a], local_only=True)
+            if joined is None:
+                continue
+            head = joined[0]
+        change = leave[0] if leave is not None else np.array([first.q_b, onto])
+        tail = connect(ctx, second.q_b, targets, local_only=True)
+        if tail is None:
+            continue
+        rows = [*head, *change, *tail[0]]  # head ends and change starts on the first ride
+        keep = [0] + [i for i in range(1, len(rows)) if not np.array_equal(rows[i], rows[i - 1])]
+        waypoints = greedy_shortcut(ctx, np.array(rows)[keep])
+        ctx.report["search"] = {
+            "method": "relay",
+            "split_fraction": frac,
+            "first_ride_candidates": first.candidates_tried,
+            "second_ride_candidates": second.candidates_tried,
+            "state_checks": first.state_checks + second.state_checks,
+            "waypoints": len(waypoints),
+        }
+        return waypoints, tail[1]
+    ctx.report.setdefault("search_attempts", []).append({"method": "relay", "found": False})
+    return None
 
 
 def ride_connections(

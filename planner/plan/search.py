@@ -4,8 +4,9 @@ The cascade of the plan's :class:`~planner.plan.context.SearchPreset`: a target 
 straight joint motion when it is certified clear; for a long rail move a transit posture
 (:func:`planner.plan.connect.via_transit`: cheap, and it solves narrow passages such as a hatch); then the
 sampling planner with a budget counted in motion checks (reproducible), two straight motions through a
-configuration off the rail position (:func:`planner.plan.connect.detour`), and the sampling planner again
-with the rest of the time. The path found is cut at its corners for time
+configuration off the rail position (:func:`planner.plan.connect.detour`), where no transit posture rode
+the whole rail move two postures one after the other (:func:`planner.plan.connect.via_relay`), and the
+sampling planner again with the rest of the time. The path found is cut at its corners for time
 (:func:`planner.plan.shortcut.cut_corners`).
 """
 
@@ -37,7 +38,7 @@ def search(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Arra
 
 
 def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Array, int]:
-    """The search cascade of the preset: identical, straight, transit, OMPL quick, OMPL full."""
+    """The search cascade of the preset: identical, straight, transit, OMPL quick, detour, relay, OMPL."""
     for k, q in enumerate(targets):
         if np.allclose(q, q_start, rtol=0.0, atol=1e-12):
             return np.array([q_start, q]), k
@@ -47,10 +48,12 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
             if ctx.motion_ok(q_start, q):
                 ctx.report["search"] = {"method": "straight"}
                 return np.array([q_start, q]), k
+    relay = False  # no single posture rode the whole rail move: two, one after the other, may
     if preset.transit and ctx.simplify and abs(float(targets[0][0] - q_start[0])) >= TRANSIT_MIN_RAIL_M:
         via = via_transit(ctx, q_start, targets)
         if via is not None:
             return via
+        relay = True
     if preset.quick_attempt:
         res = ompl_attempt(ctx, q_start, targets, max_checks=preset.quick_motion_checks)
         if res is not None:
@@ -60,6 +63,10 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
         if detour is not None:
             ctx.report["search"] = {"method": "detour"}
             return detour, 0
+    if relay:  # before the full attempt, which may take thousands of certified motions
+        via = connect.via_relay(ctx, q_start, targets)
+        if via is not None:
+            return via
     res = ompl_attempt(ctx, q_start, targets, max_checks=preset.full_motion_checks)
     if res is not None:
         return res

@@ -230,3 +230,32 @@ def test_a_compensation_refusal_names_what_blocks_each_rejected_goal(tmp_path: P
     assert info.value.message.endswith(f"closest: {describe(best)}")
     assert describe(best).startswith("payload ") and "from the cabin" in describe(best)
     assert "compensated insertion line" in best["where"]
+
+
+@pytest.mark.slow
+def test_two_pinches_that_no_single_posture_passes_are_passed_by_a_relay(tmp_path: Path) -> None:
+    """Shelf beyond a hatch (cluttered family, seed 0, case 2): no posture rides the whole rail move.
+
+    Beside the shelf (d1 3.05-3.65) 3 of the transit pool's 4 000 postures are clear, none of which passes
+    the hatch (d1 1.9-2.35), so the transit search finds none and the sampling planner's full attempt
+    needed some 36 000 certified motions (9-10 s). The relay rides one posture through the hatch, changes
+    posture at the middle of the rail move (a certified straight motion) and rides another past the shelf.
+    The profile passes the independent check.
+    """
+    import json
+
+    from planner import check_profile
+    from planner.documents.output import result_document
+    from planner.plan.pipeline import plan_scenario
+
+    case = generate_case(0, 2, GeneratorOptions(family="cluttered"))
+    path = write_case(case, tmp_path)
+    sc = load_scenario(path)
+    assert sc.goal_q is None  # a pose goal: the targets come from the goal stage
+    res = plan_scenario(sc)
+    search = res.report["search"]
+    assert search["method"] == "relay" and search["split_fraction"] == 0.5, search
+    assert search["second_ride_candidates"] > 400  # beyond the most compact postures a transit sweeps
+    doc = json.loads(json.dumps(result_document(sc, res)))
+    report = check_profile(load_scenario(path), doc)
+    assert report.passed, report.summary()
