@@ -300,6 +300,37 @@ def test_compensation_that_cannot_converge_is_refused(robot: Cabin8, model: Stif
     assert len(err.value.details["iterations"]) == 2
 
 
+def test_candidates_compensated_together_get_each_ones_own_outcome_to_the_bit(
+    robot: Cabin8, model: StiffnessModel
+) -> None:
+    """compensate_many: batched iterations, each candidate's steps and result exactly its own alone."""
+    from planner.dynamics.compensation import Compensation, compensate_many
+
+    T_req, q0 = _goal(robot)
+    gammas, d5s = np.array([q0[3], q0[3] + 0.05, q0[3] - 0.08]), np.array([q0[6], q0[6] - 0.03, q0[6] + 0.02])
+    family = redundant_family(robot.desc.serial_chain, T_req @ np.linalg.inv(GRASP), gammas, d5s)
+    candidates = [q for q in family if np.all(np.isfinite(q))]
+    assert len(candidates) >= 2
+    load = LoadCase(PAYLOAD, GRASP)
+    for kwargs in ({}, {"tol_m": 1e-15, "tol_rad": 1e-15, "max_iterations": 1}):
+        together = compensate_many(model, T_req, candidates, load, **kwargs)
+        alone = [compensate_many(model, T_req, [q], load, **kwargs)[0] for q in candidates]
+        assert len(together) == len(candidates)
+        for a, b in zip(together, alone, strict=True):
+            assert type(a) is type(b)
+            if isinstance(a, Compensation):
+                assert isinstance(b, Compensation)
+                assert np.array_equal(a.q_commanded, b.q_commanded)
+                assert np.array_equal(a.T_base_frame_commanded, b.T_base_frame_commanded)
+                assert a.iterations == b.iterations
+                assert np.array_equal(a.deflection.twist, b.deflection.twist)
+            else:
+                assert isinstance(a, DeflectionNotCompensated) and isinstance(b, DeflectionNotCompensated)
+                assert a.message == b.message and a.details == b.details
+    converged = compensate_many(model, T_req, candidates, load)
+    assert all(isinstance(c, Compensation) for c in converged)  # the default tolerances: every one lands
+
+
 def test_compensated_configuration_is_the_closed_form_family(robot: Cabin8, model: StiffnessModel) -> None:
     T_req, q0 = _goal(robot)
     comp = compensate_goal(model, T_req, q0, PAYLOAD, GRASP)
