@@ -143,8 +143,6 @@ def compensate_many(
     its outcome: its :class:`Compensation`, or the :class:`DeflectionNotCompensated` that
     :func:`compensate` would raise.
     """
-    from planner.dynamics.stiffness import StaticDeflection
-
     robot = model.robot
     T_ft = np.linalg.inv(load.frame())
     T_goal = np.asarray(T_base_frame_goal, dtype=float)
@@ -164,11 +162,10 @@ def compensate_many(
             qs[r, chain.THETA6] = goals[k][chain.THETA6] + math.remainder(
                 qs[r, chain.THETA6] - goals[k][chain.THETA6], 2 * math.pi
             )
-        twists = model.deflections(qs, load)
+        deflections = model.static_deflections(qs, load)
         still: list[int] = []
         for r, k in enumerate(open_):
-            q, log = qs[r].copy(), logs[k]
-            defl = StaticDeflection(twists[r, :3].copy(), twists[r, 3:].copy())
+            q, log, defl = qs[r].copy(), logs[k], deflections[r]
             e = pose_error(T_goal, deflected_pose(T_cmd[k], defl.twist))
             step = CompensationStep(float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])))
             log.append(step)

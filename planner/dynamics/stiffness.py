@@ -368,6 +368,13 @@ class StiffnessModel:
         x = self.deflections(np.asarray(q, dtype=float)[None], load)[0]
         return StaticDeflection(x[:3].copy(), x[3:].copy())
 
+    def static_deflections(self, qs: Array, load: LoadCase) -> list[StaticDeflection]:
+        """:meth:`static_deflection` at each configuration of qs (N, 8), evaluated in one batched call.
+
+        The same bits as one by one: every row is computed on its own (tests/dynamics/test_stiffness.py).
+        """
+        return [StaticDeflection(x[:3].copy(), x[3:].copy()) for x in self.deflections(qs, load)]
+
     # Thin forms of the common load case (gravity, a payload, a frame): what the gate, the report and the
     # assembly cycles ask.
     def deflection(
