@@ -138,10 +138,10 @@ def compensate_many(
 
     Each candidate iterates exactly as :func:`compensate` alone (the same steps, to the same bits): the
     iterations of the candidates still open are taken together, their inverse kinematics and static
-    deflections evaluated in one batched call each (a stiffness evaluation costs about 1 ms of numpy
-    whether it has one configuration or ten). A candidate that converges, or fails, leaves the batch with
-    its outcome: its :class:`Compensation`, or the :class:`DeflectionNotCompensated` that
-    :func:`compensate` would raise.
+    deflections evaluated in one batched call each (a stiffness evaluation is numpy on small stacks: 1.45
+    ms for one configuration, 1.61 ms for three, 2.0 ms for ten). A candidate that converges, or fails,
+    leaves the batch with its outcome: its :class:`Compensation`, or the :class:`DeflectionNotCompensated`
+    that :func:`compensate` would raise.
     """
     robot = model.robot
     T_ft = np.linalg.inv(load.frame())
@@ -154,7 +154,8 @@ def compensate_many(
     for it in range(max_iterations + 1):
         if not open_:
             break
-        T_frames = np.stack([T_cmd[k] @ T_ft for k in open_])  # one product each, as compensate's
+        # one 4x4 product each, as a single candidate's (a stacked product may round otherwise)
+        T_frames = np.stack([T_cmd[k] @ T_ft for k in open_])
         gamma = np.array([goals[k][chain.GAMMA] for k in open_])
         d5 = np.array([goals[k][chain.D5] for k in open_])
         qs = redundant_family(robot.desc.serial_chain, T_frames, gamma, d5)
