@@ -499,11 +499,11 @@ class CollisionWorld(Generic[RobotT]):
             raise InvalidInput("qs: joint samples must be finite", field="qs")
         poses, c = np.empty((len(qs), self._n_bodies, 13)), np.empty((len(qs), len(self._kernel.c_lo)))
         self.kernels.packed_poses(qs, self._kernel, poses, c)
-        floor = min(_largest_ratio(c[:, list(self.model.ratio_rows)]) + 0.02, 0.999)
+        ratio_floor = min(_largest_ratio(c[:, list(self.model.ratio_rows)]) + 0.02, 0.999)
         threshold = self.self_clearance + 0.06  # exact capsule-pair distances below (as the motion walk)
 
         def walk(k: int, clearance: float, own: float, margin: float) -> MotionReport:
-            return self._walk(qs[k], qs[k + 1], Walk(clearance, margin, own, floor))
+            return self._walk(qs[k], qs[k + 1], Walk(clearance, margin, own, ratio=ratio_floor))
 
         has_cabin = self._probes.cabin_obj is not None
         kernels = (self.kernels, self._kernel, threshold)

@@ -9,6 +9,8 @@ plans start -> one ride -> a change of posture -> another ride -> target where n
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from planner.collision.world import CollisionWorld
@@ -17,7 +19,7 @@ from planner.kinematics import chain
 from planner.plan.context import PlanContext
 from planner.plan.ompl_adapter import plan_joint_path
 from planner.plan.shortcut import segment_times
-from planner.plan.transit import find_transit
+from planner.plan.transit import Transit, find_transit
 
 #: A connection onto or off a transit ride is first planned with the rail within this of its ends [m].
 CONNECT_RAIL_WINDOW_M = 0.3
@@ -202,20 +204,37 @@ def greedy_shortcut(ctx: PlanContext, waypoints: Array) -> Array:
     return waypoints[keep]
 
 
-def via_transit(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Array, int] | None:
-    """Start -> transit ride -> a target (waypoints, target index), or None when no transit is found."""
-    transit = find_transit(
+def _find_ride(
+    ctx: PlanContext,
+    q_a: Array,
+    q_b: Array,
+    segment_ok: Callable[[Array, Array], bool] | None = None,
+    **sweep: int,
+) -> Transit | None:
+    """:func:`find_transit` from ``q_a``'s d1 to ``q_b``'s under the plan's clearances, checks and seed.
+
+    ``segment_ok``: the ride's extra condition (default: the static forces along it); ``sweep``:
+    ``n_sweep`` and ``n_riders`` where they differ from the transit search's.
+    """
+    c = ctx.clearances
+    return find_transit(
         ctx.world,
-        q_start,
-        targets[0],
-        ctx.clearances.planner_m,
-        ctx.clearances.motion_margin_m,
+        q_a,
+        q_b,
+        c.planner_m,
+        c.motion_margin_m,
         ctx.search_state_ok,
-        ctx.search_motion_ok,
+        ctx.search_motion_ok if segment_ok is None else segment_ok,
         ctx.opts.seed,
         deadline=ctx.out_of_time,
         states_ok=ctx.search_states_ok,
+        **sweep,
     )
+
+
+def via_transit(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Array, int] | None:
+    """Start -> transit ride -> a target (waypoints, target index), or None when no transit is found."""
+    transit = _find_ride(ctx, q_start, targets[0])
     ctx.report.setdefault("search_attempts", []).append({"method": "transit", "found": transit is not None})
     if transit is None:
         return None
@@ -263,24 +282,10 @@ def via_relay(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[A
     """
     q_goal = np.asarray(targets[0], dtype=float)
     d1_a, d1_b = float(q_start[chain.D1]), float(q_goal[chain.D1])
-    c = ctx.clearances
     for frac in RELAY_SPLITS:
         q_m = q_goal.copy()
         q_m[chain.D1] = d1_a + frac * (d1_b - d1_a)
-        second = find_transit(
-            ctx.world,
-            q_m,
-            q_goal,
-            c.planner_m,
-            c.motion_margin_m,
-            ctx.search_state_ok,
-            ctx.search_motion_ok,
-            ctx.opts.seed,
-            n_sweep=RELAY_SWEEP,
-            deadline=ctx.out_of_time,
-            n_riders=1,
-            states_ok=ctx.search_states_ok,
-        )
+        second = _find_ride(ctx, q_m, q_goal, n_sweep=RELAY_SWEEP, n_riders=1)
         if second is None:
             continue
         onto = second.q_a
@@ -288,18 +293,7 @@ def via_relay(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[A
         def ride_then_change(q_a: Array, q_b: Array, onto: Array = onto) -> bool:
             return ctx.search_motion_ok(q_a, q_b) and ctx.motion_ok(q_b, onto)
 
-        first = find_transit(
-            ctx.world,
-            q_start,
-            onto,
-            c.planner_m,
-            c.motion_margin_m,
-            ctx.search_state_ok,
-            ride_then_change,
-            ctx.opts.seed,
-            deadline=ctx.out_of_time,
-            states_ok=ctx.search_states_ok,
-        )
+        first = _find_ride(ctx, q_start, onto, ride_then_change)
         if first is None:
             continue
         head, leave = ride_connections(ctx, q_start, [onto], first.q_a, first.q_b)

@@ -48,7 +48,7 @@ def _cascade(ctx: PlanContext, q_start: Array, targets: list[Array]) -> tuple[Ar
             if ctx.motion_ok(q_start, q):
                 ctx.report["search"] = {"method": "straight"}
                 return np.array([q_start, q]), k
-    relay = False  # no single posture rode the whole rail move: two, one after the other, may
+    relay = False  # no transit ride was found (and connected): two rides, one after the other, may be
     if preset.transit and ctx.simplify and abs(float(targets[0][0] - q_start[0])) >= TRANSIT_MIN_RAIL_M:
         via = via_transit(ctx, q_start, targets)
         if via is not None:
