@@ -173,6 +173,63 @@ def test_surface_samples_cover_the_surface() -> None:
             assert gap.max() <= 2 * 0.05
 
 
+def _reference_grid(vertices: np.ndarray, faces: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """(marked nodes, distance to the nearest one [m]) as numpy and scipy compute them.
+
+    The samples held in memory, then ``scipy.ndimage.distance_transform_edt``: the construction the compiled
+    one replaced.
+    """
+    from scipy import ndimage
+
+    lo = vertices.min(axis=0) - 0.5
+    shape = tuple(int(n) for n in np.ceil((vertices.max(axis=0) + 0.5 - lo) / step).astype(int) + 1)
+    samples = surface_samples(vertices, faces, 0.015)
+    idx = np.clip(np.rint((samples - lo) / step).astype(np.int64), 0, np.array(shape) - 1)
+    free = np.ones(shape, dtype=bool)
+    free[idx[:, 0], idx[:, 1], idx[:, 2]] = False
+    return ~free, ndimage.distance_transform_edt(free, sampling=step)
+
+
+def test_the_compiled_grid_is_the_sampled_surfaces_exact_distance_transform() -> None:
+    """The same nodes marked as numpy's samples mark, the same distances as scipy's transform (to 1e-12 m).
+
+    On a generated ring-frame cabin and a suite cabin at two steps, and on masks with empty lines, one
+    marked node and every node marked.
+    """
+    from scipy import ndimage
+
+    from planner.collision.kernels.entries import DEFAULT
+    from planner.generate import GeneratorOptions, generate_case
+    from planner.generate.cabins import cabin_mesh
+
+    case = generate_case(3, 0, GeneratorOptions(family="ring-frame"))
+    cabins = [cabin_mesh(case.layout), load_mesh(REFERENCE_DIR / "cabin-hatch.stl", units="m")]
+    for cabin, step in zip(cabins, (0.05, 0.03), strict=True):
+        v = np.ascontiguousarray(cabin.vertices, dtype=float)
+        f = np.ascontiguousarray(cabin.faces, dtype=np.int64)
+        grid = ClearanceGrid.build(v, f, step=step)
+        marked, dist = _reference_grid(v, f, step)
+        lo = v.min(axis=0) - 0.5
+        ours = np.zeros(marked.shape, dtype=bool)
+        DEFAULT.grid_marks(v, f, lo, step, 0.015, ours)
+        assert np.array_equal(ours, marked)
+        offset = step * np.sqrt(3.0) + 2 * 0.015
+        inner = grid.lower_bound[1:-1, 1:-1, 1:-1]
+        assert np.max(np.abs(inner - (dist - offset))) < 1e-12
+        assert np.all(grid.lower_bound[[0, -1]] == -np.inf) and np.all(
+            grid.lower_bound[:, :, [0, -1]] == -np.inf
+        )
+        assert np.allclose(grid.origin, lo - step, rtol=0.0, atol=1e-15)
+    rng = np.random.default_rng(5)
+    masks = [rng.random((9, 13, 7)) < p for p in (0.02, 0.3)]
+    one = np.zeros((6, 1, 11), dtype=bool)
+    one[4, 0, 2] = True
+    masks += [one, np.ones((3, 4, 5), dtype=bool)]
+    for mask in masks:
+        out = DEFAULT.grid_bounds(mask, 0.1, 0.0)[1:-1, 1:-1, 1:-1]
+        assert np.max(np.abs(out - ndimage.distance_transform_edt(~mask, sampling=0.1))) < 1e-12
+
+
 def test_grid_build_and_outside_points() -> None:
     m = box_at((1.0, 1.0, 1.0), (0, 0, 0))
     grid = ClearanceGrid.build(np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64), step=0.05)

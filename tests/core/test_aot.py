@@ -231,6 +231,22 @@ def test_build_and_jit_give_the_same_obstacle_bounds(both: tuple[Kernels, Kernel
     assert any(c.kind == "obstacle" for r in reports[0] if hasattr(r, "contacts") for c in r.contacts)
 
 
+def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels]) -> None:
+    """The grid's marks and distance transform: the same bits from the build and the JIT, on a suite cabin."""
+    built, jit = both
+    sc = load_scenario(SCENARIOS / "hatch-pass.yaml")
+    assert sc.cabin is not None
+    v = np.ascontiguousarray(sc.cabin.vertices, dtype=float)
+    f = np.ascontiguousarray(sc.cabin.faces, dtype=np.int64)
+    lo = v.min(axis=0) - 0.2
+    shape = tuple(int(n) for n in np.ceil((v.max(axis=0) + 0.2 - lo) / 0.06).astype(int) + 1)
+    marks = [np.zeros(shape, dtype=bool), np.zeros(shape, dtype=bool)]
+    built.grid_marks(v, f, lo, 0.06, 0.03, marks[0])
+    jit.grid_marks(v, f, lo, 0.06, 0.03, marks[1])
+    _same(marks[0], marks[1], "grid_marks")
+    _same(built.grid_bounds(marks[0], 0.06, 0.1), jit.grid_bounds(marks[0], 0.06, 0.1), "grid_bounds")
+
+
 def test_build_and_jit_give_the_same_reference_speed() -> None:
     """The timing reference (forward-backward pass) on the rows of real jerk-limited stages: equal bits."""
     robot = Cabin8()
@@ -292,6 +308,7 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
     one = np.arange(len(at[0]), dtype=np.int64)  # each body its own task column
     none = np.full(len(at[0]), -1, dtype=np.int64)
     yes, half = np.zeros(len(at[0]), bool), np.zeros(len(at[0]))
+    pts, tri, grid = np.eye(3), np.array([[0, 1, 2]]), np.zeros((3, 3, 3), dtype=bool)
     cases += [
         (lambda: built.obstacle_bounds(at[0], od, th), None),  # the control: accepted
         (lambda: built.obstacle_bounds(at[0], d, th), "d"),  # a world's data, not an obstacle set's
@@ -304,6 +321,13 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
         (lambda: built.task_offsets(at, at[:, :, :12], yes, np.zeros(1), one, none), "poses_b"),
         (lambda: built.task_offsets(at, at, yes, half, one.astype(np.int32), none), "col_a"),
         (lambda: built.hull_deviation(np.asfortranarray(at[:, :, :3])), "verts"),
+        (lambda: built.grid_bounds(np.zeros((2, 2, 2), dtype=bool), 0.1, 0.0), None),
+        (lambda: built.grid_bounds(np.zeros((2, 2, 2), dtype=np.int8), 0.1, 0.0), "marked"),
+        (lambda: built.grid_bounds(np.zeros((2, 2), dtype=bool), 0.1, 0.0), "marked"),
+        (lambda: built.grid_marks(pts, tri, np.zeros(3), 0.1, 0.1, grid), None),
+        (lambda: built.grid_marks(at[0, :, 9:12], tri, np.zeros(3), 0.1, 0.1, grid), "vertices"),
+        (lambda: built.grid_marks(pts, tri.astype(np.int32), np.zeros(3), 0.1, 0.1, grid), "faces"),
+        (lambda: built.grid_marks(pts, tri, np.zeros(3), 0.1, 0.1, grid.astype(np.int8)), "marked"),
     ]
     for call, name in cases:
         if name is None:

@@ -21,15 +21,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from planner.collision.bodies import BodySet, Shape
-from planner.collision.clearance_grid import ClearanceGrid
 from planner.core.aot import B1, F8, I8, check_array
 from planner.core.types import Array, BoolArray, IntArray
 from planner.robots.geometry import CollisionModel
+
+if TYPE_CHECKING:  # the grid is built with these kernels (:mod:`..clearance_grid` imports them)
+    from planner.collision.clearance_grid import ClearanceGrid
 
 #: Integers before the int64 arrays: counts (bodies, fine spheres, coarse spheres, pairs, table length),
 #: has_grid, carriage, grid shape (3), then kernel code, counts (kernel parameters, constraints, ratio rows).

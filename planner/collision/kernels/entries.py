@@ -108,6 +108,8 @@ EXTENSION = aot.Extension(
         Entry("cumulative_bound", ("f8[2]", "f8[2]"), "f8[2]w"),
         Entry("propagate", ("f8[2]w", "f8[2]", "i8[1]"), "none"),
         Entry("between_bound", ("f8[2]", "f8[2]", "i8[1]"), "(f8,i8)"),
+        Entry("grid_marks", ("f8[2]", "i8[2]", "f8[1]", "f8", "f8", "b1[3]w"), "none"),
+        Entry("grid_bounds", ("b1[3]", "f8", "f8", "f8[3]w"), "none"),
     ),
 )
 
@@ -452,6 +454,32 @@ class Kernels:
             raise ValueError(f"between_bound: one or more columns in [0, {lower.shape[1]}) expected")
         value, k = self.module.between_bound(lower, reach, cols)
         return float(value), int(k)
+
+    def grid_marks(
+        self, vertices: Array, faces: IntArray, lo: Array, step: float, spacing: float, marked: BoolArray
+    ) -> None:
+        """:func:`.grid.grid_marks`: mark the nodes of ``marked`` (nx, ny, nz) nearest to surface samples."""
+        vertices = check_array(vertices, "vertices", F8, 2, shape=(None, 3))
+        faces = check_array(faces, "faces", I8, 2, shape=(None, 3))
+        if len(faces) and not (0 <= int(faces.min()) and int(faces.max()) < len(vertices)):
+            raise ValueError(f"grid_marks: face indices in [0, {len(vertices)}) expected")
+        if not (step > 0.0 and spacing > 0.0):
+            raise ValueError(f"grid_marks: step and spacing > 0 expected, got {step}, {spacing}")
+        self.module.grid_marks(
+            vertices,
+            faces,
+            check_array(lo, "lo", F8, 1, shape=(3,)),
+            float(step),
+            float(spacing),
+            check_array(marked, "marked", B1, 3, out=True),
+        )
+
+    def grid_bounds(self, marked: BoolArray, step: float, offset: float) -> Array:
+        """:func:`.grid.grid_bounds`: step * distance to the nearest marked node - offset, padded by -inf."""
+        marked = check_array(marked, "marked", B1, 3)
+        out = np.empty(tuple(n + 2 for n in marked.shape))
+        self.module.grid_bounds(marked, float(step), float(offset), out)
+        return out
 
 
 #: The kernels every world uses: the ahead-of-time build when there is one, resolved on first use.

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
+from planner.collision.kernels.grid import grid_bounds, grid_marks
 from planner.collision.kernels.obstacles import obstacle_bounds, obstacle_coarse_batch, obstacle_fine_batch
 from planner.collision.kernels.offsets import (
     hull_deviation,
@@ -33,6 +34,8 @@ __all__ = [
     "cumulative_bound",
     "end_ratio",
     "first_inadmissible",
+    "grid_bounds",
+    "grid_marks",
     "hull_deviation",
     "motion_walk",
     "obstacle_bounds",
