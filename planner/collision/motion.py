@@ -136,7 +136,7 @@ class CertifiedMotion:
             idx = task if is_cabin else task - n_cabin
             base = clearance if is_cabin else own
             if code == walk.WALK_DONE:
-                queries = self.probes.queries - before
+                queries = self.probes.queries - before + int(ci[walk.CI_QUERIES])
                 return MotionReport(
                     True, int(ci[walk.CI_COUNT]), queries, smallest_margin_m=float(cf[walk.CF_SMALLEST])
                 )
@@ -151,7 +151,7 @@ class CertifiedMotion:
                 )
                 states = int(ci[walk.CI_COUNT])
                 t_fail = float(cf[walk.CF_TFAIL])
-                queries = self.probes.queries - before
+                queries = self.probes.queries - before + int(ci[walk.CI_QUERIES])
                 smallest = float(cf[walk.CF_SMALLEST])
                 return MotionReport(False, states, queries, t_fail, (contact,), smallest)
             else:  # WALK_PROBE: the first level at which the grown body is clear becomes the spare clearance
@@ -159,11 +159,16 @@ class CertifiedMotion:
                 st = BodyState(poses[slot], cabin[slot], pairs[slot])
                 first = walk.CF_LEVEL0
                 levels = cf[first : first + int(ci[walk.CI_LEVELS])].tolist()
-                for level in levels:
-                    if not self.probes.hit(st, is_cabin, idx, base + level):
-                        cf[walk.CF_E] = level
-                        break
+                clear = False
+                if ci[walk.CI_PROBED]:  # the walk probed every level itself (a box), and each touched
+                    ci[walk.CI_PROBED] = 0
                 else:
+                    for level in levels:
+                        if not self.probes.hit(st, is_cabin, idx, base + level):
+                            cf[walk.CF_E] = level
+                            clear = True
+                            break
+                if not clear:
                     # Every grown body hit. A grown box is a larger box: near its edges and corners it
                     # overstates the clearance it tests by up to (sqrt 3 - 1) times the growth, so the exact
                     # distance (milliseconds against a mesh, asked only here) decides.

@@ -46,7 +46,8 @@ class MotionReport:
     valid: bool
     #: States evaluated along the segment (limit samples when a limit failed first).
     states_checked: int
-    #: FCL collision queries the check needed (probes on grown bodies).
+    #: Collision queries the check needed (probes on grown bodies: FCL's, and the walk's own for boxes
+    #: against the cabin, :mod:`planner.collision.kernels.mesh`, the same queries).
     fcl_queries: int
     #: Segment parameter t in [0, 1] of the state that failed (None if valid).
     t_fail: float | None = None

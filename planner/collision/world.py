@@ -81,6 +81,14 @@ def _cabin_grid(sha256: str, vertices_bytes: bytes, faces_bytes: bytes, step: fl
     return cached_build(key, vertices, faces, step)
 
 
+@cache
+def _cabin_tree(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> buffers.MeshTree:
+    """The cabin's triangles in a box tree (the walk's own probes of box bodies), built once per cabin."""
+    vertices = np.frombuffer(vertices_bytes).reshape(-1, 3)
+    faces = np.frombuffer(faces_bytes, dtype=np.int64).reshape(-1, 3)
+    return KERNELS.mesh_tree(vertices, faces)
+
+
 #: Carriage clearance tables by (cabin, carriage shape, rail travel), built once (``Probes.carriage_table``).
 _CARRIAGE_TABLES: dict[tuple[str, str, float, float], tuple[float, float, Array]] = {}
 
@@ -164,7 +172,12 @@ class CollisionWorld(Generic[RobotT]):
             if self.model.rail_body is not None:
                 self._carriage_table = self._carriage_table_of(entry[1])
         self._kernel = buffers.build(
-            self.model, self.bodies, self._T_tool_box, self._grid, self._carriage_table
+            self.model,
+            self.bodies,
+            self._T_tool_box,
+            self._grid,
+            self._carriage_table,
+            _cabin_tree(*entry[0]) if entry is not None else buffers.NO_TREE,
         )
         #: The compiled kernels' entries (the ahead-of-time build or numba's JIT, :mod:`.kernels.entries`).
         self.kernels: Kernels = KERNELS

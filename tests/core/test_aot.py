@@ -245,6 +245,17 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
     jit.grid_marks(v, f, lo, 0.06, 0.03, marks[1])
     _same(marks[0], marks[1], "grid_marks")
     _same(built.grid_bounds(marks[0], 0.06, 0.1), jit.grid_bounds(marks[0], 0.06, 0.1), "grid_bounds")
+    trees = built.mesh_tree(v, f), jit.mesh_tree(v, f)
+    _same(tuple(trees[0]), tuple(trees[1]), "mesh_tree")
+    rng = np.random.default_rng(2)
+    for p in rng.uniform(v.min(axis=0), v.max(axis=0), (200, 3)):
+        pose = np.concatenate([np.eye(3).reshape(9), p, [0.0]])
+        half = rng.uniform(0.01, 0.3, 3)
+        _same(
+            built.box_touches_mesh(pose, half, 0.01, trees[0]),
+            jit.box_touches_mesh(pose, half, 0.01, trees[0]),
+            "box_touches_mesh",
+        )
 
 
 def test_build_and_jit_give_the_same_reference_speed() -> None:
@@ -328,6 +339,13 @@ def test_wrong_arguments_are_refused_not_computed(both: tuple[Kernels, Kernels])
         (lambda: built.grid_marks(at[0, :, 9:12], tri, np.zeros(3), 0.1, 0.1, grid), "vertices"),
         (lambda: built.grid_marks(pts, tri.astype(np.int32), np.zeros(3), 0.1, 0.1, grid), "faces"),
         (lambda: built.grid_marks(pts, tri, np.zeros(3), 0.1, 0.1, grid.astype(np.int8)), "marked"),
+        (lambda: built.mesh_tree(pts, tri), None),
+        (lambda: built.mesh_tree(pts, tri.astype(np.int32)), "faces"),
+        (lambda: built.box_touches_mesh(at[0, 0], np.ones(3), 0.0, built.mesh_tree(pts, tri)), None),
+        (
+            lambda: built.box_touches_mesh(np.zeros(26)[::2], np.ones(3), 0.0, built.mesh_tree(pts, tri)),
+            "pose",
+        ),
     ]
     for call, name in cases:
         if name is None:

@@ -149,6 +149,44 @@ def cover(shapes: tuple[Shape, ...], centres: tuple[Array, ...], radii: tuple[Ar
     )
 
 
+class MeshTree(NamedTuple):
+    """The cabin's triangles in a bounding-box tree (:func:`.mesh.mesh_tree`); empty arrays: no cabin."""
+
+    tris: Array  # (T, 9) the triangles' vertices, in the tree's order
+    bounds: Array  # (N, 6) each node's bounding box: lo, then hi
+    links: IntArray  # (N, 2) a leaf: (first triangle, count > 0); an inner node: (left, -right - 1)
+
+
+def check_tree(tree: MeshTree) -> MeshTree:
+    """``tree`` if its arrays have their entry types and its links stay inside it (else ValueError).
+
+    The compiled walk follows the links without checking them: a link out of range would read past the
+    arrays.
+    """
+    tris = check_array(tree.tris, "tree tris", F8, 2, shape=(None, 9))
+    bounds = check_array(tree.bounds, "tree bounds", F8, 2, shape=(None, 6))
+    links = check_array(tree.links, "tree links", I8, 2, shape=(len(bounds), 2))
+    n, t = len(bounds), len(tris)
+    leaf = links[:, 1] > 0
+    first, count = links[leaf, 0], links[leaf, 1]
+    inner = links[~leaf]
+    if (t == 0) != (n == 0) or (
+        n
+        and not (
+            np.all(first >= 0)
+            and np.all(first + count <= t)
+            and np.all((inner[:, 0] > 0) & (inner[:, 0] < n))
+            and np.all((-inner[:, 1] - 1 > 0) & (-inner[:, 1] - 1 < n))
+        )
+    ):
+        raise ValueError("tree: links outside the tree's nodes or triangles")
+    return tree
+
+
+#: The tree of a world without a cabin.
+NO_TREE = MeshTree(np.zeros((0, 9)), np.zeros((0, 6)), np.zeros((0, 2), dtype=np.int64))
+
+
 @dataclass(frozen=True, eq=False)
 class KernelData:
     """Everything a world's kernels read, built once per world by :func:`build`.
@@ -177,6 +215,7 @@ class KernelData:
     c_hi: Array
     rho: Array  # (B, n_joints) static reach bounds (``BodySet.rho``)
     pair_rigid: BoolArray  # (P, n_joints) joint j moves both bodies of pair p rigidly
+    tree: MeshTree = NO_TREE  # the cabin's triangles, for the walk's own probes of boxes
 
     def __post_init__(self) -> None:
         """The arrays the kernels read have their entry types and shapes, and are frozen (read-only).
@@ -197,10 +236,11 @@ class KernelData:
             ("pair_rigid", self.pair_rigid, B1, 2, (p, self.n_joints)),
         ):
             check_array(value, f"kernel data {name}", dtype, ndim, shape=shape)
+        check_tree(self.tree)
         if self.ibuf[5]:  # has_grid: the flat grid holds every node of the packed grid shape
             check_array(self.grid, "kernel data grid", F8, 1, shape=(int(np.prod(self.ibuf[7:10])),))
         frozen = (self.fbuf, self.ibuf, self.grid, self.pair_a, self.pair_b, self.exact_pair, self.link_mask)
-        for arr in (*frozen, self.c_lo, self.c_hi, self.rho, self.pair_rigid):
+        for arr in (*frozen, self.c_lo, self.c_hi, self.rho, self.pair_rigid, *self.tree):
             arr.setflags(write=False)
 
     @cached_property
@@ -230,6 +270,7 @@ def build(
     T_tool_box: Array,
     grid: ClearanceGrid | None,
     carriage_table: tuple[float, float, Array] | None,
+    tree: MeshTree = NO_TREE,
 ) -> KernelData:
     """The kernel data of a world: covers, pair tables, closed-form pose data, packed.
 
@@ -308,6 +349,7 @@ def build(
         c_hi=c_hi,
         rho=np.ascontiguousarray(bodies.rho, dtype=np.float64),
         pair_rigid=np.ascontiguousarray(bodies.pair_rigid, dtype=np.bool_),
+        tree=tree,
     )
 
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from planner.collision.kernels import codes
-from planner.collision.kernels.buffers import Cover, KernelData, ObstacleKernelData
+from planner.collision.kernels.buffers import Cover, KernelData, MeshTree, ObstacleKernelData, check_tree
 from planner.core import aot
 from planner.core.aot import B1, F8, I8, Entry, check_array
 from planner.core.types import Array, BoolArray, IntArray
@@ -43,6 +43,8 @@ def _jit_module() -> ModuleType:
 #: Inputs of a world's constant data: packed buffers (floats, ints) and the flat clearance grid.
 _DATA = ("f8[1]", "i8[1]")
 _GRID = "f8[1]"
+#: The cabin's triangle tree (:class:`~.buffers.MeshTree`: triangles, node bounds, node links).
+_TREE = ("f8[2]", "f8[2]", "i8[2]")
 #: Inputs of an obstacle set's constant data: its packed buffers (floats, ints).
 _OBSTACLES = ("f8[1]", "i8[1]")
 
@@ -95,7 +97,18 @@ EXTENSION = aot.Extension(
         ),
         Entry(
             "motion_walk",
-            ("i8[1]w", "f8[1]w", *(["f8[1]"] * 5), *_DATA, _GRID, "i8[1]w", "f8[3]w", "f8[2]w", "f8[2]w"),
+            (
+                "i8[1]w",
+                "f8[1]w",
+                *(["f8[1]"] * 5),
+                *_DATA,
+                _GRID,
+                *_TREE,
+                "i8[1]w",
+                "f8[3]w",
+                "f8[2]w",
+                "f8[2]w",
+            ),
             "i8",
         ),
         Entry("obstacle_bounds", ("f8[2]", *_OBSTACLES, "f8[1]"), "f8[2]w"),
@@ -110,6 +123,8 @@ EXTENSION = aot.Extension(
         Entry("between_bound", ("f8[2]", "f8[2]", "i8[1]"), "(f8,i8)"),
         Entry("grid_marks", ("f8[2]", "i8[2]", "f8[1]", "f8", "f8", "b1[3]w"), "none"),
         Entry("grid_bounds", ("b1[3]", "f8", "f8", "f8[3]w"), "none"),
+        Entry("mesh_tree", ("f8[2]", "i8[2]"), "(f8[2]w,f8[2]w,i8[2]w)"),
+        Entry("box_touches_mesh", ("f8[1]", "f8[1]", "f8", *_TREE), "b1"),
     ),
 )
 
@@ -322,8 +337,23 @@ class Kernels:
         resumed call (tens of thousands a plan set).
         """
         if resumed:
+            t = d.tree
             return self.module.motion_walk(
-                ci, cf, q_a, q_b, dq, reach, pair_reach, d.fbuf, d.ibuf, d.grid, slot_of, poses, cabin, pairs
+                ci,
+                cf,
+                q_a,
+                q_b,
+                dq,
+                reach,
+                pair_reach,
+                d.fbuf,
+                d.ibuf,
+                d.grid,
+                *t,
+                slot_of,
+                poses,
+                cabin,
+                pairs,
             )
         d = _data(d)
         b, p, n_j = d.n_bodies, len(d.pair_a), d.n_joints
@@ -347,6 +377,7 @@ class Kernels:
             d.fbuf,
             d.ibuf,
             d.grid,
+            *d.tree,
             slot_of,
             poses,
             check_array(cabin, "cabin", F8, 2, out=True, shape=(cap, b)),
@@ -472,6 +503,28 @@ class Kernels:
             float(step),
             float(spacing),
             check_array(marked, "marked", B1, 3, out=True),
+        )
+
+    def mesh_tree(self, vertices: Array, faces: IntArray) -> MeshTree:
+        """:func:`.mesh.mesh_tree`: the triangles of a mesh (vertices (V, 3), faces (F, 3)) in a box tree."""
+        vertices = check_array(vertices, "vertices", F8, 2, shape=(None, 3))
+        faces = check_array(faces, "faces", I8, 2, shape=(None, 3))
+        if len(faces) and not (0 <= int(faces.min()) and int(faces.max()) < len(vertices)):
+            raise ValueError(f"mesh_tree: face indices in [0, {len(vertices)}) expected")
+        return MeshTree(*self.module.mesh_tree(vertices, faces))
+
+    def box_touches_mesh(self, pose: Array, half: Array, grow: float, tree: MeshTree) -> bool:
+        """:func:`.mesh.box_touches_mesh`: the box of half extents ``half`` + ``grow`` at ``pose`` (13,)."""
+        if not isinstance(tree, MeshTree):
+            raise TypeError(f"tree: MeshTree expected, got {type(tree).__name__}")
+        tree = check_tree(tree)
+        return bool(
+            self.module.box_touches_mesh(
+                check_array(pose, "pose", F8, 1, shape=(13,)),
+                check_array(half, "half", F8, 1, shape=(3,)),
+                float(grow),
+                *tree,
+            )
         )
 
     def grid_bounds(self, marked: BoolArray, step: float, offset: float) -> Array:

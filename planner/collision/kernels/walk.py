@@ -2,7 +2,8 @@
 
 :func:`motion_walk` is the walk of :mod:`planner.collision.motion` (the maths is in
 :meth:`planner.collision.world.CollisionWorld.check_motion`): states and per-body / per-pair bounds are
-evaluated on demand, and the walk returns to Python only when a task needs FCL probes on a grown body.
+evaluated on demand, and the walk returns to Python only when a task needs FCL probes on a grown body
+(a box body against the cabin is probed here, :mod:`.mesh`).
 Around it: the limit samples (:func:`first_inadmissible`), the reach bounds of a segment
 (:func:`end_ratio`, :func:`segment_reach`) and the run rule of ``check_path`` (:func:`run_extent`).
 """
@@ -38,6 +39,8 @@ from planner.collision.kernels.codes import (
     CI_N,
     CI_PHASE,
     CI_PREV,
+    CI_PROBED,
+    CI_QUERIES,
     CI_SLOT,
     CI_TASK,
     MAX_LEVELS,
@@ -46,6 +49,7 @@ from planner.collision.kernels.codes import (
     WALK_GROW,
     WALK_PROBE,
 )
+from planner.collision.kernels.mesh import box_touches_mesh
 from planner.collision.kernels.packed import unpack
 from planner.collision.kernels.poses import admissible, constraints_at, poses_at
 
@@ -225,6 +229,9 @@ def motion_walk(
     fbuf: np.ndarray,
     ibuf: np.ndarray,
     grid: np.ndarray,
+    tris: np.ndarray,
+    tree_bounds: np.ndarray,
+    tree_links: np.ndarray,
     slot_of: np.ndarray,
     poses: np.ndarray,
     cabin: np.ndarray,
@@ -240,6 +247,11 @@ def motion_walk(
     Returns ``WALK_PROBE`` when the walk needs FCL: ``ci[CI_SLOT]`` is the state's slot, the
     ``ci[CI_LEVELS]`` levels to try in order are at ``cf[CF_LEVEL0:]``, ``cf[CF_E]`` the bound's E; the
     caller writes the first level that did not collide (or leaves E) into ``cf[CF_E]`` and calls again.
+    A box body against the cabin, with the cabin's tree given (``tris``, ``tree_bounds``, ``tree_links``:
+    :func:`.mesh.mesh_tree`; empty: none), is probed here, level by level, by the same test
+    (:func:`.mesh.box_touches_mesh` on the box grown by the level, as FCL's grown box; counted in
+    ``ci[CI_QUERIES]``); it returns ``WALK_PROBE`` with ``ci[CI_PROBED]`` set only when every level touched
+    and the exact distance may prove the margin (the caller's last resort).
     ``WALK_FAIL``: no margin could be proven (task ``ci[CI_TASK]``, at ``cf[CF_TFAIL]``). ``WALK_GROW``:
     the state store is full (enlarge and call again). ``WALK_DONE``: every task is certified.
     """
@@ -307,7 +319,23 @@ def motion_walk(
                 # Then the level proven last time (the spare clearance changes little from state to state)
                 # halved down to the margin, strictly decreasing (see ``probe_levels``).
                 m = probe_levels(cf, m, above, max(cf[CF_LAST], 2.0 * local), local)
-            if m > 0:
+            probe = m > 0
+            if probe and is_cabin and tris.shape[0] > 0 and u.radius[idx] == 0.0:  # a box: probed here
+                lowest = math.inf
+                clear = False
+                for r in range(m):
+                    level = cf[CF_LEVEL0 + r]
+                    lowest = min(lowest, level)
+                    ci[CI_QUERIES] += 1
+                    grow = base + level
+                    if not box_touches_mesh(poses[s, idx], u.half[idx], grow, tris, tree_bounds, tree_links):
+                        E = level
+                        clear = True
+                        break
+                # Every level touched: the caller's exact distance decides, if the margin is among them.
+                probe = not clear and lowest <= local + 1e-12
+                ci[CI_PROBED] = 1 if probe else 0
+            if probe:
                 ci[CI_SLOT] = s
                 ci[CI_LEVELS] = m
                 cf[CF_E] = E

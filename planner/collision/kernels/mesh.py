@@ -1,0 +1,201 @@
+"""Does a box touch the cabin's triangles? A bounding-volume tree and an exact overlap test, compiled.
+
+The certified motion walk (:func:`.walk.motion_walk`) proves a state's spare clearance by *probes*: the body
+grown by a level is tested against the cabin mesh, and the first level that does not touch is the spare.
+Through FCL that is a return to Python per probe (about 10 us each: the posed object, the query and its
+result), thousands a plan in a tight cabin, nearly all of them on the payload, a box. Here the same test
+runs inside the walk:
+
+- :func:`mesh_tree` builds an axis-aligned bounding-box tree over the triangles (median split of the
+  longest axis of the centroids, at most :data:`LEAF` triangles a leaf), once per cabin;
+- :func:`box_touches_mesh` walks it with the box's axis-aligned bounds and tests each triangle of a leaf
+  it reaches by the separating-axis theorem (:func:`box_touches_triangle`: the box's 3 face normals, the
+  triangle's normal and the 9 edge-edge cross products; Akenine-Moeller, "Fast 3D triangle-box overlap
+  testing", 2001). Touching counts as overlap, as FCL's collision query does.
+
+The test is exact up to rounding; the box is tested with its half extents raised by :data:`ROUND_M`, so
+that rounding can only make it report a touch that is not there, never miss one that is.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: Most triangles in a leaf of the tree.
+LEAF = 4
+#: The half extents are raised by this much [m] before the test (see the module doc).
+ROUND_M = 1e-9
+
+
+@njit(cache=True, fastmath=False)
+def mesh_tree(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(triangles (T, 9) in the tree's order, node bounds (N, 6): lo then hi, node links (N, 2)).
+
+    A leaf's links are (first triangle, count > 0); an inner node's (left child, 0), its right child
+    following the left one's subtree at ``links[k, 0] + size of the left subtree``: stored as the right
+    child's index in ``links[k, 1]`` negated minus one, so that a leaf and an inner node are told apart by the
+    sign of ``links[k, 1]``.
+    """
+    n_t = faces.shape[0]
+    if n_t == 0:
+        return np.zeros((0, 9)), np.zeros((0, 6)), np.zeros((0, 2), dtype=np.int64)
+    cent = np.empty((n_t, 3))
+    tri_lo = np.empty((n_t, 3))
+    tri_hi = np.empty((n_t, 3))
+    for t in range(n_t):
+        for x in range(3):
+            a, b, c = vertices[faces[t, 0], x], vertices[faces[t, 1], x], vertices[faces[t, 2], x]
+            tri_lo[t, x] = min(a, min(b, c))
+            tri_hi[t, x] = max(a, max(b, c))
+            cent[t, x] = (a + b + c) / 3.0
+    order = np.arange(n_t)
+    cap = 2 * n_t
+    bounds = np.empty((cap, 6))
+    links = np.zeros((cap, 2), dtype=np.int64)
+    # An explicit stack of (node, first, count); nodes are numbered as they are created.
+    stack = np.empty((cap, 3), dtype=np.int64)
+    top = 0
+    n_nodes = 1
+    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, n_t
+    top = 1
+    while top > 0:
+        top -= 1
+        node, first, count = stack[top, 0], stack[top, 1], stack[top, 2]
+        for x in range(3):
+            lo, hi = math.inf, -math.inf
+            for r in range(first, first + count):
+                lo = min(lo, tri_lo[order[r], x])
+                hi = max(hi, tri_hi[order[r], x])
+            bounds[node, x], bounds[node, 3 + x] = lo, hi
+        if count <= LEAF:
+            links[node, 0], links[node, 1] = first, count
+            continue
+        # Split at the median centroid along the centroids' longest extent.
+        axis, width = 0, -1.0
+        for x in range(3):
+            lo, hi = math.inf, -math.inf
+            for r in range(first, first + count):
+                lo = min(lo, cent[order[r], x])
+                hi = max(hi, cent[order[r], x])
+            if hi - lo > width:
+                axis, width = x, hi - lo
+        seg = order[first : first + count]
+        keys = np.empty(count)
+        for r in range(count):
+            keys[r] = cent[seg[r], axis]
+        seg[:] = seg[np.argsort(keys, kind="mergesort")]
+        half = count // 2
+        left, right = n_nodes, n_nodes + 1
+        n_nodes += 2
+        links[node, 0], links[node, 1] = left, -right - 1
+        stack[top, 0], stack[top, 1], stack[top, 2] = left, first, half
+        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2] = right, first + half, count - half
+        top += 2
+    tris = np.empty((n_t, 9))
+    for r in range(n_t):
+        t = order[r]
+        for c in range(3):
+            for x in range(3):
+                tris[r, 3 * c + x] = vertices[faces[t, c], x]
+    return tris, bounds[:n_nodes].copy(), links[:n_nodes].copy()
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _apart(p0: float, p1: float, p2: float, r: float) -> bool:
+    """The projections p0, p1, p2 of the triangle miss the box's projection [-r, r]."""
+    return min(p0, min(p1, p2)) > r or max(p0, max(p1, p2)) < -r
+
+
+@njit(cache=True, fastmath=False)
+def box_touches_triangle(v: np.ndarray, e0: float, e1: float, e2: float) -> bool:
+    """Whether the box [-e, e] touches the triangle v (3, 3) (rows: vertices in the box's frame)."""
+    a0, a1, a2 = v[0, 0], v[0, 1], v[0, 2]
+    b0, b1, b2 = v[1, 0], v[1, 1], v[1, 2]
+    c0, c1, c2 = v[2, 0], v[2, 1], v[2, 2]
+    # The box's face normals: the triangle's bounds against the box.
+    if _apart(a0, b0, c0, e0) or _apart(a1, b1, c1, e1) or _apart(a2, b2, c2, e2):
+        return False
+    # The nine axes e_i x f_j (f: the triangle's edges).
+    for k in range(3):
+        if k == 0:
+            f0, f1, f2 = b0 - a0, b1 - a1, b2 - a2
+        elif k == 1:
+            f0, f1, f2 = c0 - b0, c1 - b1, c2 - b2
+        else:
+            f0, f1, f2 = a0 - c0, a1 - c1, a2 - c2
+        # x axis cross f = (0, -f2, f1)
+        r = e1 * abs(f2) + e2 * abs(f1)
+        if _apart(-f2 * a1 + f1 * a2, -f2 * b1 + f1 * b2, -f2 * c1 + f1 * c2, r):
+            return False
+        # y axis cross f = (f2, 0, -f0)
+        r = e0 * abs(f2) + e2 * abs(f0)
+        if _apart(f2 * a0 - f0 * a2, f2 * b0 - f0 * b2, f2 * c0 - f0 * c2, r):
+            return False
+        # z axis cross f = (-f1, f0, 0)
+        r = e0 * abs(f1) + e1 * abs(f0)
+        if _apart(-f1 * a0 + f0 * a1, -f1 * b0 + f0 * b1, -f1 * c0 + f0 * c1, r):
+            return False
+    # The triangle's normal.
+    u0, u1, u2 = b0 - a0, b1 - a1, b2 - a2
+    w0, w1, w2 = c0 - a0, c1 - a1, c2 - a2
+    n0, n1, n2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+    r = e0 * abs(n0) + e1 * abs(n1) + e2 * abs(n2)
+    s = n0 * a0 + n1 * a1 + n2 * a2
+    return not abs(s) > r
+
+
+@njit(cache=True, fastmath=False)
+def box_touches_mesh(
+    pose: np.ndarray, half: np.ndarray, grow: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
+) -> bool:
+    """Whether a triangle of the tree (:func:`mesh_tree`) touches the box at ``pose``.
+
+    ``pose`` (13,): R column-major, then p (a body pose of the kernels); the box's half extents are
+    ``half`` + ``grow``.
+    """
+    if tris.shape[0] == 0:
+        return False
+    e0, e1, e2 = half[0] + grow + ROUND_M, half[1] + grow + ROUND_M, half[2] + grow + ROUND_M
+    # R column-major: R[i, j] = pose[3 j + i]; column j is the box's axis j in the base frame.
+    px, py, pz = pose[9], pose[10], pose[11]
+    ext = np.empty(3)
+    for i in range(3):
+        ext[i] = abs(pose[i]) * e0 + abs(pose[3 + i]) * e1 + abs(pose[6 + i]) * e2
+    v = np.empty((3, 3))
+    stack = np.empty(64, dtype=np.int64)
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        k = stack[top]
+        if (
+            bounds[k, 0] > px + ext[0]
+            or bounds[k, 3] < px - ext[0]
+            or bounds[k, 1] > py + ext[1]
+            or bounds[k, 4] < py - ext[1]
+            or bounds[k, 2] > pz + ext[2]
+            or bounds[k, 5] < pz - ext[2]
+        ):
+            continue
+        if links[k, 1] > 0:
+            for t in range(links[k, 0], links[k, 0] + links[k, 1]):
+                for c in range(3):
+                    d0 = tris[t, 3 * c] - px
+                    d1 = tris[t, 3 * c + 1] - py
+                    d2 = tris[t, 3 * c + 2] - pz
+                    for j in range(3):  # R^T d: the vertex in the box's frame
+                        v[c, j] = (pose[3 * j] * d0 + pose[3 * j + 1] * d1) + pose[3 * j + 2] * d2
+                if box_touches_triangle(v, e0, e1, e2):
+                    return True
+            continue
+        if top + 2 > stack.shape[0]:
+            grown = np.empty(2 * stack.shape[0], dtype=np.int64)
+            grown[:top] = stack[:top]
+            stack = grown
+        stack[top] = links[k, 0]
+        stack[top + 1] = -links[k, 1] - 1
+        top += 2
+    return False

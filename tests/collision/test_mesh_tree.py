@@ -1,0 +1,144 @@
+"""The cabin's triangle tree and the compiled box probe (:mod:`planner.collision.kernels.mesh`) against FCL.
+
+The walk probes box bodies against the cabin itself; its verdicts must be FCL's collision verdicts on the
+same grown boxes, on random boxes anywhere in a cabin and on boxes grazing its surface, and a walk with the
+tree must report exactly what a walk with FCL's probes reports.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import fcl
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from planner.collision.bodies import PayloadGeometry
+from planner.collision.kernels.buffers import NO_TREE, MeshTree, check_tree
+from planner.collision.kernels.entries import DEFAULT
+from planner.collision.motion import CertifiedMotion
+from planner.collision.world import CollisionWorld
+from planner.generate import GeneratorOptions, generate_case
+from planner.generate.cabins import cabin_mesh
+from planner.meshes import REFERENCE_DIR
+from planner.meshio import load_mesh
+from planner.robots.cabin8 import Cabin8
+from tests.conftest import admissible_joints
+
+
+def _cabins() -> list[tuple[np.ndarray, np.ndarray]]:
+    hatch = load_mesh(REFERENCE_DIR / "cabin-cluttered.stl", units="m")
+    ring = cabin_mesh(generate_case(4, 0, GeneratorOptions(family="ring-frame")).layout)
+    return [
+        (np.ascontiguousarray(m.vertices, dtype=float), np.ascontiguousarray(m.faces, dtype=np.int64))
+        for m in (hatch, ring)
+    ]
+
+
+@pytest.fixture(scope="module")
+def cabins() -> list[tuple[np.ndarray, np.ndarray, MeshTree, fcl.CollisionObject]]:
+    out = []
+    for v, f in _cabins():
+        model = fcl.BVHModel()
+        model.beginModel(len(v), len(f))
+        model.addSubModel(v, f.astype(np.int32))
+        model.endModel()
+        out.append((v, f, DEFAULT.mesh_tree(v, f), fcl.CollisionObject(model, fcl.Transform())))
+    return out
+
+
+def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """A body pose (13,) as the kernels store it: R column-major, then p, then a length."""
+    return np.concatenate([R.T.reshape(9), p, [0.0]])
+
+
+def _fcl_touches(R: np.ndarray, p: np.ndarray, half: np.ndarray, cabin: fcl.CollisionObject) -> bool:
+    box = fcl.CollisionObject(fcl.Box(*(2.0 * half)), fcl.Transform(R, p))
+    return bool(fcl.collide(box, cabin, fcl.CollisionRequest(), fcl.CollisionResult()) > 0)
+
+
+def test_the_tree_holds_every_triangle_once_inside_its_nodes(cabins: list) -> None:
+    for v, f, tree, _ in cabins:
+        check_tree(tree)
+        tris, bounds, links = tree
+        assert np.array_equal(np.sort(tris.reshape(-1, 9), axis=0), np.sort(v[f].reshape(-1, 9), axis=0)), (
+            "the tree's triangles are the mesh's, each once"
+        )
+        for k in range(len(bounds)):
+            lo, hi = bounds[k, :3], bounds[k, 3:]
+            if links[k, 1] > 0:
+                first, count = links[k]
+                pts = tris[first : first + count].reshape(-1, 3)
+                assert 1 <= count <= 4 and np.all(pts >= lo) and np.all(pts <= hi)
+            else:
+                for child in (links[k, 0], -links[k, 1] - 1):
+                    assert child > k and np.all(bounds[child, :3] >= lo) and np.all(bounds[child, 3:] <= hi)
+
+
+def test_box_probes_agree_with_fcl_anywhere_and_grazing(cabins: list) -> None:
+    """Random boxes in the cabin, and boxes within 1 mm of touching a triangle: FCL's verdicts, every one."""
+    rng = np.random.default_rng(7)
+    for v, f, tree, cabin in cabins:
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        n = 3000
+        Rs = Rotation.random(2 * n, random_state=rng.integers(1 << 31)).as_matrix()
+        halves = rng.uniform(0.01, 0.3, (2 * n, 3))
+        grows = rng.uniform(0.0, 0.05, 2 * n)
+        centres = rng.uniform(lo, hi, (n, 3))
+        # Grazing: a box corner placed within +-1 mm of a point on a random triangle.
+        tri = v[f[rng.integers(len(f), size=n)]]
+        ab = rng.dirichlet(np.ones(3), size=n)
+        on = np.einsum("nk,nkx->nx", ab, tri)
+        corner = np.sign(rng.normal(size=(n, 3)))
+        offset = np.einsum("nij,nj->ni", Rs[n:], corner * (halves[n:] + grows[n:, None]))
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        centres = np.vstack([centres, on - offset + rng.uniform(-1e-3, 1e-3, (n, 1)) * normal])
+        touched = 0
+        for i in range(2 * n):
+            ours = DEFAULT.box_touches_mesh(_pose(Rs[i], centres[i]), halves[i], float(grows[i]), tree)
+            theirs = _fcl_touches(Rs[i], centres[i], halves[i] + grows[i], cabin)
+            assert ours == theirs, f"box {i}: ours {ours}, FCL {theirs}"
+            touched += ours
+        assert 0.2 * n < touched < 1.8 * n, "both verdicts are exercised"
+
+
+def test_an_empty_or_broken_tree(cabins: list) -> None:
+    assert DEFAULT.box_touches_mesh(_pose(np.eye(3), np.zeros(3)), np.ones(3), 0.0, NO_TREE) is False
+    empty = DEFAULT.mesh_tree(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    assert all(len(a) == 0 for a in empty)
+    tris, bounds, links = cabins[0][2]
+    bad = links.copy()
+    bad[0, 0] = len(bounds)  # the root's left child past the last node
+    with pytest.raises(ValueError, match="tree"):
+        DEFAULT.box_touches_mesh(_pose(np.eye(3), np.zeros(3)), np.ones(3), 0.0, MeshTree(tris, bounds, bad))
+    with pytest.raises(TypeError, match="tree"):
+        DEFAULT.box_touches_mesh(_pose(np.eye(3), np.zeros(3)), np.ones(3), 0.0, (tris, bounds, links))  # type: ignore[arg-type]
+
+
+def test_the_walk_with_its_own_box_probes_reports_what_fcl_probes_give(robot: Cabin8) -> None:
+    """The same motion reports, query counts included, with the tree and without it (FCL's probes)."""
+    payload = PayloadGeometry((0.45, 0.35, 0.5), T_tool_payload=np.eye(4), mass=60.0)
+    world = CollisionWorld(robot, load_mesh(REFERENCE_DIR / "cabin-cluttered.stl", units="m"), payload)
+    own = world._motion
+    fcl_only = CertifiedMotion(
+        own.model, own.bodies, dataclasses.replace(own.data, tree=NO_TREE), own.probes, own.kernels
+    )
+    rng = np.random.default_rng(3)
+    qs = admissible_joints(robot, 160, seed=11)
+    in_kernel = 0
+    for q in qs:
+        if not world.is_valid(q):
+            continue
+        step = rng.normal(0.0, 0.15, 8) * np.array([4.0, 1, 1, 1, 1, 1, 0.5, 1])
+        for clearance in (0.01, 0.03):
+            world._motion = own
+            before = own.probes.queries
+            ours = world.check_motion(q, q + step, clearance)
+            in_kernel += ours.fcl_queries - (own.probes.queries - before)  # the walk's own probes
+            world._motion = fcl_only
+            theirs = world.check_motion(q, q + step, clearance)
+            world._motion = own
+            assert ours == theirs
+    assert in_kernel > 100, "the walk probed the payload itself"
