@@ -159,16 +159,11 @@ class CertifiedMotion:
                 st = BodyState(poses[slot], cabin[slot], pairs[slot])
                 first = walk.CF_LEVEL0
                 levels = cf[first : first + int(ci[walk.CI_LEVELS])].tolist()
-                clear = False
-                if ci[walk.CI_PROBED]:  # the walk probed every level itself (a box), and each touched
-                    ci[walk.CI_PROBED] = 0
+                for level in levels:
+                    if not self.probes.hit(st, is_cabin, idx, base + level):
+                        cf[walk.CF_E] = level
+                        break
                 else:
-                    for level in levels:
-                        if not self.probes.hit(st, is_cabin, idx, base + level):
-                            cf[walk.CF_E] = level
-                            clear = True
-                            break
-                if not clear:
                     # Every grown body hit. A grown box is a larger box: near its edges and corners it
                     # overstates the clearance it tests by up to (sqrt 3 - 1) times the growth, so the exact
                     # distance (milliseconds against a mesh, asked only here) decides.

@@ -104,6 +104,39 @@ def test_box_probes_agree_with_fcl_anywhere_and_grazing(cabins: list) -> None:
         assert 0.2 * n < touched < 1.8 * n, "both verdicts are exercised"
 
 
+def test_box_distances_are_fcls_exact_distances(cabins: list) -> None:
+    """Boxes near the surface (a corner within 0-20 cm of a triangle) and anywhere: FCL's distance, capped.
+
+    To 1e-5 m (FCL's own tolerance), or below FCL's by at most 2e-4 m where FCL's iteration stops short.
+    """
+    rng = np.random.default_rng(9)
+    for v, f, tree, cabin in cabins:
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        n = 600
+        Rs = Rotation.random(2 * n, random_state=rng.integers(1 << 31)).as_matrix()
+        halves = rng.uniform(0.01, 0.3, (2 * n, 3))
+        tri = v[f[rng.integers(len(f), size=n)]]
+        on = np.einsum("nk,nkx->nx", rng.dirichlet(np.ones(3), size=n), tri)
+        corner = np.einsum("nij,nj->ni", Rs[n:], np.sign(rng.normal(size=(n, 3))) * halves[n:])
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        away = rng.uniform(0.0, 0.2, (n, 1)) * np.sign(rng.normal(size=(n, 1)))
+        centres = np.vstack([rng.uniform(lo, hi, (n, 3)), on - corner + away * normal])
+        near = 0
+        for i in range(2 * n):
+            ours = DEFAULT.box_mesh_distance(_pose(Rs[i], centres[i]), halves[i], 0.25, tree)
+            box = fcl.CollisionObject(fcl.Box(*(2.0 * halves[i])), fcl.Transform(Rs[i], centres[i]))
+            req = fcl.DistanceRequest(enable_signed_distance=True)
+            theirs = max(0.0, float(fcl.distance(cabin, box, req, fcl.DistanceResult())))
+            if theirs >= 0.25:
+                assert ours >= 0.25 - 1e-9
+                continue
+            near += 0.0 < theirs
+            assert theirs - 2e-4 <= ours <= theirs + 1e-5, f"box {i}: ours {ours}, FCL {theirs}"
+            assert abs(ours - theirs) < 1e-5 or ours < theirs
+        assert near > 0.3 * n
+
+
 def test_an_empty_or_broken_tree(cabins: list) -> None:
     assert DEFAULT.box_touches_mesh(_pose(np.eye(3), np.zeros(3)), np.ones(3), 0.0, NO_TREE) is False
     empty = DEFAULT.mesh_tree(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))

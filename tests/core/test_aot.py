@@ -256,6 +256,11 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
             jit.box_touches_mesh(pose, half, 0.01, trees[0]),
             "box_touches_mesh",
         )
+        _same(
+            built.box_mesh_distance(pose, half, 0.3, trees[0]),
+            jit.box_mesh_distance(pose, half, 0.3, trees[0]),
+            "box_mesh_distance",
+        )
 
 
 def test_build_and_jit_give_the_same_reference_speed() -> None:

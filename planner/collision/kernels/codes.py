@@ -13,9 +13,8 @@ CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
 WALK_DONE, WALK_PROBE, WALK_FAIL, WALK_GROW = 0, 1, 2, 3
 #: Slots of the walk's integer (``ci``) and float (``cf``) context arrays.
 CI_TASK, CI_I, CI_PHASE, CI_N, CI_COUNT, CI_SLOT, CI_LEVELS, CI_CABIN, CI_PREV = range(9)
-#: Set by the walk when it probed the levels itself (a box against the cabin, :mod:`.mesh`) and every one
-#: touched: the caller only asks the exact distance; the count of the walk's own probes.
-CI_PROBED, CI_QUERIES = 9, 10
+#: The count of the walk's own probes (a box against the cabin, :mod:`.mesh`).
+CI_QUERIES = 9
 CF_LAST, CF_E, CF_TSTOP, CF_CLEARANCE, CF_OWN, CF_MARGIN, CF_THRESHOLD, CF_TFAIL, CF_PROBE_PROVEN = range(9)
 #: The smallest margin the walk may adapt to, the margin of the current step, the last proven state's E,
 #: the smallest margin the walk stepped with.
@@ -23,7 +22,7 @@ CF_FLOOR, CF_LOCAL, CF_EPREV, CF_SMALLEST = 9, 10, 11, 12
 CF_LEVEL0 = 13
 #: Most probe levels the walk lists at one state (``cf[CF_LEVEL0:]``).
 MAX_LEVELS = 16
-CI_SIZE, CF_SIZE = 11, CF_LEVEL0 + MAX_LEVELS
+CI_SIZE, CF_SIZE = 10, CF_LEVEL0 + MAX_LEVELS
 
 #: ``cover_walk`` state (``ci``): the task and piece it is at, the sample/task of a pending exact distance.
 CW_TASK, CW_POS, CW_K, CW_PENDING, CW_SIZE = 0, 1, 2, 3, 4

@@ -125,6 +125,7 @@ EXTENSION = aot.Extension(
         Entry("grid_bounds", ("b1[3]", "f8", "f8", "f8[3]w"), "none"),
         Entry("mesh_tree", ("f8[2]", "i8[2]"), "(f8[2]w,f8[2]w,i8[2]w)"),
         Entry("box_touches_mesh", ("f8[1]", "f8[1]", "f8", *_TREE), "b1"),
+        Entry("box_mesh_distance", ("f8[1]", "f8[1]", "f8", *_TREE), "f8"),
     ),
 )
 
@@ -523,6 +524,20 @@ class Kernels:
                 check_array(pose, "pose", F8, 1, shape=(13,)),
                 check_array(half, "half", F8, 1, shape=(3,)),
                 float(grow),
+                *tree,
+            )
+        )
+
+    def box_mesh_distance(self, pose: Array, half: Array, cap: float, tree: MeshTree) -> float:
+        """:func:`.mesh.box_mesh_distance`: the box's distance to the tree's triangles, at most ``cap``."""
+        if not isinstance(tree, MeshTree):
+            raise TypeError(f"tree: MeshTree expected, got {type(tree).__name__}")
+        tree = check_tree(tree)
+        return float(
+            self.module.box_mesh_distance(
+                check_array(pose, "pose", F8, 1, shape=(13,)),
+                check_array(half, "half", F8, 1, shape=(3,)),
+                float(cap),
                 *tree,
             )
         )

@@ -199,3 +199,195 @@ def box_touches_mesh(
         stack[top + 1] = -links[k, 1] - 1
         top += 2
     return False
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
+    return (a0 * b0 + a1 * b1) + a2 * b2
+
+
+@njit(cache=True, fastmath=False)
+def point_triangle_sq(p: np.ndarray, v: np.ndarray) -> float:
+    """Squared distance from p (3,) to the triangle v (3, 3) (Ericson, Real-Time Collision Detection, 5.1.5).
+
+    The Voronoi regions of the vertices, then of the edges, then the face.
+    """
+    a0, a1, a2 = v[0, 0], v[0, 1], v[0, 2]
+    ab0, ab1, ab2 = v[1, 0] - a0, v[1, 1] - a1, v[1, 2] - a2
+    ac0, ac1, ac2 = v[2, 0] - a0, v[2, 1] - a1, v[2, 2] - a2
+    ap0, ap1, ap2 = p[0] - a0, p[1] - a1, p[2] - a2
+    d1 = _dot3(ab0, ab1, ab2, ap0, ap1, ap2)
+    d2 = _dot3(ac0, ac1, ac2, ap0, ap1, ap2)
+    if d1 <= 0.0 and d2 <= 0.0:  # vertex a
+        return _dot3(ap0, ap1, ap2, ap0, ap1, ap2)
+    bp0, bp1, bp2 = p[0] - v[1, 0], p[1] - v[1, 1], p[2] - v[1, 2]
+    d3 = _dot3(ab0, ab1, ab2, bp0, bp1, bp2)
+    d4 = _dot3(ac0, ac1, ac2, bp0, bp1, bp2)
+    if d3 >= 0.0 and d4 <= d3:  # vertex b
+        return _dot3(bp0, bp1, bp2, bp0, bp1, bp2)
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:  # edge ab
+        s = d1 / (d1 - d3)
+        q0, q1, q2 = ap0 - s * ab0, ap1 - s * ab1, ap2 - s * ab2
+        return _dot3(q0, q1, q2, q0, q1, q2)
+    cp0, cp1, cp2 = p[0] - v[2, 0], p[1] - v[2, 1], p[2] - v[2, 2]
+    d5 = _dot3(ab0, ab1, ab2, cp0, cp1, cp2)
+    d6 = _dot3(ac0, ac1, ac2, cp0, cp1, cp2)
+    if d6 >= 0.0 and d5 <= d6:  # vertex c
+        return _dot3(cp0, cp1, cp2, cp0, cp1, cp2)
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:  # edge ac
+        s = d2 / (d2 - d6)
+        q0, q1, q2 = ap0 - s * ac0, ap1 - s * ac1, ap2 - s * ac2
+        return _dot3(q0, q1, q2, q0, q1, q2)
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:  # edge bc
+        s = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        bc0, bc1, bc2 = v[2, 0] - v[1, 0], v[2, 1] - v[1, 1], v[2, 2] - v[1, 2]
+        q0, q1, q2 = bp0 - s * bc0, bp1 - s * bc1, bp2 - s * bc2
+        return _dot3(q0, q1, q2, q0, q1, q2)
+    den = 1.0 / (va + vb + vc)  # inside the face
+    s, w = vb * den, vc * den
+    q0, q1, q2 = ap0 - s * ab0 - w * ac0, ap1 - s * ab1 - w * ac1, ap2 - s * ab2 - w * ac2
+    return _dot3(q0, q1, q2, q0, q1, q2)
+
+
+@njit(cache=True, fastmath=False)
+def segment_segment_sq(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray) -> float:
+    """Squared distance between the segments [p, q] and [r, s] (Ericson 5.1.9, degenerate ones included)."""
+    d10, d11, d12 = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+    d20, d21, d22 = s[0] - r[0], s[1] - r[1], s[2] - r[2]
+    r0, r1, r2 = p[0] - r[0], p[1] - r[1], p[2] - r[2]
+    a = _dot3(d10, d11, d12, d10, d11, d12)
+    e = _dot3(d20, d21, d22, d20, d21, d22)
+    f = _dot3(d20, d21, d22, r0, r1, r2)
+    tiny = 1e-30
+    if a <= tiny and e <= tiny:
+        return _dot3(r0, r1, r2, r0, r1, r2)
+    if a <= tiny:
+        sc = 0.0
+        tc = min(max(f / e, 0.0), 1.0)
+    else:
+        c = _dot3(d10, d11, d12, r0, r1, r2)
+        if e <= tiny:
+            tc = 0.0
+            sc = min(max(-c / a, 0.0), 1.0)
+        else:
+            b = _dot3(d10, d11, d12, d20, d21, d22)
+            den = a * e - b * b
+            sc = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 0.0 else 0.0
+            tc = (b * sc + f) / e
+            if tc < 0.0:
+                tc = 0.0
+                sc = min(max(-c / a, 0.0), 1.0)
+            elif tc > 1.0:
+                tc = 1.0
+                sc = min(max((b - c) / a, 0.0), 1.0)
+    x0 = (p[0] + d10 * sc) - (r[0] + d20 * tc)
+    x1 = (p[1] + d11 * sc) - (r[1] + d21 * tc)
+    x2 = (p[2] + d12 * sc) - (r[2] + d22 * tc)
+    return _dot3(x0, x1, x2, x0, x1, x2)
+
+
+@njit(cache=True, fastmath=False)
+def box_triangle_distance(v: np.ndarray, e0: float, e1: float, e2: float, corners: np.ndarray) -> float:
+    """Distance between the box [-e, e] and the triangle v (3, 3) in the box's frame (0 when they touch).
+
+    Disjoint convex polytopes are nearest at a vertex of one and a face of the other, or at two edges:
+    the triangle's vertices against the box (clamped), the box's corners (``corners`` (8, 3), scratch)
+    against the triangle, and the box's 12 edges against the triangle's 3.
+    """
+    if box_touches_triangle(v, e0, e1, e2):
+        return 0.0
+    best = math.inf
+    for c in range(3):  # the triangle's vertices against the box
+        x0 = max(abs(v[c, 0]) - e0, 0.0)
+        x1 = max(abs(v[c, 1]) - e1, 0.0)
+        x2 = max(abs(v[c, 2]) - e2, 0.0)
+        best = min(best, _dot3(x0, x1, x2, x0, x1, x2))
+    for k in range(8):  # the box's corners against the triangle
+        corners[k, 0] = e0 if k & 1 else -e0
+        corners[k, 1] = e1 if k & 2 else -e1
+        corners[k, 2] = e2 if k & 4 else -e2
+        best = min(best, point_triangle_sq(corners[k], v))
+    for k in range(
+        8
+    ):  # the box's edges (corner k to the corner one axis bit above it) against the triangle's
+        for bit in (1, 2, 4):
+            if k & bit:
+                continue
+            for c in range(3):
+                best = min(best, segment_segment_sq(corners[k], corners[k | bit], v[c], v[(c + 1) % 3]))
+    return math.sqrt(best)
+
+
+@njit(cache=True, fastmath=False)
+def box_mesh_distance(
+    pose: np.ndarray, half: np.ndarray, cap: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
+) -> float:
+    """The distance from the box of half extents ``half`` at ``pose`` (13,) to the tree's triangles.
+
+    Exact (to rounding, less :data:`ROUND_M`) where it is below ``cap``; ``cap`` where no triangle is
+    nearer (only the triangles within the box's bounds grown by the best distance so far are visited).
+    0 where the box touches a triangle.
+    """
+    best = cap
+    if tris.shape[0] == 0:
+        return best
+    e0, e1, e2 = half[0], half[1], half[2]
+    px, py, pz = pose[9], pose[10], pose[11]
+    ext = np.empty(3)
+    for i in range(3):
+        ext[i] = abs(pose[i]) * e0 + abs(pose[3 + i]) * e1 + abs(pose[6 + i]) * e2
+    v = np.empty((3, 3))
+    corners = np.empty((8, 3))
+    stack = np.empty(64, dtype=np.int64)
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        k = stack[top]
+        g = best
+        if (
+            bounds[k, 0] > px + ext[0] + g
+            or bounds[k, 3] < px - ext[0] - g
+            or bounds[k, 1] > py + ext[1] + g
+            or bounds[k, 4] < py - ext[1] - g
+            or bounds[k, 2] > pz + ext[2] + g
+            or bounds[k, 5] < pz - ext[2] - g
+        ):
+            continue
+        if links[k, 1] > 0:
+            for t in range(links[k, 0], links[k, 0] + links[k, 1]):
+                for c in range(3):
+                    d0 = tris[t, 3 * c] - px
+                    d1 = tris[t, 3 * c + 1] - py
+                    d2 = tris[t, 3 * c + 2] - pz
+                    for j in range(3):
+                        v[c, j] = (pose[3 * j] * d0 + pose[3 * j + 1] * d1) + pose[3 * j + 2] * d2
+                # A lower bound first: the triangle's bounds against the box, in the box's frame.
+                x0 = max(
+                    min(v[0, 0], min(v[1, 0], v[2, 0])) - e0, -e0 - max(v[0, 0], max(v[1, 0], v[2, 0])), 0.0
+                )
+                x1 = max(
+                    min(v[0, 1], min(v[1, 1], v[2, 1])) - e1, -e1 - max(v[0, 1], max(v[1, 1], v[2, 1])), 0.0
+                )
+                x2 = max(
+                    min(v[0, 2], min(v[1, 2], v[2, 2])) - e2, -e2 - max(v[0, 2], max(v[1, 2], v[2, 2])), 0.0
+                )
+                if _dot3(x0, x1, x2, x0, x1, x2) >= best * best:
+                    continue
+                d = box_triangle_distance(v, e0, e1, e2, corners) - ROUND_M
+                if d < best:
+                    best = max(d, 0.0)
+                    if best == 0.0:
+                        return 0.0
+            continue
+        if top + 2 > stack.shape[0]:
+            grown = np.empty(2 * stack.shape[0], dtype=np.int64)
+            grown[:top] = stack[:top]
+            stack = grown
+        stack[top] = links[k, 0]
+        stack[top + 1] = -links[k, 1] - 1
+        top += 2
+    return best

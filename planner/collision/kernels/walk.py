@@ -39,7 +39,6 @@ from planner.collision.kernels.codes import (
     CI_N,
     CI_PHASE,
     CI_PREV,
-    CI_PROBED,
     CI_QUERIES,
     CI_SLOT,
     CI_TASK,
@@ -49,7 +48,7 @@ from planner.collision.kernels.codes import (
     WALK_GROW,
     WALK_PROBE,
 )
-from planner.collision.kernels.mesh import box_touches_mesh
+from planner.collision.kernels.mesh import box_mesh_distance, box_touches_mesh
 from planner.collision.kernels.packed import unpack
 from planner.collision.kernels.poses import admissible, constraints_at, poses_at
 
@@ -250,8 +249,8 @@ def motion_walk(
     A box body against the cabin, with the cabin's tree given (``tris``, ``tree_bounds``, ``tree_links``:
     :func:`.mesh.mesh_tree`; empty: none), is probed here, level by level, by the same test
     (:func:`.mesh.box_touches_mesh` on the box grown by the level, as FCL's grown box; counted in
-    ``ci[CI_QUERIES]``); it returns ``WALK_PROBE`` with ``ci[CI_PROBED]`` set only when every level touched
-    and the exact distance may prove the margin (the caller's last resort).
+    ``ci[CI_QUERIES]``), and where every level touched, its exact distance to the cabin decides as the
+    caller's does (:func:`.mesh.box_mesh_distance`).
     ``WALK_FAIL``: no margin could be proven (task ``ci[CI_TASK]``, at ``cf[CF_TFAIL]``). ``WALK_GROW``:
     the state store is full (enlarge and call again). ``WALK_DONE``: every task is certified.
     """
@@ -332,9 +331,16 @@ def motion_walk(
                         E = level
                         clear = True
                         break
-                # Every level touched: the caller's exact distance decides, if the margin is among them.
-                probe = not clear and lowest <= local + 1e-12
-                ci[CI_PROBED] = 1 if probe else 0
+                if not clear and lowest <= local + 1e-12:
+                    # Every grown box touched. A grown box is a larger box: near its edges and corners it
+                    # overstates the clearance it tests by up to (sqrt 3 - 1) times the growth, so the exact
+                    # distance decides; it is below sqrt 3 times the smallest growth that touched.
+                    cap = math.sqrt(3.0) * (base + lowest) + 1e-6
+                    box = poses[s, idx]
+                    spare = box_mesh_distance(box, u.half[idx], cap, tris, tree_bounds, tree_links) - base
+                    if spare >= local:
+                        E = spare
+                probe = False
             if probe:
                 ci[CI_SLOT] = s
                 ci[CI_LEVELS] = m
