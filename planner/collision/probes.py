@@ -16,6 +16,9 @@ import fcl
 import numpy as np
 
 from planner.collision.bodies import BodySet, Shape
+from planner.collision.kernels.buffers import MeshTree
+from planner.collision.kernels.entries import DEFAULT as KERNELS
+from planner.collision.kernels.entries import Kernels
 from planner.collision.reports import BodyState
 from planner.core.types import Array, IntArray
 from planner.robots.geometry import BOX_CORNER_SIGNS
@@ -88,14 +91,28 @@ class GrownShapes:
 class Probes:
     """FCL objects of a world's bodies and its cabin, and the queries on them (counted in ``queries``).
 
+    A box against the cabin is probed by the compiled test on the cabin's triangle tree when there is one
+    (:func:`planner.collision.kernels.mesh.box_touches_mesh`: FCL's verdicts, about 2 us instead of 10).
+
     Args:
         bodies: The world's bodies (shapes, checked pairs).
         cabin: The cabin's FCL mesh (``None``: free space).
+        tree: The same cabin's triangle tree (``None``: every probe through FCL).
+        kernels: The compiled kernels' entries.
     """
 
-    def __init__(self, bodies: BodySet, cabin: fcl.BVHModel | None) -> None:
+    def __init__(
+        self,
+        bodies: BodySet,
+        cabin: fcl.BVHModel | None,
+        tree: MeshTree | None = None,
+        kernels: Kernels = KERNELS,
+    ) -> None:
         self.bodies = bodies
         self.cabin_obj = fcl.CollisionObject(cabin, fcl.Transform()) if cabin is not None else None
+        self._tree = tree if tree is not None and len(tree.tris) and cabin is not None else None
+        self._kernels = kernels
+        self._half = [np.array(s.size, dtype=float) / 2 if s.kind == "box" else None for s in bodies.shapes]
         self.queries = 0
         self._capsule = [s.kind == "capsule" for s in bodies.shapes]
         self._grown = GrownShapes(bodies.shapes)
@@ -142,6 +159,10 @@ class Probes:
     def cabin_hit(self, st: BodyState, b: int, margin: float) -> bool:
         """Body b grown by ``margin`` touches the cabin."""
         assert self.cabin_obj is not None
+        half = self._half[b]
+        if half is not None and self._tree is not None:
+            self.queries += 1
+            return self._kernels.box_touches_mesh(st.flat[b], half, margin, self._tree)
         return self.collide(self.posed(st, b, margin), self.cabin_obj)
 
     def pair_hit(self, st: BodyState, k: int, margin: float) -> bool:

@@ -86,7 +86,10 @@ def _cabin_tree(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> buffe
     """The cabin's triangles in a box tree (the walk's own probes of box bodies), built once per cabin."""
     vertices = np.frombuffer(vertices_bytes).reshape(-1, 3)
     faces = np.frombuffer(faces_bytes, dtype=np.int64).reshape(-1, 3)
-    return KERNELS.mesh_tree(vertices, faces)
+    tree = KERNELS.mesh_tree(vertices, faces)
+    for arr in tree:  # shared by every world on the cabin: read-only
+        arr.setflags(write=False)
+    return tree
 
 
 #: Carriage clearance tables by (cabin, carriage shape, rail travel), built once (``Probes.carriage_table``).
@@ -141,6 +144,9 @@ class CollisionWorld(Generic[RobotT]):
     #: Motion walks: probe for more than the bounds prove only where they prove nothing (states cost
     #: ~2 us, an FCL probe 10-50 us); the reference route keeps the original always-probe policy.
     probe_when_proven: bool = False
+    #: Probes of a box against the cabin by the compiled test on the cabin's triangle tree (FCL's verdicts,
+    #: :mod:`.kernels.mesh`), in the motion walk and in state checks; the reference route uses FCL's.
+    compiled_box_probes: bool = True
 
     def __init__(
         self,
@@ -166,7 +172,12 @@ class CollisionWorld(Generic[RobotT]):
         self._grid: ClearanceGrid | None = None
         self._carriage_table: tuple[float, float, Array] | None = None
         entry = _cabin_entry(cabin) if cabin is not None else None
-        self._probes = Probes(self.bodies, cabin_bvh(*entry[0]) if entry is not None else None)
+        tree = _cabin_tree(*entry[0]) if entry is not None else buffers.NO_TREE
+        self._probes = Probes(
+            self.bodies,
+            cabin_bvh(*entry[0]) if entry is not None else None,
+            tree if self.compiled_box_probes else None,
+        )
         if entry is not None:
             self._grid = _cabin_grid(*entry[0], grid_step_m)
             if self.model.rail_body is not None:
@@ -177,7 +188,7 @@ class CollisionWorld(Generic[RobotT]):
             self._T_tool_box,
             self._grid,
             self._carriage_table,
-            _cabin_tree(*entry[0]) if entry is not None else buffers.NO_TREE,
+            tree,
         )
         #: The compiled kernels' entries (the ahead-of-time build or numba's JIT, :mod:`.kernels.entries`).
         self.kernels: Kernels = KERNELS

@@ -151,6 +151,7 @@ class Kernels:
 
     def __init__(self, module: Any = None) -> None:
         self._module = module
+        self._checked: MeshTree | None = None  # the last tree checked, if its arrays are read-only
 
     @property
     def module(self) -> Any:
@@ -514,11 +515,23 @@ class Kernels:
             raise ValueError(f"mesh_tree: face indices in [0, {len(vertices)}) expected")
         return MeshTree(*self.module.mesh_tree(vertices, faces))
 
-    def box_touches_mesh(self, pose: Array, half: Array, grow: float, tree: MeshTree) -> bool:
-        """:func:`.mesh.box_touches_mesh`: the box of half extents ``half`` + ``grow`` at ``pose`` (13,)."""
+    def _tree(self, tree: MeshTree) -> MeshTree:
+        """``tree``, checked (:func:`~.buffers.check_tree`) unless it is the last one checked and read-only.
+
+        A world's tree (:class:`~.buffers.KernelData`) is read-only: the probes of a plan check it once.
+        """
+        if tree is self._checked:
+            return tree
         if not isinstance(tree, MeshTree):
             raise TypeError(f"tree: MeshTree expected, got {type(tree).__name__}")
-        tree = check_tree(tree)
+        check_tree(tree)
+        if not any(a.flags.writeable for a in tree):
+            self._checked = tree
+        return tree
+
+    def box_touches_mesh(self, pose: Array, half: Array, grow: float, tree: MeshTree) -> bool:
+        """:func:`.mesh.box_touches_mesh`: the box of half extents ``half`` + ``grow`` at ``pose`` (13,)."""
+        tree = self._tree(tree)
         return bool(
             self.module.box_touches_mesh(
                 check_array(pose, "pose", F8, 1, shape=(13,)),
@@ -530,9 +543,7 @@ class Kernels:
 
     def box_mesh_distance(self, pose: Array, half: Array, cap: float, tree: MeshTree) -> float:
         """:func:`.mesh.box_mesh_distance`: the box's distance to the tree's triangles, at most ``cap``."""
-        if not isinstance(tree, MeshTree):
-            raise TypeError(f"tree: MeshTree expected, got {type(tree).__name__}")
-        tree = check_tree(tree)
+        tree = self._tree(tree)
         return float(
             self.module.box_mesh_distance(
                 check_array(pose, "pose", F8, 1, shape=(13,)),
