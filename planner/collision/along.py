@@ -73,6 +73,7 @@ from planner.collision.sweep import (
     pair_vertices_along,
     shape_object,
     swept_bound,
+    swept_bound_tree,
     task_offsets,
 )
 from planner.core.types import Array, BoolArray, IntArray
@@ -363,6 +364,8 @@ class AlongPath:
             if verts is None:
                 verts = self._verts[t] = body_vertices_along(self.poses, b, shape)
         self.swept_queries += 1
+        if t < self.n_cabin and self.probes.tree is not None:  # the cabin: compiled, on its triangle tree
+            return swept_bound_tree(verts[i : j + 1], shape, self.probes.tree)
         return swept_bound(verts[i : j + 1], shape, target)
 
     # ---------------------------------------------------------- certificate

@@ -110,7 +110,8 @@ class Probes:
     ) -> None:
         self.bodies = bodies
         self.cabin_obj = fcl.CollisionObject(cabin, fcl.Transform()) if cabin is not None else None
-        self._tree = tree if tree is not None and len(tree.tris) and cabin is not None else None
+        #: The cabin's triangle tree for the compiled tests (None: FCL only).
+        self.tree = tree if tree is not None and len(tree.tris) and cabin is not None else None
         self._kernels = kernels
         self._half = [np.array(s.size, dtype=float) / 2 if s.kind == "box" else None for s in bodies.shapes]
         self.queries = 0
@@ -160,9 +161,9 @@ class Probes:
         """Body b grown by ``margin`` touches the cabin."""
         assert self.cabin_obj is not None
         half = self._half[b]
-        if half is not None and self._tree is not None:
+        if half is not None and self.tree is not None:
             self.queries += 1
-            return self._kernels.box_touches_mesh(st.flat[b], half, margin, self._tree)
+            return self._kernels.box_touches_mesh(st.flat[b], half, margin, self.tree)
         return self.collide(self.posed(st, b, margin), self.cabin_obj)
 
     def pair_hit(self, st: BodyState, k: int, margin: float) -> bool:

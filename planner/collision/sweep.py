@@ -32,6 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError
 
+from planner.collision.kernels.buffers import MeshTree
+from planner.collision.kernels.codes import ROUND_M
 from planner.collision.kernels.entries import DEFAULT as KERNELS
 from planner.core.types import Array, IntArray
 from planner.robots.geometry import BOX_CORNER_SIGNS, Shape
@@ -187,6 +189,20 @@ def shape_object(shape: Shape, length: float) -> fcl.CollisionObject:
     """
     geom = fcl.Box(*shape.size) if shape.kind == "box" else fcl.Capsule(shape.radius, length)
     return fcl.CollisionObject(geom, fcl.Transform())
+
+
+def swept_bound_tree(verts: Array, shape: Shape, tree: MeshTree) -> float:
+    """:func:`swept_bound` against the cabin's triangle tree, compiled (:mod:`.kernels.mesh`).
+
+    The hull is the vertices at the run's two ends as they are (no hull is built: the minimum-norm search
+    needs only the points); its distance is a certified lower bound (FCL's to 1e-11 m where FCL's is exact,
+    ``tests/collision/test_mesh_tree.py``), less :data:`~.kernels.codes.ROUND_M` for rounding.
+    """
+    e = hull_deviation(verts)
+    d = KERNELS.hull_mesh_lower(np.ascontiguousarray(np.vstack([verts[0], verts[-1]])), tree)
+    if not d > 0.0:
+        return -np.inf
+    return d - e - grown_radius(shape) - ROUND_M
 
 
 def swept_bound(verts: Array, shape: Shape, target: Any) -> float:

@@ -261,6 +261,8 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
             jit.box_mesh_distance(pose, half, 0.3, trees[0]),
             "box_mesh_distance",
         )
+        pts = np.ascontiguousarray(p + rng.normal(0.0, 0.2, (16, 3)))
+        _same(built.hull_mesh_lower(pts, trees[0]), jit.hull_mesh_lower(pts, trees[0]), "hull_mesh_lower")
 
 
 def test_build_and_jit_give_the_same_reference_speed() -> None:

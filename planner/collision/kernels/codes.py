@@ -24,6 +24,10 @@ CF_LEVEL0 = 13
 MAX_LEVELS = 16
 CI_SIZE, CF_SIZE = 10, CF_LEVEL0 + MAX_LEVELS
 
+#: The compiled tests on the cabin's triangles (:mod:`.mesh`) widen a box, and lower a distance, by this much
+#: [m], so that rounding can only report a touch that is not there, or a distance below the true one.
+ROUND_M = 1e-9
+
 #: ``cover_walk`` state (``ci``): the task and piece it is at, the sample/task of a pending exact distance.
 CW_TASK, CW_POS, CW_K, CW_PENDING, CW_SIZE = 0, 1, 2, 3, 4
 #: ``cover_walk`` returns: every task covered (or its pieces left to the walk), or an exact distance needed.

@@ -126,6 +126,7 @@ EXTENSION = aot.Extension(
         Entry("mesh_tree", ("f8[2]", "i8[2]"), "(f8[2]w,f8[2]w,i8[2]w)"),
         Entry("box_touches_mesh", ("f8[1]", "f8[1]", "f8", *_TREE), "b1"),
         Entry("box_mesh_distance", ("f8[1]", "f8[1]", "f8", *_TREE), "f8"),
+        Entry("hull_mesh_lower", ("f8[2]", *_TREE), "f8"),
     ),
 )
 
@@ -551,6 +552,13 @@ class Kernels:
                 float(cap),
                 *tree,
             )
+        )
+
+    def hull_mesh_lower(self, points: Array, tree: MeshTree) -> float:
+        """:func:`.mesh.hull_mesh_lower`: a certified lower bound of conv(points (n, 3))'s distance."""
+        tree = self._tree(tree)
+        return float(
+            self.module.hull_mesh_lower(check_array(points, "points", F8, 2, shape=(None, 3)), *tree)
         )
 
     def grid_bounds(self, marked: BoolArray, step: float, offset: float) -> Array:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
 from planner.collision.kernels.grid import grid_bounds, grid_marks
-from planner.collision.kernels.mesh import box_mesh_distance, box_touches_mesh, mesh_tree
+from planner.collision.kernels.mesh import box_mesh_distance, box_touches_mesh, hull_mesh_lower, mesh_tree
 from planner.collision.kernels.obstacles import obstacle_bounds, obstacle_coarse_batch, obstacle_fine_batch
 from planner.collision.kernels.offsets import (
     hull_deviation,
@@ -41,6 +41,7 @@ __all__ = [
     "grid_marks",
     "mesh_tree",
     "hull_deviation",
+    "hull_mesh_lower",
     "motion_walk",
     "obstacle_bounds",
     "obstacle_coarse_batch",

@@ -13,8 +13,11 @@ runs inside the walk:
   triangle's normal and the 9 edge-edge cross products; Akenine-Moeller, "Fast 3D triangle-box overlap
   testing", 2001). Touching counts as overlap, as FCL's collision query does.
 
-The test is exact up to rounding; the box is tested with its half extents raised by :data:`ROUND_M`, so
-that rounding can only make it report a touch that is not there, never miss one that is.
+The test is exact up to rounding; the box is tested with its half extents raised by
+:data:`~.codes.ROUND_M`, so that rounding can only make it report a touch that is not there, never miss one
+that is. :func:`box_mesh_distance` gives a box's exact distance (the walk's last resort, as FCL's was) and
+:func:`hull_mesh_lower` a certified lower bound of a point set's convex hull's distance (the gate's swept
+hulls, :mod:`planner.collision.sweep`), both on the same tree.
 """
 
 from __future__ import annotations
@@ -24,10 +27,10 @@ import math
 import numpy as np
 from numba import njit
 
+from planner.collision.kernels.codes import ROUND_M
+
 #: Most triangles in a leaf of the tree.
 LEAF = 4
-#: The half extents are raised by this much [m] before the test (see the module doc).
-ROUND_M = 1e-9
 
 
 @njit(cache=True, fastmath=False)
@@ -391,3 +394,200 @@ def box_mesh_distance(
         stack[top + 1] = -links[k, 1] - 1
         top += 2
     return best
+
+
+#: Iterations of :func:`hull_triangle_lower`'s minimum-norm search (it stops earlier at a relative gap of
+#: :data:`HULL_GAP`; whatever the iterate, the bound it returns is certified).
+HULL_ITERATIONS = 64
+HULL_GAP = 1e-12
+
+
+@njit(cache=True, fastmath=False)
+def _affine_min(m: np.ndarray, s: np.ndarray, k: int, a: np.ndarray, g: np.ndarray) -> bool:
+    """Weights a[:k] (summing to 1) of the affine minimum-norm point of the points m[s[:k]]; False: singular.
+
+    The system [G 1; 1' 0] [a; mu] = [0; 1] (G the Gram matrix), by Gaussian elimination with pivoting in
+    ``g`` ((5, 6) scratch).
+    """
+    n = k + 1
+    for i in range(k):
+        for j in range(k):
+            g[i, j] = _dot3(m[s[i], 0], m[s[i], 1], m[s[i], 2], m[s[j], 0], m[s[j], 1], m[s[j], 2])
+        g[i, k] = 1.0
+        g[i, n] = 0.0
+    for j in range(k):
+        g[k, j] = 1.0
+    g[k, k] = 0.0
+    g[k, n] = 1.0
+    scale = 0.0
+    for i in range(k):
+        scale = max(scale, abs(g[i, i]))
+    tiny = 1e-14 * max(scale, 1.0)
+    for c in range(n):
+        piv = c
+        for r in range(c + 1, n):
+            if abs(g[r, c]) > abs(g[piv, c]):
+                piv = r
+        if abs(g[piv, c]) <= tiny:
+            return False
+        if piv != c:
+            for j in range(n + 1):
+                g[c, j], g[piv, j] = g[piv, j], g[c, j]
+        for r in range(n):
+            if r != c:
+                f = g[r, c] / g[c, c]
+                if f != 0.0:
+                    for j in range(c, n + 1):
+                        g[r, j] -= f * g[c, j]
+    for i in range(k):
+        a[i] = g[i, n] / g[i, i]
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def hull_triangle_lower(
+    m: np.ndarray, nm: int, s: np.ndarray, lam: np.ndarray, a: np.ndarray, g: np.ndarray
+) -> float:
+    """A certified lower bound of the norm of conv(m[:nm]) (0: it may hold the origin).
+
+    With m the differences of two point sets' points, the distance between their convex hulls. Wolfe's
+    minimum-norm-point algorithm (Wolfe, "Finding the nearest point in a polytope", Math. Programming 11,
+    1976) from the shortest point: the corral ``s`` (at most 4 points, weights ``lam``)
+    moves towards the origin's nearest point. For any x, every point p of the hull has x . p >= min_k x . m_k
+    = w, so the hull is at least w / |x| from the origin where w > 0: that bound is returned from the last
+    iterate, exact at convergence (scratch: ``s`` (5,) ints, ``lam``, ``a`` (5,), ``g`` (5, 6)).
+    """
+    best, k0 = math.inf, 0
+    for i in range(nm):
+        v = _dot3(m[i, 0], m[i, 1], m[i, 2], m[i, 0], m[i, 1], m[i, 2])
+        if v < best:
+            best, k0 = v, i
+    k = 1
+    s[0], lam[0] = k0, 1.0
+    x0, x1, x2 = m[k0, 0], m[k0, 1], m[k0, 2]
+    for _ in range(HULL_ITERATIONS):
+        xx = _dot3(x0, x1, x2, x0, x1, x2)
+        if xx == 0.0:
+            return 0.0
+        jmin, w = 0, math.inf
+        for i in range(nm):
+            v = _dot3(x0, x1, x2, m[i, 0], m[i, 1], m[i, 2])
+            if v < w:
+                w, jmin = v, i
+        if xx - w <= HULL_GAP * xx or k == 4:
+            break
+        fresh = True
+        for i in range(k):
+            fresh = fresh and s[i] != jmin
+        if not fresh:
+            break
+        s[k], lam[k] = jmin, 0.0
+        k += 1
+        while True:  # minor cycles: the affine minimum of the corral, or the step to its boundary
+            if not _affine_min(m, s, k, a, g):
+                k -= 1  # the newest point made the corral degenerate: keep the last iterate
+                break
+            inside = True
+            for i in range(k):
+                inside = inside and a[i] > 0.0
+            if inside:
+                for i in range(k):
+                    lam[i] = a[i]
+                break
+            theta = 1.0
+            for i in range(k):
+                if a[i] <= 0.0 and lam[i] - a[i] > 0.0:
+                    theta = min(theta, lam[i] / (lam[i] - a[i]))
+            j = 0
+            for i in range(k):
+                li = lam[i] + theta * (a[i] - lam[i])
+                if li > 1e-14:
+                    s[j], lam[j] = s[i], li
+                    j += 1
+            k = j
+            if k == 0:
+                return 0.0
+        x0, x1, x2 = 0.0, 0.0, 0.0
+        for i in range(k):
+            x0 += lam[i] * m[s[i], 0]
+            x1 += lam[i] * m[s[i], 1]
+            x2 += lam[i] * m[s[i], 2]
+    xx = _dot3(x0, x1, x2, x0, x1, x2)
+    if xx == 0.0:
+        return 0.0
+    w = math.inf
+    for i in range(nm):
+        w = min(w, _dot3(x0, x1, x2, m[i, 0], m[i, 1], m[i, 2]))
+    return w / math.sqrt(xx) if w > 0.0 else 0.0
+
+
+@njit(cache=True, fastmath=False)
+def hull_mesh_lower(points: np.ndarray, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray) -> float:
+    """A certified lower bound of the distance between the convex hull of ``points`` (n, 3) and the triangles.
+
+    :func:`hull_triangle_lower` per triangle of the tree (0 where they may touch; inf: no triangles). The
+    tree is walked nearer child first and pruned by the bounding boxes' distance to the points' box.
+    """
+    n = points.shape[0]
+    best = math.inf
+    if tris.shape[0] == 0 or n == 0:
+        return best
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for x in range(3):
+        lo[x], hi[x] = points[0, x], points[0, x]
+        for i in range(1, n):
+            lo[x] = min(lo[x], points[i, x])
+            hi[x] = max(hi[x], points[i, x])
+    m = np.empty((3 * n, 3))
+    s = np.empty(5, dtype=np.int64)
+    lam = np.empty(5)
+    a = np.empty(5)
+    g = np.empty((5, 6))
+    stack = np.empty(64, dtype=np.int64)
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        k = stack[top]
+        if _box_gap_sq(lo, hi, bounds, k) >= best * best:
+            continue
+        if links[k, 1] > 0:
+            for t in range(links[k, 0], links[k, 0] + links[k, 1]):
+                gap = 0.0
+                for x in range(3):
+                    tlo = min(tris[t, x], min(tris[t, 3 + x], tris[t, 6 + x]))
+                    thi = max(tris[t, x], max(tris[t, 3 + x], tris[t, 6 + x]))
+                    d = max(tlo - hi[x], lo[x] - thi, 0.0)
+                    gap += d * d
+                if gap >= best * best:
+                    continue
+                for i in range(n):
+                    for c in range(3):
+                        for x in range(3):
+                            m[3 * i + c, x] = points[i, x] - tris[t, 3 * c + x]
+                best = min(best, hull_triangle_lower(m, 3 * n, s, lam, a, g))
+                if best == 0.0:
+                    return 0.0
+            continue
+        if top + 2 > stack.shape[0]:
+            grown = np.empty(2 * stack.shape[0], dtype=np.int64)
+            grown[:top] = stack[:top]
+            stack = grown
+        left, right = links[k, 0], -links[k, 1] - 1
+        if _box_gap_sq(lo, hi, bounds, left) < _box_gap_sq(lo, hi, bounds, right):
+            left, right = right, left  # the nearer child popped first
+        stack[top] = left
+        stack[top + 1] = right
+        top += 2
+    return best
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _box_gap_sq(lo: np.ndarray, hi: np.ndarray, bounds: np.ndarray, k: int) -> float:
+    """The squared distance between the box [lo, hi] and node k's box."""
+    gap = 0.0
+    for x in range(3):
+        d = max(bounds[k, x] - hi[x], lo[x] - bounds[k, 3 + x], 0.0)
+        gap += d * d
+    return gap
