@@ -321,10 +321,13 @@ class AlongPath:
         return False
 
     def exact_at(self, k: int, t: int, arrays: tuple[Array, IntArray] | None = None) -> float:
-        """The exact distance of task t at sample k (one FCL distance query, once); written to ``lower``.
+        """The exact distance of task t at sample k (one distance query, once); written to ``lower``.
 
-        An exact distance replaces the bound: were it below (rounding between FCL and the bounds'
-        arithmetic), the smaller value is kept, so nothing reported is above what FCL measured.
+        A body against the cabin: compiled on the cabin's tree (:meth:`~.probes.Probes.distance`); a pair
+        or an obstacle: FCL's.
+
+        An exact distance replaces the bound: were it below (rounding between the distance and the bounds'
+        arithmetic), the smaller value is kept, so nothing reported is above what was measured.
         """
         lower, state = arrays if arrays is not None else (self.lower, self.state)
         if state[k, t] == EXACT:

@@ -23,6 +23,11 @@ from planner.collision.reports import BodyState
 from planner.core.types import Array, IntArray
 from planner.robots.geometry import BOX_CORNER_SIGNS
 
+#: The distance FCL's signed distance query gives a mesh and a shape in contact (it measures no depth).
+PENETRATION_M = -1.0
+#: The half extents passed for a capsule (unused).
+_NO_HALF = np.zeros(3)
+
 
 def _bvh(vertices: Array, faces: IntArray) -> fcl.BVHModel:
     model = fcl.BVHModel()
@@ -91,8 +96,8 @@ class GrownShapes:
 class Probes:
     """FCL objects of a world's bodies and its cabin, and the queries on them (counted in ``queries``).
 
-    A box against the cabin is probed by the compiled test on the cabin's triangle tree when there is one
-    (:func:`planner.collision.kernels.mesh.box_touches_mesh`: FCL's verdicts, about 2 us instead of 10).
+    A body against the cabin is probed by the compiled tests on the cabin's triangle tree when there is one
+    (:mod:`planner.collision.kernels.mesh`: FCL's verdicts, a box in about 2 us instead of 10).
 
     Args:
         bodies: The world's bodies (shapes, checked pairs).
@@ -114,6 +119,7 @@ class Probes:
         self.tree = tree if tree is not None and len(tree.tris) and cabin is not None else None
         self._kernels = kernels
         self._half = [np.array(s.size, dtype=float) / 2 if s.kind == "box" else None for s in bodies.shapes]
+        self._radius = [float(s.radius) if s.kind == "capsule" else 0.0 for s in bodies.shapes]
         self.queries = 0
         self._capsule = [s.kind == "capsule" for s in bodies.shapes]
         self._grown = GrownShapes(bodies.shapes)
@@ -160,10 +166,12 @@ class Probes:
     def cabin_hit(self, st: BodyState, b: int, margin: float) -> bool:
         """Body b grown by ``margin`` touches the cabin."""
         assert self.cabin_obj is not None
-        half = self._half[b]
-        if half is not None and self.tree is not None:
+        if self.tree is not None:
             self.queries += 1
-            return self._kernels.box_touches_mesh(st.flat[b], half, margin, self.tree)
+            half = self._half[b]
+            if half is not None:
+                return self._kernels.box_touches_mesh(st.flat[b], half, margin, self.tree)
+            return self._kernels.capsule_touches_mesh(st.flat[b], self._radius[b], margin, self.tree)
         return self.collide(self.posed(st, b, margin), self.cabin_obj)
 
     def pair_hit(self, st: BodyState, k: int, margin: float) -> bool:
@@ -209,6 +217,14 @@ class Probes:
         the first box of a box pair as a triangle mesh), whose point comes first.
         """
         shapes = self.bodies.shapes
+        if is_cabin and self.tree is not None:  # compiled: exact, where FCL's GJK stops up to 0.2 mm above
+            half = self._half[idx]
+            d, p_body, p_cabin = self._kernels.cabin_witness(
+                st.flat[idx], _NO_HALF if half is None else half, self._radius[idx], self.tree
+            )
+            # A touch or a penetration: -1, as FCL reports one it does not measure (so that every distance
+            # of a report, the obstacles' included, follows one convention).
+            return (d if d > 0.0 else PENETRATION_M), idx, -1, p_body, p_cabin
         if is_cabin:
             a, other = idx, -1
             first = self.cabin_obj

@@ -263,6 +263,23 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
         )
         pts = np.ascontiguousarray(p + rng.normal(0.0, 0.2, (16, 3)))
         _same(built.hull_mesh_lower(pts, trees[0]), jit.hull_mesh_lower(pts, trees[0]), "hull_mesh_lower")
+        pose[12] = 0.4
+        _same(
+            built.cabin_witness(pose, half, 0.0, trees[0]),
+            jit.cabin_witness(pose, half, 0.0, trees[0]),
+            "box",
+        )
+        _same(
+            built.cabin_witness(pose, half, 0.05, trees[0]),
+            jit.cabin_witness(pose, half, 0.05, trees[0]),
+            "cap",
+        )
+        for what in ("capsule_touches_mesh", "capsule_mesh_distance"):
+            _same(
+                getattr(built, what)(pose, 0.05, 0.02, trees[0]),
+                getattr(jit, what)(pose, 0.05, 0.02, trees[0]),
+                what,
+            )
 
 
 def test_build_and_jit_give_the_same_reference_speed() -> None:

@@ -127,6 +127,9 @@ EXTENSION = aot.Extension(
         Entry("box_touches_mesh", ("f8[1]", "f8[1]", "f8", *_TREE), "b1"),
         Entry("box_mesh_distance", ("f8[1]", "f8[1]", "f8", *_TREE), "f8"),
         Entry("hull_mesh_lower", ("f8[2]", *_TREE), "f8"),
+        Entry("capsule_touches_mesh", ("f8[1]", "f8", "f8", *_TREE), "b1"),
+        Entry("capsule_mesh_distance", ("f8[1]", "f8", "f8", *_TREE), "f8"),
+        Entry("cabin_witness", ("f8[1]", "f8[1]", "f8", *_TREE), "(f8,f8[1]w,f8[1]w)"),
     ),
 )
 
@@ -553,6 +556,28 @@ class Kernels:
                 *tree,
             )
         )
+
+    def capsule_touches_mesh(self, pose: Array, radius: float, grow: float, tree: MeshTree) -> bool:
+        """:func:`.mesh.capsule_touches_mesh`: the capsule of radius ``radius`` + ``grow`` at ``pose``."""
+        tree = self._tree(tree)
+        pose = check_array(pose, "pose", F8, 1, shape=(13,))
+        return bool(self.module.capsule_touches_mesh(pose, float(radius), float(grow), *tree))
+
+    def capsule_mesh_distance(self, pose: Array, radius: float, cap: float, tree: MeshTree) -> float:
+        """:func:`.mesh.capsule_mesh_distance`: the capsule's distance to the triangles, at most ``cap``."""
+        tree = self._tree(tree)
+        pose = check_array(pose, "pose", F8, 1, shape=(13,))
+        return float(self.module.capsule_mesh_distance(pose, float(radius), float(cap), *tree))
+
+    def cabin_witness(
+        self, pose: Array, half: Array, radius: float, tree: MeshTree
+    ) -> tuple[float, Array, Array]:
+        """:func:`.mesh.cabin_witness`: (distance, body point, cabin point) of a box (radius 0), a capsule."""
+        tree = self._tree(tree)
+        pose = check_array(pose, "pose", F8, 1, shape=(13,))
+        half = check_array(half, "half", F8, 1, shape=(3,))
+        d, pa, pb = self.module.cabin_witness(pose, half, float(radius), *tree)
+        return float(d), pa, pb
 
     def hull_mesh_lower(self, points: Array, tree: MeshTree) -> float:
         """:func:`.mesh.hull_mesh_lower`: a certified lower bound of conv(points (n, 3))'s distance."""

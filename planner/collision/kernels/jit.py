@@ -9,7 +9,15 @@ from __future__ import annotations
 from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
 from planner.collision.kernels.grid import grid_bounds, grid_marks
-from planner.collision.kernels.mesh import box_mesh_distance, box_touches_mesh, hull_mesh_lower, mesh_tree
+from planner.collision.kernels.mesh import (
+    box_mesh_distance,
+    box_touches_mesh,
+    cabin_witness,
+    capsule_mesh_distance,
+    capsule_touches_mesh,
+    hull_mesh_lower,
+    mesh_tree,
+)
 from planner.collision.kernels.obstacles import obstacle_bounds, obstacle_coarse_batch, obstacle_fine_batch
 from planner.collision.kernels.offsets import (
     hull_deviation,
@@ -32,6 +40,9 @@ __all__ = [
     "bounds_at",
     "box_mesh_distance",
     "box_touches_mesh",
+    "cabin_witness",
+    "capsule_mesh_distance",
+    "capsule_touches_mesh",
     "cover_centres_batch",
     "cover_walk",
     "cumulative_bound",

@@ -330,13 +330,20 @@ def box_mesh_distance(
 ) -> float:
     """The distance from the box of half extents ``half`` at ``pose`` (13,) to the tree's triangles.
 
-    Exact (to rounding, less :data:`ROUND_M`) where it is below ``cap``; ``cap`` where no triangle is
-    nearer (only the triangles within the box's bounds grown by the best distance so far are visited).
-    0 where the box touches a triangle.
+    Exact (to rounding) where it is below ``cap``; ``cap`` where no triangle is nearer (only the triangles
+    within the box's bounds grown by the best distance so far are visited). 0 where the box touches one.
     """
-    best = cap
+    return _box_nearest(pose, half, cap, tris, bounds, links)[0]
+
+
+@njit(cache=True, fastmath=False)
+def _box_nearest(
+    pose: np.ndarray, half: np.ndarray, cap: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
+) -> tuple[float, int]:
+    """:func:`box_mesh_distance` and the nearest triangle (-1: none below ``cap``)."""
+    best, best_t = cap, -1
     if tris.shape[0] == 0:
-        return best
+        return best, best_t
     e0, e1, e2 = half[0], half[1], half[2]
     px, py, pz = pose[9], pose[10], pose[11]
     ext = np.empty(3)
@@ -380,11 +387,11 @@ def box_mesh_distance(
                 )
                 if _dot3(x0, x1, x2, x0, x1, x2) >= best * best:
                     continue
-                d = box_triangle_distance(v, e0, e1, e2, corners) - ROUND_M
+                d = box_triangle_distance(v, e0, e1, e2, corners)
                 if d < best:
-                    best = max(d, 0.0)
+                    best, best_t = d, t
                     if best == 0.0:
-                        return 0.0
+                        return best, best_t
             continue
         if top + 2 > stack.shape[0]:
             grown = np.empty(2 * stack.shape[0], dtype=np.int64)
@@ -393,7 +400,7 @@ def box_mesh_distance(
         stack[top] = links[k, 0]
         stack[top + 1] = -links[k, 1] - 1
         top += 2
-    return best
+    return best, best_t
 
 
 #: Iterations of :func:`hull_triangle_lower`'s minimum-norm search (it stops earlier at a relative gap of
@@ -445,17 +452,15 @@ def _affine_min(m: np.ndarray, s: np.ndarray, k: int, a: np.ndarray, g: np.ndarr
 
 
 @njit(cache=True, fastmath=False)
-def hull_triangle_lower(
+def _wolfe(
     m: np.ndarray, nm: int, s: np.ndarray, lam: np.ndarray, a: np.ndarray, g: np.ndarray
-) -> float:
-    """A certified lower bound of the norm of conv(m[:nm]) (0: it may hold the origin).
+) -> tuple[int, float, float, float]:
+    """Wolfe's minimum-norm point of conv(m[:nm]): (corral size k, x); the corral in ``s[:k]``, ``lam[:k]``.
 
-    With m the differences of two point sets' points, the distance between their convex hulls. Wolfe's
-    minimum-norm-point algorithm (Wolfe, "Finding the nearest point in a polytope", Math. Programming 11,
-    1976) from the shortest point: the corral ``s`` (at most 4 points, weights ``lam``)
-    moves towards the origin's nearest point. For any x, every point p of the hull has x . p >= min_k x . m_k
-    = w, so the hull is at least w / |x| from the origin where w > 0: that bound is returned from the last
-    iterate, exact at convergence (scratch: ``s`` (5,) ints, ``lam``, ``a`` (5,), ``g`` (5, 6)).
+    Wolfe, "Finding the nearest point in a polytope", Math. Programming 11, 1976: from the shortest point,
+    the corral (at most 4 points) moves towards the origin's nearest point of the hull, until the gap
+    x . x - min_k x . m_k is below :data:`HULL_GAP` (relative) or :data:`HULL_ITERATIONS` pass. k = 0: the
+    corral collapsed (x is then 0). Scratch: ``s`` (5,) ints, ``lam``, ``a`` (5,), ``g`` (5, 6).
     """
     best, k0 = math.inf, 0
     for i in range(nm):
@@ -468,7 +473,7 @@ def hull_triangle_lower(
     for _ in range(HULL_ITERATIONS):
         xx = _dot3(x0, x1, x2, x0, x1, x2)
         if xx == 0.0:
-            return 0.0
+            break
         jmin, w = 0, math.inf
         for i in range(nm):
             v = _dot3(x0, x1, x2, m[i, 0], m[i, 1], m[i, 2])
@@ -506,12 +511,26 @@ def hull_triangle_lower(
                     j += 1
             k = j
             if k == 0:
-                return 0.0
+                return 0, 0.0, 0.0, 0.0
         x0, x1, x2 = 0.0, 0.0, 0.0
         for i in range(k):
             x0 += lam[i] * m[s[i], 0]
             x1 += lam[i] * m[s[i], 1]
             x2 += lam[i] * m[s[i], 2]
+    return k, x0, x1, x2
+
+
+@njit(cache=True, fastmath=False)
+def hull_triangle_lower(
+    m: np.ndarray, nm: int, s: np.ndarray, lam: np.ndarray, a: np.ndarray, g: np.ndarray
+) -> float:
+    """A certified lower bound of the norm of conv(m[:nm]) (0: it may hold the origin).
+
+    With m the differences of two point sets' points, the distance between their convex hulls. For any x,
+    every point p of the hull has x . p >= min_k x . m_k = w, so the hull is at least w / |x| from the
+    origin where w > 0: that bound, from :func:`_wolfe`'s minimum-norm point, exact at its convergence.
+    """
+    _, x0, x1, x2 = _wolfe(m, nm, s, lam, a, g)
     xx = _dot3(x0, x1, x2, x0, x1, x2)
     if xx == 0.0:
         return 0.0
@@ -591,3 +610,160 @@ def _box_gap_sq(lo: np.ndarray, hi: np.ndarray, bounds: np.ndarray, k: int) -> f
         d = max(bounds[k, x] - hi[x], lo[x] - bounds[k, 3 + x], 0.0)
         gap += d * d
     return gap
+
+
+@njit(cache=True, fastmath=False)
+def segment_triangle_sq(a: np.ndarray, b: np.ndarray, v: np.ndarray, x: np.ndarray) -> float:
+    """Squared distance between the segment [a, b] and the triangle v (3, 3) (``x`` (3,): scratch).
+
+    Where the segment crosses the triangle's plane, the crossing's distance to the triangle (0 inside it);
+    then the end points against the triangle and the segment against its 3 edges, where the nearest points
+    of a segment and a triangle that do not meet lie.
+    """
+    n0 = (v[1, 1] - v[0, 1]) * (v[2, 2] - v[0, 2]) - (v[1, 2] - v[0, 2]) * (v[2, 1] - v[0, 1])
+    n1 = (v[1, 2] - v[0, 2]) * (v[2, 0] - v[0, 0]) - (v[1, 0] - v[0, 0]) * (v[2, 2] - v[0, 2])
+    n2 = (v[1, 0] - v[0, 0]) * (v[2, 1] - v[0, 1]) - (v[1, 1] - v[0, 1]) * (v[2, 0] - v[0, 0])
+    da = _dot3(n0, n1, n2, a[0] - v[0, 0], a[1] - v[0, 1], a[2] - v[0, 2])
+    db = _dot3(n0, n1, n2, b[0] - v[0, 0], b[1] - v[0, 1], b[2] - v[0, 2])
+    best = math.inf
+    if (da <= 0.0 <= db or db <= 0.0 <= da) and da != db:
+        t = da / (da - db)
+        for j in range(3):
+            x[j] = a[j] + t * (b[j] - a[j])
+        best = point_triangle_sq(x, v)
+        if best == 0.0:
+            return 0.0
+    best = min(best, point_triangle_sq(a, v))
+    best = min(best, point_triangle_sq(b, v))
+    for c in range(3):
+        best = min(best, segment_segment_sq(a, b, v[c], v[(c + 1) % 3]))
+    return best
+
+
+@njit(cache=True, fastmath=False)
+def capsule_mesh_distance(
+    pose: np.ndarray, radius: float, cap: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
+) -> float:
+    """The distance from the capsule at ``pose`` to the tree's triangles.
+
+    The capsule: radius ``radius``, axis length ``pose[12]`` along its z axis (as FCL's capsule). Exact (to
+    rounding) below ``cap``, else ``cap``; negative (the axis's distance less the radius) where the capsule
+    reaches into a triangle.
+    """
+    return _capsule_nearest(pose, radius, cap, tris, bounds, links)[0]
+
+
+@njit(cache=True, fastmath=False)
+def _capsule_nearest(
+    pose: np.ndarray, radius: float, cap: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
+) -> tuple[float, int]:
+    """:func:`capsule_mesh_distance` and the nearest triangle (-1: none below ``cap``)."""
+    best, best_t = cap + radius, -1  # on the axis
+    if tris.shape[0] == 0:
+        return cap, best_t
+    h = 0.5 * pose[12]
+    a = np.empty(3)
+    b = np.empty(3)
+    for j in range(3):
+        a[j] = pose[9 + j] - h * pose[6 + j]
+        b[j] = pose[9 + j] + h * pose[6 + j]
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for j in range(3):
+        lo[j], hi[j] = min(a[j], b[j]), max(a[j], b[j])
+    v = np.empty((3, 3))
+    x = np.empty(3)
+    stack = np.empty(64, dtype=np.int64)
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        k = stack[top]
+        if _box_gap_sq(lo, hi, bounds, k) >= best * best:
+            continue
+        if links[k, 1] > 0:
+            for t in range(links[k, 0], links[k, 0] + links[k, 1]):
+                for c in range(3):
+                    for j in range(3):
+                        v[c, j] = tris[t, 3 * c + j]
+                d = math.sqrt(segment_triangle_sq(a, b, v, x))
+                if d < best:
+                    best, best_t = d, t
+            continue
+        if top + 2 > stack.shape[0]:
+            grown = np.empty(2 * stack.shape[0], dtype=np.int64)
+            grown[:top] = stack[:top]
+            stack = grown
+        left, right = links[k, 0], -links[k, 1] - 1
+        if _box_gap_sq(lo, hi, bounds, left) < _box_gap_sq(lo, hi, bounds, right):
+            left, right = right, left
+        stack[top] = left
+        stack[top + 1] = right
+        top += 2
+    return min(best - radius, cap), best_t
+
+
+@njit(cache=True, fastmath=False)
+def capsule_touches_mesh(
+    pose: np.ndarray, radius: float, grow: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
+) -> bool:
+    """Whether the capsule of radius ``radius`` + ``grow`` at ``pose`` touches a triangle of the tree."""
+    return capsule_mesh_distance(pose, radius + grow + ROUND_M, ROUND_M, tris, bounds, links) <= 0.0
+
+
+@njit(cache=True, fastmath=False)
+def cabin_witness(
+    pose: np.ndarray, half: np.ndarray, radius: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """(distance, the body's nearest point, the cabin's nearest point) of a body against the triangles.
+
+    A box (``radius`` 0, half extents ``half``) or a capsule (``radius`` > 0) at ``pose``. The distance is
+    :func:`box_mesh_distance`'s / :func:`capsule_mesh_distance`'s (exact; inf and NaN points without
+    triangles); the points come from :func:`_wolfe` on the differences of the nearest triangle's vertices
+    and the body's corners (a capsule: its axis end points, the body's point then moved out by the radius).
+    """
+    pa = np.full(3, np.nan)
+    pb = np.full(3, np.nan)
+    if radius > 0.0:
+        d, t = _capsule_nearest(pose, radius, math.inf, tris, bounds, links)
+        n = 2
+    else:
+        d, t = _box_nearest(pose, half, math.inf, tris, bounds, links)
+        n = 8
+    if t < 0:
+        return d, pa, pb
+    pts = np.empty((n, 3))
+    for k in range(n):
+        for j in range(3):
+            if radius > 0.0:
+                pts[k, j] = pose[9 + j] + (k - 0.5) * pose[12] * pose[6 + j]
+            else:
+                c = pose[9 + j]
+                c += (half[0] if k & 1 else -half[0]) * pose[j]
+                c += (half[1] if k & 2 else -half[1]) * pose[3 + j]
+                c += (half[2] if k & 4 else -half[2]) * pose[6 + j]
+                pts[k, j] = c
+    m = np.empty((3 * n, 3))
+    for i in range(n):
+        for c in range(3):
+            for j in range(3):
+                m[3 * i + c, j] = pts[i, j] - tris[t, 3 * c + j]
+    s = np.empty(5, dtype=np.int64)
+    lam = np.empty(5)
+    k, _, _, _ = _wolfe(m, 3 * n, s, lam, np.empty(5), np.empty((5, 6)))
+    if k == 0:  # a collapsed corral (a touch): the first corner and the triangle's first vertex
+        s[0], lam[0], k = 0, 1.0, 1
+    pa[:] = 0.0
+    pb[:] = 0.0
+    for i in range(k):
+        for j in range(3):
+            pa[j] += lam[i] * pts[s[i] // 3, j]
+            pb[j] += lam[i] * tris[t, 3 * (s[i] % 3) + j]
+    if radius > 0.0:  # from the axis to the capsule's surface, towards the cabin
+        g0, g1, g2 = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+        gap = math.sqrt(_dot3(g0, g1, g2, g0, g1, g2))
+        if gap > 0.0:
+            pa[0] += radius * g0 / gap
+            pa[1] += radius * g1 / gap
+            pa[2] += radius * g2 / gap
+    return d, pa, pb

@@ -48,7 +48,12 @@ from planner.collision.kernels.codes import (
     WALK_GROW,
     WALK_PROBE,
 )
-from planner.collision.kernels.mesh import box_mesh_distance, box_touches_mesh
+from planner.collision.kernels.mesh import (
+    box_mesh_distance,
+    box_touches_mesh,
+    capsule_mesh_distance,
+    capsule_touches_mesh,
+)
 from planner.collision.kernels.packed import unpack
 from planner.collision.kernels.poses import admissible, constraints_at, poses_at
 
@@ -246,11 +251,12 @@ def motion_walk(
     Returns ``WALK_PROBE`` when the walk needs FCL: ``ci[CI_SLOT]`` is the state's slot, the
     ``ci[CI_LEVELS]`` levels to try in order are at ``cf[CF_LEVEL0:]``, ``cf[CF_E]`` the bound's E; the
     caller writes the first level that did not collide (or leaves E) into ``cf[CF_E]`` and calls again.
-    A box body against the cabin, with the cabin's tree given (``tris``, ``tree_bounds``, ``tree_links``:
+    A body against the cabin, with the cabin's tree given (``tris``, ``tree_bounds``, ``tree_links``:
     :func:`.mesh.mesh_tree`; empty: none), is probed here, level by level, by the same test
-    (:func:`.mesh.box_touches_mesh` on the box grown by the level, as FCL's grown box; counted in
-    ``ci[CI_QUERIES]``), and where every level touched, its exact distance to the cabin decides as the
-    caller's does (:func:`.mesh.box_mesh_distance`).
+    (:func:`.mesh.box_touches_mesh` on a box grown by the level, as FCL's grown box;
+    :func:`.mesh.capsule_touches_mesh` on a capsule; counted in ``ci[CI_QUERIES]``), and where every level
+    touched, its exact distance to the cabin decides as the caller's does (:func:`.mesh.box_mesh_distance`,
+    :func:`.mesh.capsule_mesh_distance`): only pairs return ``WALK_PROBE``.
     ``WALK_FAIL``: no margin could be proven (task ``ci[CI_TASK]``, at ``cf[CF_TFAIL]``). ``WALK_GROW``:
     the state store is full (enlarge and call again). ``WALK_DONE``: every task is certified.
     """
@@ -319,7 +325,8 @@ def motion_walk(
                 # halved down to the margin, strictly decreasing (see ``probe_levels``).
                 m = probe_levels(cf, m, above, max(cf[CF_LAST], 2.0 * local), local)
             probe = m > 0
-            if probe and is_cabin and tris.shape[0] > 0 and u.radius[idx] == 0.0:  # a box: probed here
+            if probe and is_cabin and tris.shape[0] > 0:  # a body against the cabin: probed here
+                r_b = u.radius[idx]  # 0: a box; else a capsule
                 lowest = math.inf
                 clear = False
                 for r in range(m):
@@ -327,19 +334,28 @@ def motion_walk(
                     lowest = min(lowest, level)
                     ci[CI_QUERIES] += 1
                     grow = base + level
-                    if not box_touches_mesh(poses[s, idx], u.half[idx], grow, tris, tree_bounds, tree_links):
+                    if r_b == 0.0:
+                        hit = box_touches_mesh(
+                            poses[s, idx], u.half[idx], grow, tris, tree_bounds, tree_links
+                        )
+                    else:
+                        hit = capsule_touches_mesh(poses[s, idx], r_b, grow, tris, tree_bounds, tree_links)
+                    if not hit:
                         E = level
                         clear = True
                         break
                 if not clear and lowest <= local + 1e-12:
-                    # Every grown box touched. A grown box is a larger box: near its edges and corners it
+                    # Every grown body touched. A grown box is a larger box: near its edges and corners it
                     # overstates the clearance it tests by up to (sqrt 3 - 1) times the growth, so the exact
                     # distance decides; it is below sqrt 3 times the smallest growth that touched.
                     cap = math.sqrt(3.0) * (base + lowest) + 1e-6
-                    box = poses[s, idx]
-                    spare = box_mesh_distance(box, u.half[idx], cap, tris, tree_bounds, tree_links) - base
-                    if spare >= local:
-                        E = spare
+                    body = poses[s, idx]
+                    if r_b == 0.0:
+                        d = box_mesh_distance(body, u.half[idx], cap, tris, tree_bounds, tree_links)
+                    else:
+                        d = capsule_mesh_distance(body, r_b, cap, tris, tree_bounds, tree_links)
+                    if d - base >= local:
+                        E = d - base
                 probe = False
             if probe:
                 ci[CI_SLOT] = s
