@@ -349,6 +349,10 @@ def _box_nearest(
     ext = np.empty(3)
     for i in range(3):
         ext[i] = abs(pose[i]) * e0 + abs(pose[3 + i]) * e1 + abs(pose[6 + i]) * e2
+    lo = np.empty(3)  # the box's bounds
+    hi = np.empty(3)
+    for i in range(3):
+        lo[i], hi[i] = pose[9 + i] - ext[i], pose[9 + i] + ext[i]
     v = np.empty((3, 3))
     corners = np.empty((8, 3))
     stack = np.empty(64, dtype=np.int64)
@@ -357,15 +361,7 @@ def _box_nearest(
     while top > 0:
         top -= 1
         k = stack[top]
-        g = best
-        if (
-            bounds[k, 0] > px + ext[0] + g
-            or bounds[k, 3] < px - ext[0] - g
-            or bounds[k, 1] > py + ext[1] + g
-            or bounds[k, 4] < py - ext[1] - g
-            or bounds[k, 2] > pz + ext[2] + g
-            or bounds[k, 5] < pz - ext[2] - g
-        ):
+        if _box_gap_sq(lo, hi, bounds, k) >= best * best:
             continue
         if links[k, 1] > 0:
             for t in range(links[k, 0], links[k, 0] + links[k, 1]):
@@ -397,8 +393,11 @@ def _box_nearest(
             grown = np.empty(2 * stack.shape[0], dtype=np.int64)
             grown[:top] = stack[:top]
             stack = grown
-        stack[top] = links[k, 0]
-        stack[top + 1] = -links[k, 1] - 1
+        left, right = links[k, 0], -links[k, 1] - 1
+        if _box_gap_sq(lo, hi, bounds, left) < _box_gap_sq(lo, hi, bounds, right):
+            left, right = right, left  # the nearer child popped first
+        stack[top] = left
+        stack[top + 1] = right
         top += 2
     return best, best_t
 
