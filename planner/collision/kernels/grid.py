@@ -131,6 +131,16 @@ def _envelope(f: np.ndarray, n: int, d: np.ndarray, v: np.ndarray, z: np.ndarray
 
 
 @njit(cache=True, fastmath=False)
+def _rows(slab: np.ndarray, dst: np.ndarray, v: np.ndarray, z: np.ndarray) -> None:
+    """Each row of ``slab`` (lines, n) replaced by its lower envelope (:func:`_envelope`), in place."""
+    n = slab.shape[1]
+    for k in range(slab.shape[0]):
+        _envelope(slab[k], n, dst, v, z)
+        for q in range(n):
+            slab[k, q] = dst[q]
+
+
+@njit(cache=True, fastmath=False)
 def grid_bounds(marked: np.ndarray, step: float, offset: float, out: np.ndarray) -> None:
     """``out[1 + i, 1 + j, 1 + k] = step * (distance in node steps to the nearest marked node) - offset``.
 
@@ -142,7 +152,6 @@ def grid_bounds(marked: np.ndarray, step: float, offset: float, out: np.ndarray)
     work = np.empty((nx, ny, nz))
     v = np.empty(m, dtype=np.int64)
     z = np.empty(m + 1)
-    src = np.empty(m)
     dst = np.empty(m)
     # Along z: the squared distance to the nearest marked node of each line (two scans).
     for i in range(nx):
@@ -166,12 +175,7 @@ def grid_bounds(marked: np.ndarray, step: float, offset: float, out: np.ndarray)
         for j in range(ny):
             for k in range(nz):
                 slab[k, j] = work[i, j, k]
-        for k in range(nz):
-            for j in range(ny):
-                src[j] = slab[k, j]
-            _envelope(src, ny, dst, v, z)
-            for j in range(ny):
-                slab[k, j] = dst[j]
+        _rows(slab, dst, v, z)
         for j in range(ny):
             for k in range(nz):
                 work[i, j, k] = slab[k, j]
@@ -182,12 +186,7 @@ def grid_bounds(marked: np.ndarray, step: float, offset: float, out: np.ndarray)
         for i in range(nx):
             for k in range(nz):
                 slab[k, i] = work[i, j, k]
-        for k in range(nz):
-            for i in range(nx):
-                src[i] = slab[k, i]
-            _envelope(src, nx, dst, v, z)
-            for i in range(nx):
-                slab[k, i] = dst[i]
+        _rows(slab, dst, v, z)
         for i in range(nx):
             for k in range(nz):
                 out[i + 1, j + 1, k + 1] = math.sqrt(slab[k, i]) * step - offset

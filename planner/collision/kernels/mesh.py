@@ -28,6 +28,8 @@ import numpy as np
 from numba import njit
 
 from planner.collision.kernels.codes import ROUND_M
+from planner.collision.kernels.distances import dot3 as _dot3
+from planner.collision.kernels.distances import segment_segment_sq
 
 #: Most triangles in a leaf of the tree.
 LEAF = 4
@@ -204,11 +206,6 @@ def box_touches_mesh(
     return False
 
 
-@njit(cache=True, fastmath=False, inline="always")
-def _dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
-    return (a0 * b0 + a1 * b1) + a2 * b2
-
-
 @njit(cache=True, fastmath=False)
 def point_triangle_sq(p: np.ndarray, v: np.ndarray) -> float:
     """Squared distance from p (3,) to the triangle v (3, 3) (Ericson, Real-Time Collision Detection, 5.1.5).
@@ -253,43 +250,6 @@ def point_triangle_sq(p: np.ndarray, v: np.ndarray) -> float:
     s, w = vb * den, vc * den
     q0, q1, q2 = ap0 - s * ab0 - w * ac0, ap1 - s * ab1 - w * ac1, ap2 - s * ab2 - w * ac2
     return _dot3(q0, q1, q2, q0, q1, q2)
-
-
-@njit(cache=True, fastmath=False)
-def segment_segment_sq(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray) -> float:
-    """Squared distance between the segments [p, q] and [r, s] (Ericson 5.1.9, degenerate ones included)."""
-    d10, d11, d12 = q[0] - p[0], q[1] - p[1], q[2] - p[2]
-    d20, d21, d22 = s[0] - r[0], s[1] - r[1], s[2] - r[2]
-    r0, r1, r2 = p[0] - r[0], p[1] - r[1], p[2] - r[2]
-    a = _dot3(d10, d11, d12, d10, d11, d12)
-    e = _dot3(d20, d21, d22, d20, d21, d22)
-    f = _dot3(d20, d21, d22, r0, r1, r2)
-    tiny = 1e-30
-    if a <= tiny and e <= tiny:
-        return _dot3(r0, r1, r2, r0, r1, r2)
-    if a <= tiny:
-        sc = 0.0
-        tc = min(max(f / e, 0.0), 1.0)
-    else:
-        c = _dot3(d10, d11, d12, r0, r1, r2)
-        if e <= tiny:
-            tc = 0.0
-            sc = min(max(-c / a, 0.0), 1.0)
-        else:
-            b = _dot3(d10, d11, d12, d20, d21, d22)
-            den = a * e - b * b
-            sc = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 0.0 else 0.0
-            tc = (b * sc + f) / e
-            if tc < 0.0:
-                tc = 0.0
-                sc = min(max(-c / a, 0.0), 1.0)
-            elif tc > 1.0:
-                tc = 1.0
-                sc = min(max((b - c) / a, 0.0), 1.0)
-    x0 = (p[0] + d10 * sc) - (r[0] + d20 * tc)
-    x1 = (p[1] + d11 * sc) - (r[1] + d21 * tc)
-    x2 = (p[2] + d12 * sc) - (r[2] + d22 * tc)
-    return _dot3(x0, x1, x2, x0, x1, x2)
 
 
 @njit(cache=True, fastmath=False)

@@ -2,8 +2,8 @@
 
 :func:`motion_walk` is the walk of :mod:`planner.collision.motion` (the maths is in
 :meth:`planner.collision.world.CollisionWorld.check_motion`): states and per-body / per-pair bounds are
-evaluated on demand, and the walk returns to Python only when a task needs FCL probes on a grown body
-(a box body against the cabin is probed here, :mod:`.mesh`).
+evaluated on demand, and the walk returns to Python only when a robot pair needs FCL probes on its grown
+bodies (a body against the cabin is probed here, on the cabin's triangles: :mod:`.mesh`).
 Around it: the limit samples (:func:`first_inadmissible`), the reach bounds of a segment
 (:func:`end_ratio`, :func:`segment_reach`) and the run rule of ``check_path`` (:func:`run_extent`).
 """
