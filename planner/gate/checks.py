@@ -132,7 +132,7 @@ def on_path_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
     """``on_path``: every sample lies on the certified geometric path (when the planner gives it)."""
     if ctx.q is None or ctx.req.path_legs is None:
         return None
-    dev = path_deviation(ctx.q, ctx.req.path_legs, ctx.req.path_leg_of)
+    dev = path_deviation(ctx.q, ctx.req.path_legs, ctx.req.path_leg_of, ctx.req.path_s)
     k = int(np.argmax(dev))
     return Check(
         "on_path",

@@ -78,6 +78,9 @@ class GateRequirements:
     path_legs: tuple[JointPath, ...] | None = field(default=None, repr=False)
     #: The leg (N,) each sample was timed on, with ``path_legs``: each sample must lie on its own leg.
     path_leg_of: IntArray | None = field(default=None, repr=False)
+    #: With ``path_leg_of``: the parameter (N,) on its leg at which each sample was taken, the witness that
+    #: it lies on the path (a sample within the tolerance of its witness point needs no nearest-point search).
+    path_s: Array | None = field(default=None, repr=False)
     #: Whether this gate certifies the clearance (``collision`` and the clearance figure); False only where
     #: a caller's gate certifies the same samples in the same world (a cycle's legs: the cycle gate).
     collision: bool = True

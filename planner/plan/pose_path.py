@@ -225,7 +225,7 @@ def build_profile(
     entry = stages.default_stage(robot)
     stage = entry.build(robot, None, sample_period_s=period, grid_points=grid_points)
     timed = [stage.time_path(leg) for leg in leg_paths(path)]
-    profile, leg = sample_legs(robot, timed, period, None)
+    profile, leg, _ = sample_legs(robot, timed, period, None)
     gate, poses = validate(robot, path, profile, leg, period)
     if not gate.passed:
         raise ValidationFailed(f"the drive profile failed the gate: {gate.summary()}", report=gate.to_dict())

@@ -54,12 +54,12 @@ def time_and_validate(
             "duration_s": round(sum(tl.duration for tl in timed), 6),
         }
         ctx.progress("sample", 0.85)
-        profile, ctx.leg_of = sample_legs(
+        profile, ctx.leg_of, path_s = sample_legs(
             ctx.robot, timed, ctx.opts.sample_period_s, ctx.payload, ctx.dynamics
         )
         ctx.progress("validate", 0.9)
         with ctx.stage(f"validate_{attempt}"):
-            sampled = dataclasses.replace(req, path_leg_of=ctx.leg_of)
+            sampled = dataclasses.replace(req, path_leg_of=ctx.leg_of, path_s=path_s)
             gate = validate_profile(profile, ctx.robot, ctx.world, sampled, ctx.dynamics)
         if gate.passed:
             return profile, gate, timed

@@ -179,8 +179,10 @@ def sample_legs(
     period_s: float,
     payload: RigidPayload | None,
     dynamics: DriveDynamics | None = None,
-) -> tuple[DriveProfile, IntArray]:
-    """Sample consecutive legs at t_k = k * period; also returns each sample's leg index (N,).
+) -> tuple[DriveProfile, IntArray, Array]:
+    """Sample consecutive legs at t_k = k * period; also each sample's leg index (N,) and path parameter (N,).
+
+    Sample k is its leg's path at the parameter ``s[k]`` (the gate's witness that it lies on the path).
 
     Forces come from the robot's dynamics model (``dynamics``, else
     :func:`~planner.dynamics.models.drive_dynamics`); a robot without one gives a profile without forces.
@@ -194,6 +196,7 @@ def sample_legs(
     n = int(first[-1]) + 1
     t = np.arange(n, dtype=float) * period_s
     leg_of = np.full(n, -1)
+    s_of = np.zeros(n)
     q = np.empty((n, len(legs[0].path.start)))
     qd = np.zeros_like(q)
     qdd = np.zeros_like(q)
@@ -214,13 +217,15 @@ def sample_legs(
         ud[idx] = pdu * sd[:, None]
         udd[idx] = pdu * sdd[:, None] + pddu * (sd**2)[:, None]
         leg_of[idx] = k
+        s_of[idx] = s
     # Exact end points: the first sample is the path's start, the last the path's end, both at rest.
     q[0], u[0] = legs[0].path.start, robot.drives_from_joints(legs[0].path.start)
     q[-1], u[-1] = legs[-1].path.end, robot.drives_from_joints(legs[-1].path.end)
+    s_of[0], s_of[-1] = 0.0, legs[-1].path.length
     qd[[0, -1]] = ud[[0, -1]] = 0.0
     qdd[-1] = udd[-1] = 0.0
     effort = dynamics.drive_forces_batch(q, qd, qdd, payload) if dynamics is not None else None
     profile = DriveProfile(
         robot.drive_names, robot.drive_units, robot.joint_names, float(period_s), t, u, ud, udd, effort, q
     )
-    return profile, leg_of
+    return profile, leg_of, s_of

@@ -98,7 +98,7 @@ def timed(robot: Cabin8, path: JointPath, name: str, mass: float) -> tuple[Timed
     if key not in _timed:
         payload = grasped(mass) if mass > 0 else None
         tp = ToppraStage(robot, payload).time_path(path)
-        prof, leg_of = sample_legs(robot, [tp], PERIOD, payload)
+        prof, leg_of, _ = sample_legs(robot, [tp], PERIOD, payload)
         assert np.all(leg_of == 0)
         _timed[key] = (tp, prof)
     return _timed[key]
@@ -245,7 +245,7 @@ def test_binding_force_limit_holds_on_every_sample(
     weak.limits = dataclasses.replace(robot.limits, effort_max=f_max)
     payload = grasped(30.0)
     tp = ToppraStage(weak, payload).time_path(rail_path)
-    prof, _ = sample_legs(weak, [tp], PERIOD, payload)
+    prof, _, _ = sample_legs(weak, [tp], PERIOD, payload)
     _, strong = timed(robot, rail_path, "rail", 30.0)
     f = np.abs(prof.effort) / f_max
     assert np.all(f <= TOL)
@@ -314,7 +314,7 @@ def test_legs_are_sampled_back_to_back_at_rest_at_every_boundary(
     payload = grasped(30.0)
     stage = ToppraStage(robot, payload)
     legs = [stage.time_path(p) for p in (rail_path, arm_path, line(robot, arm_path.end, rail_path.end))]
-    prof, leg_of = sample_legs(robot, legs, PERIOD, payload)
+    prof, leg_of, _ = sample_legs(robot, legs, PERIOD, payload)
     lim = robot.limits
     steps = [int(np.ceil(leg.duration / PERIOD - 1e-9)) for leg in legs]
     assert len(prof.t) == sum(steps) + 1
