@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=False, inline="always")
+@njit(cache=True, fastmath=False)
 def dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
     """The dot product of two 3-vectors given by their components, summed in sequence (numpy's order)."""
     return (a0 * b0 + a1 * b1) + a2 * b2
