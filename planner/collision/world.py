@@ -144,9 +144,10 @@ class CollisionWorld(Generic[RobotT]):
     #: Motion walks: probe for more than the bounds prove only where they prove nothing (states cost
     #: ~2 us, an FCL probe 10-50 us); the reference route keeps the original always-probe policy.
     probe_when_proven: bool = False
-    #: Probes of a box against the cabin by the compiled test on the cabin's triangle tree (FCL's verdicts,
-    #: :mod:`.kernels.mesh`), in the motion walk and in state checks; the reference route uses FCL's.
-    compiled_box_probes: bool = True
+    #: A body's probes and exact distances against the cabin by the compiled tests on the cabin's triangle
+    #: tree (FCL's verdicts, exact distances: :mod:`.kernels.mesh`) outside the walk too (state checks, the
+    #: gate, reports); the reference route uses FCL's.
+    compiled_cabin_tests: bool = True
 
     def __init__(
         self,
@@ -176,7 +177,7 @@ class CollisionWorld(Generic[RobotT]):
         self._probes = Probes(
             self.bodies,
             cabin_bvh(*entry[0]) if entry is not None else None,
-            tree if self.compiled_box_probes else None,
+            tree if self.compiled_cabin_tests else None,
         )
         if entry is not None:
             self._grid = _cabin_grid(*entry[0], grid_step_m)
