@@ -198,11 +198,8 @@ def swept_bound_tree(verts: Array, shape: Shape, tree: MeshTree) -> float:
     needs only the points); its distance is a certified lower bound (FCL's to 1e-11 m where FCL's is exact,
     ``tests/collision/test_mesh_tree.py``), less :data:`~.kernels.codes.ROUND_M` for rounding.
     """
-    e = hull_deviation(verts)
     d = KERNELS.hull_mesh_lower(np.ascontiguousarray(np.vstack([verts[0], verts[-1]])), tree)
-    if not d > 0.0:
-        return -np.inf
-    return d - e - grown_radius(shape) - ROUND_M
+    return _run_bound(d, verts, shape, ROUND_M)
 
 
 def swept_bound(verts: Array, shape: Shape, target: Any) -> float:
@@ -216,8 +213,12 @@ def swept_bound(verts: Array, shape: Shape, target: Any) -> float:
     Returns:
         d(H, target) - e - r - :data:`GJK_SLACK_M`, or ``-inf`` when the hull touches the target.
     """
-    e = hull_deviation(verts)
     d = float(fcl.distance(hull_object(verts, shape), target, _REQUEST, fcl.DistanceResult()))
+    return _run_bound(d, verts, shape, GJK_SLACK_M)
+
+
+def _run_bound(d: float, verts: Array, shape: Shape, slack: float) -> float:
+    """The hull's distance ``d`` less the run's deviation e, the radius r and ``slack``; -inf: it touches."""
     if not d > 0.0:
         return -np.inf
-    return d - e - grown_radius(shape) - GJK_SLACK_M
+    return d - hull_deviation(verts) - grown_radius(shape) - slack

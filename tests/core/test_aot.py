@@ -251,35 +251,19 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
     for p in rng.uniform(v.min(axis=0), v.max(axis=0), (200, 3)):
         pose = np.concatenate([np.eye(3).reshape(9), p, [0.0]])
         half = rng.uniform(0.01, 0.3, 3)
-        _same(
-            built.box_touches_mesh(pose, half, 0.01, trees[0]),
-            jit.box_touches_mesh(pose, half, 0.01, trees[0]),
-            "box_touches_mesh",
-        )
-        _same(
-            built.box_mesh_distance(pose, half, 0.3, trees[0]),
-            jit.box_mesh_distance(pose, half, 0.3, trees[0]),
-            "box_mesh_distance",
-        )
         pts = np.ascontiguousarray(p + rng.normal(0.0, 0.2, (16, 3)))
-        _same(built.hull_mesh_lower(pts, trees[0]), jit.hull_mesh_lower(pts, trees[0]), "hull_mesh_lower")
-        pose[12] = 0.4
-        _same(
-            built.cabin_witness(pose, half, 0.0, trees[0]),
-            jit.cabin_witness(pose, half, 0.0, trees[0]),
-            "box",
-        )
-        _same(
-            built.cabin_witness(pose, half, 0.05, trees[0]),
-            jit.cabin_witness(pose, half, 0.05, trees[0]),
-            "cap",
-        )
-        for what in ("capsule_touches_mesh", "capsule_mesh_distance"):
-            _same(
-                getattr(built, what)(pose, 0.05, 0.02, trees[0]),
-                getattr(jit, what)(pose, 0.05, 0.02, trees[0]),
-                what,
-            )
+        capsule = np.concatenate([pose[:12], [0.4]])
+        calls = [
+            ("box_touches_mesh", (pose, half, 0.01)),
+            ("box_mesh_distance", (pose, half, 0.3)),
+            ("hull_mesh_lower", (pts,)),
+            ("cabin_witness", (capsule, half, 0.0)),
+            ("cabin_witness", (capsule, half, 0.05)),
+            ("capsule_touches_mesh", (capsule, 0.05, 0.02)),
+            ("capsule_mesh_distance", (capsule, 0.05, 0.02)),
+        ]
+        for what, args in calls:
+            _same(getattr(built, what)(*args, trees[0]), getattr(jit, what)(*args, trees[0]), what)
 
 
 def test_build_and_jit_give_the_same_reference_speed() -> None:
