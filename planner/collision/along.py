@@ -27,7 +27,7 @@ by the smaller of the two from sample to sample, makes d_t 1-Lipschitz over the 
 
 :meth:`AlongPath.certify` proves every piece so -- the cabin's and the pairs' in one compiled walk
 (:func:`~planner.collision.kernels.along.cover_walk`), the obstacles' alike on their bounds: bounds on
-demand where the spare clearance proven so far runs out, swept hulls over adaptive windows of samples, FCL
+demand where the spare clearance proven so far runs out, swept hulls over adaptive windows of samples,
 probes and exact distances only where those fall short; a piece whose two exact end distances still cannot
 cover it is walked by the world's certified motion check
 (:meth:`~planner.collision.world.CollisionWorld.check_motion`, obstacles included), which decides. It is
@@ -323,8 +323,8 @@ class AlongPath:
     def exact_at(self, k: int, t: int, arrays: tuple[Array, IntArray] | None = None) -> float:
         """The exact distance of task t at sample k (one distance query, once); written to ``lower``.
 
-        A body against the cabin: compiled on the cabin's tree (:meth:`~.probes.Probes.distance`); a pair
-        or an obstacle: FCL's.
+        A body against the cabin or an obstacle: compiled on its triangle tree
+        (:meth:`~.probes.Probes.distance`, :meth:`~.obstacles.ObstacleSet.distance`); a pair: FCL's.
 
         An exact distance replaces the bound: were it below (rounding between the distance and the bounds'
         arithmetic), the smaller value is kept, so nothing reported is above what was measured.
@@ -359,13 +359,14 @@ class AlongPath:
             target = shape_object(self.bodies.shapes[b], float(np.max(self.poses[i : j + 1, b, 12])))
             if verts is None:
                 verts = self._verts[t] = pair_vertices_along(self.poses, a, b, shape)
-        else:
+        else:  # an obstacle: its own bound (compiled on its triangles, see :mod:`.obstacles`)
             assert self.obstacles is not None
             b, o = self.obstacle_tasks[t - self.n_kernel]
-            target = self.obstacles.mesh_object(o)
             shape = self.bodies.shapes[b]
             if verts is None:
                 verts = self._verts[t] = body_vertices_along(self.poses, b, shape)
+            self.swept_queries += 1
+            return self.obstacles.swept_bound(verts[i : j + 1], shape, o)
         self.swept_queries += 1
         if t < self.n_cabin and self.probes.tree is not None:  # the cabin: compiled, on its triangle tree
             return swept_bound_tree(verts[i : j + 1], shape, self.probes.tree)

@@ -10,15 +10,24 @@ Certification follows the cabin's rules (:mod:`planner.collision.world`):
 
 * **States**: a conservative prune first -- every body is covered by spheres (its fine cover), and a sphere
   whose distance to the obstacle's bounding box exceeds its radius plus the clearance cannot touch the
-  obstacle; what the prune cannot prove clear goes to an FCL *collision* query of the body grown by the
+  obstacle; what the prune cannot prove clear goes to a *collision* probe of the body grown by the
   clearance against the obstacle.
 * **Motions** q(t) = q_a + t (q_b - q_a): no point of body b moves more than D_b = rho_b . |q_b - q_a| over
   the segment (the world's reach bounds). At a checked t the pair (body, obstacle) is proven to have a
-  distance d >= clearance + margin (its sphere lower bound, else the exact FCL distance), so every t' with
+  distance d >= clearance + margin (its sphere lower bound, else the exact distance), so every t' with
   |t' - t| D_b <= d - clearance keeps the clearance, and the walk steps on by (d - clearance) / D_b.
   A state that cannot prove the margin refuses the motion there (it may be a real contact).
-* **Distances**: exact FCL distances on the un-grown shapes (the obstacle always first, as a mesh: FCL's
-  box-box distance is wrong in face-parallel cases and its shape-vs-mesh witnesses come swapped).
+* **Distances**: exact distances on the un-grown shapes.
+
+The probes, the exact distances and the swept-hull bounds are the compiled tests on each obstacle's
+triangles (:meth:`Obstacle.tree`, :mod:`planner.collision.kernels.mesh`), as for the cabin: FCL's GJK
+stops up to 0.2 mm above a body's true distance to a mesh (``tests/collision/test_mesh_tree.py``), which a
+walk stepping by that distance would turn into an uncertified step. The reference route
+(:class:`planner.collision.oracle.ReferenceObstacles`) keeps FCL's queries (the obstacle always first, as a
+mesh: FCL's box-box distance is wrong in face-parallel cases and its shape-vs-mesh witnesses come swapped).
+Triangles alone cannot tell a body wholly *inside* an obstacle from one outside it, so a box obstacle (a
+solid) also tests whether the body's centre is inside it: a body there touches it (distance
+:data:`~planner.collision.probes.PENETRATION_M`). A mesh obstacle is its surface, as FCL's mesh is.
 
 The sphere bounds are compiled (:mod:`planner.collision.kernels.obstacles`, from the set's constant arrays
 packed once, :attr:`ObstacleSet.kernel_data`); their numpy route is the tests' reference
@@ -37,15 +46,20 @@ from functools import cache
 import fcl
 import numpy as np
 
-from planner.collision.bodies import BodySet
-from planner.collision.kernels.buffers import cover, obstacle_data
+from planner.collision.bodies import BodySet, Shape
+from planner.collision.kernels.buffers import MeshTree, cover, obstacle_data
+from planner.collision.kernels.codes import ROUND_M
 from planner.collision.kernels.entries import DEFAULT as DEFAULT_KERNELS
 from planner.collision.kernels.entries import Kernels
-from planner.collision.probes import Probes
+from planner.collision.probes import PENETRATION_M, Probes, box_mesh
 from planner.collision.reports import Contact
+from planner.collision.sweep import run_bound, swept_bound
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
 from planner.robots.geometry import BOX_CORNER_SIGNS
+
+#: The half extents passed for a capsule body (unused).
+_NO_HALF = np.zeros(3)
 
 __all__ = ["Obstacle", "ObstacleSet", "obstacle_contact"]
 
@@ -53,10 +67,7 @@ __all__ = ["Obstacle", "ObstacleSet", "obstacle_contact"]
 @cache
 def _box_mesh(size: tuple[float, float, float]) -> fcl.BVHModel:
     """An FCL triangle mesh of a box centred on its frame (for exact distances, see the module doc)."""
-    import trimesh
-
-    m = trimesh.creation.box(extents=size)
-    return _bvh(np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64))
+    return _bvh(*box_mesh(size))
 
 
 def _bvh(vertices: Array, faces: IntArray) -> fcl.BVHModel:
@@ -150,6 +161,37 @@ class Obstacle:
         assert self.vertices is not None and self.faces is not None
         return _bvh(self.vertices, self.faces)
 
+    def tree(self) -> MeshTree:
+        """The obstacle's triangles in the base frame, in a box tree (the compiled tests), built once.
+
+        A box's are its 12 (:func:`~planner.collision.probes.box_mesh`); the arrays are read-only.
+        """
+        cached: MeshTree | None = self.__dict__.get("_tree")
+        if cached is None:
+            if self.size is not None:
+                vertices, faces = box_mesh(self.size)
+            else:
+                assert self.vertices is not None and self.faces is not None
+                vertices, faces = self.vertices, self.faces
+            T = self.T_base_obstacle
+            base = np.ascontiguousarray(vertices @ T[:3, :3].T + T[:3, 3])
+            cached = DEFAULT_KERNELS.mesh_tree(base, np.ascontiguousarray(faces, dtype=np.int64))
+            for arr in cached:
+                arr.setflags(write=False)
+            object.__setattr__(self, "_tree", cached)  # frozen: set once, as a cache
+        return cached
+
+    def contains(self, points: Array) -> bool:
+        """True when a point of ``points`` (n, 3) [m, base frame] is strictly inside a box obstacle.
+
+        A mesh obstacle contains nothing (it is its surface, as FCL's mesh).
+        """
+        if self.size is None:
+            return False
+        T = self.T_base_obstacle
+        local = (np.asarray(points, dtype=float).reshape(-1, 3) - T[:3, 3]) @ T[:3, :3]
+        return bool(np.any(np.all(np.abs(local) < 0.5 * np.asarray(self.size), axis=1)))
+
     def distance_to(self, other: Obstacle) -> float:
         """Exact distance [m] to another obstacle (<= 0 when they overlap or touch)."""
         a = fcl.CollisionObject(self.mesh_model(), _tf(self.T_base_obstacle))
@@ -194,13 +236,15 @@ def obstacle_contact(body: str, obstacle: str, margin: float) -> Contact:
 
 
 class ObstacleSet:
-    """The obstacles of one world, its bodies' sphere covers against them, and the FCL queries.
+    """The obstacles of one world, its bodies' sphere covers against them, and the probes and distances.
 
     Args:
         obstacles: The obstacles (names unique).
         bodies: The world's bodies.
         allowed: ``(body name, obstacle name)`` pairs left out of every check and distance.
         kernels: The compiled kernels' entries (the world's).
+        compiled: Probes, distances and swept hulls by the compiled tests on each obstacle's triangles
+            (see the module doc); False: by FCL (the reference route).
     """
 
     def __init__(
@@ -209,6 +253,7 @@ class ObstacleSet:
         bodies: BodySet,
         allowed: frozenset[tuple[str, str]] = frozenset(),
         kernels: Kernels = DEFAULT_KERNELS,
+        compiled: bool = True,
     ) -> None:
         names = [o.name for o in obstacles]
         if len(set(names)) != len(names):
@@ -236,8 +281,17 @@ class ObstacleSet:
         self.kernel_data = obstacle_data(T_bound, half, bodies.shapes, self._cover, self.active)
         #: The compiled kernels' entries (the world's: the ahead-of-time build or numba's JIT).
         self.kernels = kernels
-        self._objects = [o.collision_object() for o in obstacles]
-        self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
+        #: Whether probes, distances and swept hulls use the compiled tests (else FCL's).
+        self.compiled = compiled
+        self._trees = [o.tree() for o in obstacles] if compiled else []
+        self._body_half = [
+            np.array(s.size, dtype=float) / 2 if s.kind == "box" else None for s in bodies.shapes
+        ]
+        self._body_radius = [float(s.radius) if s.kind == "capsule" else 0.0 for s in bodies.shapes]
+        self._boxes = [o.size is not None for o in obstacles]
+        if not compiled:
+            self._objects = [o.collision_object() for o in obstacles]
+            self._meshes = [fcl.CollisionObject(o.mesh_model(), _tf(o.T_base_obstacle)) for o in obstacles]
         # The bodies' FCL objects: grown shapes cached, objects reused per thread and only moved.
         self._probes = Probes(bodies, None)
         self.queries = 0
@@ -280,32 +334,62 @@ class ObstacleSet:
         """
         return self.kernels.obstacle_fine_batch(poses, rows, b, self.kernel_data)
 
-    def mesh_object(self, o: int) -> fcl.CollisionObject:
-        """Obstacle o as a posed FCL triangle mesh (the target of exact distances and swept hulls)."""
-        return self._meshes[o]
+    def swept_bound(self, verts: Array, shape: Shape, o: int) -> float:
+        """Certified lower bound of a body's distance to obstacle o over a run (:mod:`.sweep`).
 
-    # ----------------------------------------------------------------- FCL
+        ``verts`` (n, V, 3): the body's vertices at the run's samples. ``-inf`` when a vertex at the run's
+        ends is inside a box obstacle (the hull may then lie wholly inside it, touching no triangle).
+        """
+        if self._boxes[o] and self.obstacles[o].contains(np.vstack([verts[0], verts[-1]])):
+            return -np.inf
+        if not self.compiled:
+            return swept_bound(verts, shape, self._meshes[o])
+        points = np.ascontiguousarray(np.vstack([verts[0], verts[-1]]))
+        return run_bound(self.kernels.hull_mesh_lower(points, self._trees[o]), verts, shape, ROUND_M)
+
+    # ----------------------------------------------------------------- probes and distances
     def _body(self, flat: Array, b: int, margin: float) -> fcl.CollisionObject:
         """Body b grown by ``margin`` at the poses ``flat`` (a reused object of the thread, moved there)."""
         R = flat[b, :9].reshape(3, 3).T
         return self._probes.object(b, R, flat[b, 9:12], float(flat[b, 12]), margin)
 
+    def _inside(self, flat: Array, b: int, o: int) -> bool:
+        """Body b's centre is inside box obstacle o (the body then touches it: see the module doc)."""
+        return self._boxes[o] and self.obstacles[o].contains(flat[b, 9:12])
+
     def hit(self, flat: Array, b: int, o: int, margin: float) -> bool:
-        """Body b grown by ``margin`` touches obstacle o (one FCL collision query)."""
+        """Body b grown by ``margin`` touches obstacle o (one probe)."""
         self.queries += 1
-        return self._probes.collide(self._body(flat, b, margin), self._objects[o])
+        if self._inside(flat, b, o):
+            return True
+        if not self.compiled:
+            return self._probes.collide(self._body(flat, b, margin), self._objects[o])
+        half = self._body_half[b]
+        if half is not None:
+            return self.kernels.box_touches_mesh(flat[b], half, margin, self._trees[o])
+        return self.kernels.capsule_touches_mesh(flat[b], self._body_radius[b], margin, self._trees[o])
 
     def distance(self, flat: Array, b: int, o: int) -> tuple[float, Array, Array]:
         """Exact distance of body b to obstacle o on the un-grown shapes: (d, witness on b, on o).
 
-        Penetration gives d <= 0 (FCL's signed distance where it has one).
+        A touch or a penetration gives :data:`~planner.collision.probes.PENETRATION_M` (-1, FCL's figure
+        for a contact it does not measure; witnesses: the body's centre when it is inside a box obstacle).
         """
         self.queries += 1
-        req = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
-        res = fcl.DistanceResult()
-        d = float(fcl.distance(self._meshes[o], self._body(flat, b, 0.0), req, res))
-        p_obstacle, p_body = res.nearest_points
-        return d, np.array(p_body), np.array(p_obstacle)
+        if self._inside(flat, b, o):
+            centre = np.array(flat[b, 9:12])
+            return PENETRATION_M, centre, centre.copy()
+        if not self.compiled:
+            req = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
+            res = fcl.DistanceResult()
+            d = float(fcl.distance(self._meshes[o], self._body(flat, b, 0.0), req, res))
+            p_obstacle, p_body = res.nearest_points
+            return (d if d > 0.0 else PENETRATION_M), np.array(p_body), np.array(p_obstacle)
+        half = self._body_half[b]
+        d, p_body, p_obstacle = self.kernels.cabin_witness(
+            flat[b], _NO_HALF if half is None else half, self._body_radius[b], self._trees[o]
+        )
+        return (d if d > 0.0 else PENETRATION_M), p_body, p_obstacle
 
     # ---------------------------------------------------------------- checks
     def state_contacts(

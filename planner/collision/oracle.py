@@ -41,7 +41,7 @@ class ReferenceObstacles(ObstacleSet):
     """:class:`ObstacleSet` with its lower bounds vectorised in numpy (the compiled kernels' reference).
 
     The bounds of :mod:`planner.collision.kernels.obstacles` by whole-array operations, summed in the same
-    order; the FCL queries are the obstacle set's own.
+    order; probes, exact distances and swept hulls by FCL (the obstacle set's reference route).
     """
 
     def __init__(
@@ -50,7 +50,7 @@ class ReferenceObstacles(ObstacleSet):
         bodies: BodySet,
         allowed: frozenset[tuple[str, str]] = frozenset(),
     ) -> None:
-        super().__init__(obstacles, bodies, allowed)
+        super().__init__(obstacles, bodies, allowed, compiled=False)  # FCL's probes and distances
         n_o = len(obstacles)
         bounds = [o.bound for o in obstacles]
         self._R_bound = np.array([T[:3, :3] for T, _ in bounds]).reshape(n_o, 3, 3)

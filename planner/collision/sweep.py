@@ -199,7 +199,7 @@ def swept_bound_tree(verts: Array, shape: Shape, tree: MeshTree) -> float:
     ``tests/collision/test_mesh_tree.py``), less :data:`~.kernels.codes.ROUND_M` for rounding.
     """
     d = KERNELS.hull_mesh_lower(np.ascontiguousarray(np.vstack([verts[0], verts[-1]])), tree)
-    return _run_bound(d, verts, shape, ROUND_M)
+    return run_bound(d, verts, shape, ROUND_M)
 
 
 def swept_bound(verts: Array, shape: Shape, target: Any) -> float:
@@ -214,10 +214,10 @@ def swept_bound(verts: Array, shape: Shape, target: Any) -> float:
         d(H, target) - e - r - :data:`GJK_SLACK_M`, or ``-inf`` when the hull touches the target.
     """
     d = float(fcl.distance(hull_object(verts, shape), target, _REQUEST, fcl.DistanceResult()))
-    return _run_bound(d, verts, shape, GJK_SLACK_M)
+    return run_bound(d, verts, shape, GJK_SLACK_M)
 
 
-def _run_bound(d: float, verts: Array, shape: Shape, slack: float) -> float:
+def run_bound(d: float, verts: Array, shape: Shape, slack: float) -> float:
     """The hull's distance ``d`` less the run's deviation e, the radius r and ``slack``; -inf: it touches."""
     if not d > 0.0:
         return -np.inf

@@ -24,6 +24,7 @@ from planner.generate.cabins import cabin_mesh
 from planner.meshes import REFERENCE_DIR
 from planner.meshio import load_mesh
 from planner.robots.cabin8 import Cabin8
+from tests.collision.minimise import qp_distance
 from tests.conftest import admissible_joints
 
 
@@ -139,7 +140,7 @@ def test_box_distances_are_fcls_exact_distances(cabins: list) -> None:
             assert theirs - 2e-4 <= ours <= theirs + 1e-5, f"box {i}: ours {ours}, FCL {theirs}"
             if ours < theirs - 1e-6 and checked < 5:  # FCL stopped short: an independent minimisation
                 corners = centres[i] + (_SIGNS * halves[i]) @ Rs[i].T
-                assert abs(ours - _qp_distance(corners, v, f, theirs)) < 1e-8, f"box {i}"
+                assert abs(ours - qp_distance(corners, v, f, theirs)) < 1e-8, f"box {i}"
                 checked += 1
         assert near > 0.3 * n
 
@@ -179,33 +180,9 @@ def test_hull_bounds_are_certified_and_meet_fcls_hull_distances(cabins: list) ->
             apart += 1
             assert theirs - 2e-5 <= ours <= theirs + 1e-12, f"hull {i}: ours {ours}, FCL {theirs}"
             if ours < theirs - 1e-9:
-                assert abs(ours - _qp_distance(pts, v, f, theirs)) < 1e-9, f"hull {i}"
+                assert abs(ours - qp_distance(pts, v, f, theirs)) < 1e-9, f"hull {i}"
                 short += 1
         assert touching > 20 and apart > 100 and short < 0.05 * apart
-
-
-def _qp_distance(pts: np.ndarray, v: np.ndarray, f: np.ndarray, near: float) -> float:
-    """Min |x - y| over x in conv(pts), y in a triangle within ``near`` + 1 mm of their boxes (SLSQP)."""
-    from scipy.optimize import minimize
-
-    lo, hi = pts.min(axis=0) - near - 1e-3, pts.max(axis=0) + near + 1e-3
-    best = np.inf
-    for tri in v[f]:
-        if np.any(tri.max(axis=0) < lo) or np.any(tri.min(axis=0) > hi):
-            continue
-        m = (pts[:, None, :] - tri[None, :, :]).reshape(-1, 3)
-        n = len(m)
-        res = minimize(
-            lambda w, m=m: float(np.sum((w @ m) ** 2)),
-            np.full(n, 1.0 / n),
-            jac=lambda w, m=m: 2.0 * m @ (w @ m),
-            bounds=[(0.0, 1.0)] * n,
-            constraints=[{"type": "eq", "fun": lambda w: w.sum() - 1.0}],
-            method="SLSQP",
-            options={"ftol": 1e-16, "maxiter": 1000},
-        )
-        best = min(best, float(np.sqrt(res.fun)))
-    return best
 
 
 def test_capsule_probes_and_distances_agree_with_fcl_and_an_independent_minimisation(cabins: list) -> None:
@@ -253,9 +230,7 @@ def test_capsule_probes_and_distances_agree_with_fcl_and_an_independent_minimisa
             assert fd - 2e-4 <= d <= fd + 1e-9, f"capsule {i}: ours {d}, FCL {fd}"
             if d < fd - 1e-9 and checked < 10:
                 axis = centres[i] + np.outer([-0.5, 0.5], lengths[i]) * Rs[i][:, 2]
-                assert (
-                    abs(d + radii[i] - _qp_distance(np.ascontiguousarray(axis), v, f, fd + radii[i])) < 1e-8
-                )
+                assert abs(d + radii[i] - qp_distance(np.ascontiguousarray(axis), v, f, fd + radii[i])) < 1e-8
                 checked += 1
         assert 0.2 * n < touched < 0.9 * n and checked > 0
 

@@ -1,4 +1,4 @@
-"""Obstacles added to a cabin: certified state and motion checks against exact FCL distances.
+"""Obstacles added to a cabin: certified state and motion checks against exact distances.
 
 The compiled obstacle bounds (:mod:`planner.collision.kernels.obstacles`) against their numpy route
 (:class:`~planner.collision.oracle.ReferenceObstacles`) and the exact distances they bound.
@@ -12,11 +12,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
-from planner.collision.bodies import BodySet, PayloadGeometry, robot_bodies
+from planner.collision.bodies import BodySet, PayloadGeometry, Shape, robot_bodies
 from planner.collision.obstacles import Obstacle, ObstacleSet
 from planner.collision.oracle import ReferenceObstacles, ReferenceWorld
+from planner.collision.probes import PENETRATION_M
+from planner.collision.sweep import body_vertices
 from planner.collision.world import CollisionWorld
 from planner.robots.cabin8 import Cabin8
+from tests.collision.minimise import qp_distance
 from tests.conftest import admissible_joints
 
 
@@ -204,3 +207,113 @@ def test_the_numpy_route_gives_the_same_verdicts_and_reports(
         motions.add((got.valid, bool(got.contacts) and got.contacts[0].kind == "obstacle"))
     assert verdicts == {True, False}
     assert {(True, False), (False, True)} <= motions, motions  # valid ones, and ones an obstacle refuses
+
+
+def _body_points(flat_b: np.ndarray, shape: Shape) -> tuple[np.ndarray, float]:
+    """A body's vertices (a box's corners, a capsule's axis end points) at pose (13,), and its radius."""
+    verts = body_vertices(flat_b[None], shape)[0]
+    return verts, (float(shape.radius) if shape.kind == "capsule" else 0.0)
+
+
+def _triangles(obstacle: Obstacle) -> tuple[np.ndarray, np.ndarray]:
+    """The obstacle's triangles in the base frame as (vertices, faces) (from its tree: its own copy)."""
+    tris = obstacle.tree().tris.reshape(-1, 3)
+    return tris, np.arange(len(tris), dtype=np.int64).reshape(-1, 3)
+
+
+def test_compiled_probes_and_distances_are_fcls_verdicts_and_exact_distances() -> None:
+    """The compiled route (each obstacle's triangle tree) against FCL's (the reference route).
+
+    Rotated boxes and convex meshes, box and capsule bodies at random poses: every distance is at most
+    FCL's (plus 1e-9 m) and, where FCL's is above it by more than a micrometre (its GJK stops early), equal
+    to an independent minimisation; witness points are that far apart. Probes on the body grown to just
+    below and just above its distance (grazing) give FCL's verdicts, and the exact distance's.
+    """
+    rng = np.random.default_rng(31)
+    bodies = _bodies()
+    obstacles = _random_obstacles(rng, 8)
+    fast = ObstacleSet(obstacles, bodies)
+    ref = ReferenceObstacles(obstacles, bodies)
+    assert fast.compiled and not ref.compiled
+    compared = above = grazing = 0
+    for flat in _random_poses(rng, 60, bodies):
+        lb = fast.lower_bounds(flat, 0.3)
+        for b, o in zip(*np.nonzero(lb <= 0.3), strict=True):
+            b, o = int(b), int(o)
+            d, p_body, p_obs = fast.distance(flat, b, o)
+            d_fcl = ref.distance(flat, b, o)[0]
+            compared += 1
+            if d_fcl <= 0.0 or d <= 0.0:
+                assert d == d_fcl == PENETRATION_M, (b, o, d, d_fcl)
+                assert fast.hit(flat, b, o, 0.0) and ref.hit(flat, b, o, 0.0)
+                continue
+            assert d <= d_fcl + 1e-9, (b, o, d, d_fcl)
+            assert abs(np.linalg.norm(p_body - p_obs) - d) < 1e-9
+            if d_fcl - d > 1e-6:
+                above += 1
+                verts, radius = _body_points(flat[b], bodies.shapes[b])
+                v, f = _triangles(obstacles[o])
+                assert abs(d + radius - qp_distance(verts, v, f, d_fcl + radius)) < 1e-8, (b, o)
+            # A box grown by g is a box (its corners g sqrt(3) further out), as FCL grows it: it touches
+            # where d <= g and may where d <= g sqrt(3); a capsule grown by g touches exactly where d <= g.
+            reach = np.sqrt(3.0) if bodies.shapes[b].kind == "box" else 1.0
+            for grow in (d * (1 - 1e-3), d * (1 + 1e-3), d / reach * (1 - 1e-3), d / reach * (1 + 1e-3)):
+                got = fast.hit(flat, b, o, grow)
+                assert got == ref.hit(flat, b, o, grow), (b, o, grow, d)
+                if grow >= d or grow * reach < d:
+                    assert got == (grow >= d), (b, o, grow, d)
+                grazing += 1
+    assert compared > 300 and grazing > 300, (compared, grazing)
+    assert above > 0  # FCL's distance above the truth somewhere: the case this route exists for
+
+
+def test_a_body_inside_a_box_obstacle_touches_it() -> None:
+    """A body wholly inside a box obstacle touches none of its triangles: it still touches the obstacle.
+
+    The probe says so (FCL's box primitive agrees), the distance is a penetration
+    (:data:`~planner.collision.probes.PENETRATION_M`), and a swept run there bounds nothing.
+    """
+    bodies = _bodies()
+    T = np.eye(4)
+    T[:3, 3] = [0.4, 0.1, 0.5]
+    room = (Obstacle.box("crate", (3.0, 3.0, 3.0), T),)
+    fast, ref = ObstacleSet(room, bodies), ReferenceObstacles(room, bodies)
+    flat = np.zeros((len(bodies.names), 13))
+    flat[:, [0, 4, 8]] = 1.0
+    flat[:, 9:12] = [0.4, 0.1, 0.5]
+    flat[:, 12] = [s.length if s.kind == "capsule" else 0.0 for s in bodies.shapes]
+    for b, shape in enumerate(bodies.shapes):
+        assert fast.hit(flat, b, 0, 0.0) and ref.hit(flat, b, 0, 0.0)
+        assert fast.distance(flat, b, 0)[0] == PENETRATION_M == ref.distance(flat, b, 0)[0]
+        verts = body_vertices(np.repeat(flat[b][None], 3, axis=0), shape)
+        assert fast.swept_bound(verts, shape, 0) == -np.inf == ref.swept_bound(verts, shape, 0)
+    flat[:, 9:12] = [0.4, 0.1, 5.0]  # well outside: clear, and both routes measure the same distance
+    for b in range(len(bodies.names)):
+        assert not fast.hit(flat, b, 0, 0.0)
+        assert fast.distance(flat, b, 0)[0] == pytest.approx(ref.distance(flat, b, 0)[0], abs=2e-4)
+
+
+def test_swept_bounds_on_obstacles_are_certified() -> None:
+    """A run's compiled swept bound is below every sample's exact distance, and near FCL's bound."""
+    rng = np.random.default_rng(37)
+    bodies = _bodies()
+    obstacles = _random_obstacles(rng, 6)
+    fast, ref = ObstacleSet(obstacles, bodies), ReferenceObstacles(obstacles, bodies)
+    checked = 0
+    for a, z in zip(_random_poses(rng, 40, bodies), _random_poses(rng, 40, bodies), strict=True):
+        for b, shape in enumerate(bodies.shapes):
+            # a straight run of the body's centre from a to a + 0.1 (z - a), its rotation fixed
+            run = np.repeat(a[b][None], 9, axis=0)
+            run[:, 9:12] += np.linspace(0.0, 0.1, 9)[:, None] * (z[b, 9:12] - a[b, 9:12])
+            verts = body_vertices(run, shape)
+            for o in range(len(obstacles)):
+                bound = fast.swept_bound(verts, shape, o)
+                if not np.isfinite(bound) or bound > 0.3:
+                    continue
+                checked += bound > 0.0
+                flats = np.repeat(a[None], len(run), axis=0)
+                flats[:, b] = run
+                exact = min(fast.distance(f, b, o)[0] for f in flats)
+                assert bound <= max(exact, 0.0) + 1e-12, (b, o, bound, exact)  # a touch: -1
+                assert bound >= ref.swept_bound(verts, shape, o) - 1e-5, (b, o)
+    assert checked > 50, checked

@@ -30,6 +30,8 @@ from planner.core.aot import B1, F8, I8, Entry, check_array
 from planner.core.types import Array, BoolArray, IntArray
 
 _HERE = Path(__file__).resolve().parent
+#: How many read-only trees :meth:`Kernels._tree` remembers as checked (a cabin's and its obstacles').
+CHECKED_TREES = 256
 _ROBOTS = _HERE.parent.parent / "robots"
 
 
@@ -155,7 +157,9 @@ class Kernels:
 
     def __init__(self, module: Any = None) -> None:
         self._module = module
-        self._checked: MeshTree | None = None  # the last tree checked, if its arrays are read-only
+        #: Read-only trees already checked, by identity (held here, so an id is never reused): the cabin's
+        #: and each obstacle's (:meth:`_tree`); bounded, the oldest dropped first.
+        self._checked: dict[int, MeshTree] = {}
 
     @property
     def module(self) -> Any:
@@ -520,17 +524,19 @@ class Kernels:
         return MeshTree(*self.module.mesh_tree(vertices, faces))
 
     def _tree(self, tree: MeshTree) -> MeshTree:
-        """``tree``, checked (:func:`~.buffers.check_tree`) unless it is the last one checked and read-only.
+        """``tree``, checked (:func:`~.buffers.check_tree`) unless it was checked before and is read-only.
 
-        A world's tree (:class:`~.buffers.KernelData`) is read-only: the probes of a plan check it once.
+        A world's tree (:class:`~.buffers.KernelData`) and an obstacle's are read-only: each is checked once.
         """
-        if tree is self._checked:
+        if self._checked.get(id(tree)) is tree:
             return tree
         if not isinstance(tree, MeshTree):
             raise TypeError(f"tree: MeshTree expected, got {type(tree).__name__}")
         check_tree(tree)
         if not any(a.flags.writeable for a in tree):
-            self._checked = tree
+            if len(self._checked) >= CHECKED_TREES:
+                del self._checked[next(iter(self._checked))]
+            self._checked[id(tree)] = tree
         return tree
 
     def box_touches_mesh(self, pose: Array, half: Array, grow: float, tree: MeshTree) -> bool:
