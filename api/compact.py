@@ -158,7 +158,10 @@ def _unpack(blob: bytes, lists: bool) -> Any:
 
 def unpack_json(blob: bytes) -> bytes:
     """The document as compact JSON, UTF-8 bytes (orjson; see the module docstring)."""
-    return orjson.dumps(_unpack(blob, lists=False), option=orjson.OPT_SERIALIZE_NUMPY)
+    try:
+        return orjson.dumps(_unpack(blob, lists=False), option=orjson.OPT_SERIALIZE_NUMPY)
+    except TypeError:  # a value orjson cannot write (an integer beyond 64 bits): the standard library can
+        return json.dumps(_unpack(blob, lists=True), separators=(",", ":")).encode()
 
 
 def unpack_text(blob: bytes) -> str:

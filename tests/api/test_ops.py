@@ -390,6 +390,7 @@ def test_numpy_arrays_pack_as_their_lists_and_the_worker_text_is_the_served_text
     assert unpack_text(pack_value(doc)) == text.decode()
     assert json.loads(text) == json.loads(json.dumps(lists))
     assert document_json({"big": 2**70}) is None  # orjson cannot: the server unpacks the blob instead
+    assert json.loads(unpack_json(pack_value({"big": 2**70}))) == {"big": 2**70}  # and writes its JSON
 
 
 def test_packed_documents_of_earlier_formats_are_still_read() -> None:
