@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.collision.along import AlongPath, AlongReport, ClearanceAlong
-from planner.collision.world import CollisionWorld
+from planner.collision.world import DEFAULT_SELF_CLEARANCE_M, CollisionWorld
 from planner.core.exceptions import DeflectionNotCompensated, OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
 from planner.core.types import Array, IntArray
@@ -221,7 +221,7 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
         return Check("collision", False, NOT_ASSEMBLED)
     req, world, robot = ctx.req, ctx.world, ctx.robot
     along = world.along(ctx.q)
-    rep = along.certify(req.clearance_m, world.self_clearance, req.motion_margin_m)
+    rep = along.certify(req.clearance_m, req.self_clearance_m, req.motion_margin_m)
     if world.cabin is not None or world.obstacles is not None:
         ctx.clearance = along.clearance()
     if not rep.valid:
@@ -237,7 +237,9 @@ def collision_check(profile: DriveProfile, ctx: GateContext) -> Check | None:
         return Check("collision", True, done)
     q_def, sag, idx, x = _deflections(robot, [ctx.q], req.payload, req.T_tool_payload)[0]
     ctx.deflection = (idx, x)
-    rep_def = sagging_certificate(world, q_def, req.clearance_m, req.motion_margin_m, along)
+    rep_def = sagging_certificate(
+        world, q_def, req.clearance_m, req.motion_margin_m, along, req.self_clearance_m
+    )
     if rep_def.valid:
         return Check(
             "collision",
@@ -262,6 +264,7 @@ def sagging_certificate(
     clearance_m: float,
     margin_m: float,
     rigid: AlongPath | None = None,
+    self_clearance_m: float = DEFAULT_SELF_CLEARANCE_M,
 ) -> AlongReport:
     """The polyline through the sagging robot's configurations (N, 8) certified in one batched pass.
 
@@ -269,12 +272,13 @@ def sagging_certificate(
     (:meth:`CollisionWorld.check_path`), the world's obstacles included; ``rigid``, the rigid robot's pass
     over the same samples, seeds its bounds (:meth:`AlongPath.seed_from`: what the rigid pass proved, less
     how far the sag moves each body). A single configuration (a leg at rest) is its own path of two samples.
+    Pairs of bodies keep ``self_clearance_m`` (the requested one, not the world's setting).
     """
     q_def = np.ascontiguousarray(q_def if len(q_def) >= 2 else np.vstack([q_def, q_def]))
     along = world.along(q_def)
     if rigid is not None and rigid.n == along.n:
         along.seed_from(rigid)
-    return along.certify(clearance_m, world.self_clearance, margin_m)
+    return along.certify(clearance_m, self_clearance_m, margin_m)
 
 
 #: cabin8's checks after the drive checks, in order (each a function of the profile and the context).

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.collision.along import CLEARANCE_TOL_M, AlongPath, ClearanceAlong
-from planner.collision.world import CollisionWorld
+from planner.collision.world import DEFAULT_SELF_CLEARANCE_M, CollisionWorld
 from planner.core.exceptions import OutsideWorkspace
 from planner.core.so3 import rotation_angles, rotation_log
 from planner.core.types import Array
@@ -289,7 +289,7 @@ def _collision_checks(
         first = sl.start
         # A leg of one sample (an empty leg at the start): its sample twice, a path at rest.
         along = leg.world.along(rows if len(rows) >= 2 else np.vstack([rows, rows]))
-        rep = along.certify(req.clearance_m, leg.world.self_clearance, GATE_MOTION_MARGIN_M)
+        rep = along.certify(req.clearance_m, DEFAULT_SELF_CLEARANCE_M, GATE_MOTION_MARGIN_M)
         exact += rep.exact_queries
         walked += rep.walked
         if not rep.valid:

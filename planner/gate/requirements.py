@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from planner.collision.world import DEFAULT_SELF_CLEARANCE_M
 from planner.core.description import TRUSTED_STIFFNESS_SOURCES
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array, IntArray
@@ -84,6 +85,10 @@ class GateRequirements:
     #: Whether this gate certifies the clearance (``collision`` and the clearance figure); False only where
     #: a caller's gate certifies the same samples in the same world (a cycle's legs: the cycle gate).
     collision: bool = True
+    #: What non-adjacent bodies of the robot must keep from each other [m], certified with
+    #: ``motion_margin_m`` as the cabin's clearance: the requested one, whatever the world's own setting (the
+    #: planner's world keeps more, :data:`planner.plan.context.PLANNER_SELF_CLEARANCE_M`).
+    self_clearance_m: float = DEFAULT_SELF_CLEARANCE_M
 
 
 #: Samples of a profile at which the static deflection is predicted (the gate's deflected collision check,

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.collision.world import CollisionWorld
+from planner.collision.world import DEFAULT_SELF_CLEARANCE_M, CollisionWorld
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
 from planner.core.types import Array, IntArray
 from planner.dynamics.holding import StaticForceCheck
@@ -40,6 +40,15 @@ Progress = Callable[[str, float], None]
 #: Extra clearance the planner keeps beyond the requested one [m], so that the gate's own certification
 #: (which must prove a margin at the samples it starts from) passes on the planner's path.
 PLANNER_SLACK_M = 0.0015
+#: Extra clearance the planner keeps between the robot's own bodies beyond the self-clearance the gate
+#: certifies [m] (:data:`~planner.collision.world.DEFAULT_SELF_CLEARANCE_M`, 5 mm, with its 1 mm margin):
+#: the planner's walks certify it down to their 0.5 mm margin (:data:`planner.plan.motion.MIN_MARGIN_M`),
+#: so its paths keep 6.5 mm, 0.5 mm beyond what the gate proves. Without it a path whose pair of bodies
+#: kept 5.59 mm (certified by the planner's walks) failed the gate (gen-cluttered-0-005). It is 0.5 mm
+#: below :data:`PLANNER_SLACK_M` so that a start whose bodies keep 6.5 mm can still be left.
+PLANNER_SELF_SLACK_M = 0.001
+#: What non-adjacent bodies keep from each other in the planner's world [m] (``Clearances.self_planner_m``).
+PLANNER_SELF_CLEARANCE_M = DEFAULT_SELF_CLEARANCE_M + PLANNER_SELF_SLACK_M
 #: A curved blend is certified with this much more than the planner's clearance [m] (its chords deviate).
 BLEND_EXTRA_M = 0.001
 #: Fraction of the time limit kept for timing and validation.
@@ -65,12 +74,17 @@ class Clearances:
         motion_margin_m: The certification margin of the planner's motion checks [m] (the scenario's
             ``motion_margin_m``): a certified walk proves ``planner_m`` with this margin at every state.
         blend_extra_m: Extra clearance of a curved blend's certification [m] (:data:`BLEND_EXTRA_M`).
+        self_requested_m: What the robot's non-adjacent bodies keep from each other [m]: what the gate
+            certifies between them.
+        self_slack_m: What the planner keeps beyond it [m] (:data:`PLANNER_SELF_SLACK_M`).
     """
 
     requested_m: float
     motion_margin_m: float
     slack_m: float = PLANNER_SLACK_M
     blend_extra_m: float = BLEND_EXTRA_M
+    self_requested_m: float = DEFAULT_SELF_CLEARANCE_M
+    self_slack_m: float = PLANNER_SELF_SLACK_M
 
     @classmethod
     def of(cls, options: PlanOptions) -> Clearances:
@@ -81,6 +95,11 @@ class Clearances:
     def planner_m(self) -> float:
         """The clearance every planner stage certifies [m]: requested + slack."""
         return self.requested_m + self.slack_m
+
+    @property
+    def self_planner_m(self) -> float:
+        """What the robot's bodies keep from each other in every planner stage [m]: requested + slack."""
+        return self.self_requested_m + self.self_slack_m
 
     @property
     def blend_m(self) -> float:
@@ -191,14 +210,15 @@ class PlanContext:
         """The context of a plan of ``sc``: world and dynamics built, kernels warmed up, clock started."""
         payload = sc.payload.rigid_payload() if sc.payload is not None else None
         dynamics = Cabin8Dynamics.of(sc.robot)
+        clearances = Clearances.of(sc.options)
         ctx = cls(
             sc=sc,
             robot=sc.robot,
-            world=sc.world(),
+            world=sc.world(self_clearance=clearances.self_planner_m),
             dynamics=dynamics,
             payload=payload,
             forces=StaticForceCheck(dynamics, payload),
-            clearances=Clearances.of(sc.options),
+            clearances=clearances,
             preset=preset,
             timing=timing or timing_factory(sc),
             progress=progress or (lambda stage, fraction: None),

@@ -85,8 +85,8 @@ def check_sagging(ctx: PlanContext, q: Array, what: str) -> None:
     """
     sc, world, c = ctx.sc, ctx.world, ctx.clearances
     margin = GATE_MOTION_MARGIN_M
-    own = world.self_clearance
-    rep = world.check_motion(q, q, c.requested_m, margin)
+    own = c.self_requested_m  # what the gate certifies (the planner's world keeps more)
+    rep = world.check_motion(q, q, c.requested_m, margin, self_clearance=own)
     sag, q_def = 0.0, np.atleast_2d(q)
     if rep.valid:
         if sc.payload is None or ctx.payload is None or ctx.robot.desc.stiffness is None:
@@ -96,7 +96,7 @@ def check_sagging(ctx: PlanContext, q: Array, what: str) -> None:
         if not near_limit and screen.valid:
             return
         q_def, sag = deflected_joints(ctx.robot, np.atleast_2d(q), ctx.payload, sc.payload.T_tool_payload)
-        rep = world.check_motion(q_def[0], q_def[0], c.requested_m, margin)
+        rep = world.check_motion(q_def[0], q_def[0], c.requested_m, margin, self_clearance=own)
         if rep.valid:
             return
     limits = any(x.kind == "limit" for x in rep.contacts)

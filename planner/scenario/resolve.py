@@ -18,7 +18,7 @@ import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.obstacles import Obstacle
-from planner.collision.world import CollisionWorld
+from planner.collision.world import DEFAULT_SELF_CLEARANCE_M, CollisionWorld
 from planner.core.exceptions import InvalidInput, InvalidMesh, OutsideWorkspace, UnknownRobot
 from planner.core.types import Array
 from planner.meshes import reference_cabin_path, reference_cabins
@@ -104,10 +104,19 @@ class ResolvedScenario:
     gate_collision: bool = True
     deflection_series: bool = True
 
-    def world(self) -> CollisionWorld:
-        """The collision world of this scenario: robot, payload, cabin and its obstacles."""
+    def world(self, self_clearance: float = DEFAULT_SELF_CLEARANCE_M) -> CollisionWorld:
+        """The collision world of this scenario: robot, payload, cabin and its obstacles.
+
+        ``self_clearance``: what non-adjacent bodies keep from each other [m] in the world's checks (the
+        planner's world keeps more than the gate certifies: :data:`planner.plan.context.PLANNER_SLACK_M`).
+        """
         return CollisionWorld(
-            self.robot, self.cabin, self.payload, obstacles=self.obstacles, allowed=self.allowed_pairs
+            self.robot,
+            self.cabin,
+            self.payload,
+            self_clearance=self_clearance,
+            obstacles=self.obstacles,
+            allowed=self.allowed_pairs,
         )
 
     @property

@@ -48,7 +48,7 @@ from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.gate.checks import GateReport
 from planner.gate.cycle import CycleLeg, CycleRequirements, validate_cycle
 from planner.gate.requirements import compensates_deflection, requirements_for
-from planner.plan.context import PRODUCT, PlanContext, Progress, SearchPreset
+from planner.plan.context import PLANNER_SELF_CLEARANCE_M, PRODUCT, PlanContext, Progress, SearchPreset
 from planner.plan.evidence import (
     collision_evidence,
     describe,
@@ -354,7 +354,7 @@ def _grasp_line(
     lift_ctx = PlanContext.build(
         leg_scenario(cyc, leg("lift_off"), cyc.park_q, goal_q=cyc.park_q), None, timing, preset
     )
-    carry_world = leg_world(cyc, leg("transit"))
+    carry_world = leg_world(cyc, leg("transit"), PLANNER_SELF_CLEARANCE_M)
     for cand in lines:
         assert cand.line is not None
         q_pre, q_grasp = cand.line[0], cand.line[-1]
@@ -483,7 +483,7 @@ def _check_release(cyc: ResolvedCycle, ctx: PlanContext, q_release: Array) -> No
 
 def _check_line_end(cyc: ResolvedCycle, next_state: LegState, q: Array, what: str, field_name: str) -> None:
     """Refuse a line whose end is within the planner's clearance of anything in the next leg's world."""
-    world = leg_world(cyc, next_state)
+    world = leg_world(cyc, next_state, PLANNER_SELF_CLEARANCE_M)
     sc = leg_scenario(cyc, next_state, q, goal_q=q)
     from planner.plan.context import Clearances
 

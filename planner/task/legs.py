@@ -34,7 +34,7 @@ import numpy as np
 
 from planner.collision.bodies import PayloadGeometry
 from planner.collision.obstacles import Obstacle
-from planner.collision.world import CollisionWorld
+from planner.collision.world import DEFAULT_SELF_CLEARANCE_M, CollisionWorld
 from planner.core.types import Array
 from planner.dynamics.payload import RigidPayload
 from planner.robots.geometry import PAYLOAD
@@ -165,13 +165,20 @@ def leg_scenario(
     )
 
 
-def leg_world(cyc: ResolvedCycle, state: LegState) -> CollisionWorld:
-    """The collision world of a leg (cabin caches shared; obstacles and allowed pair the leg's)."""
+def leg_world(
+    cyc: ResolvedCycle, state: LegState, self_clearance: float = DEFAULT_SELF_CLEARANCE_M
+) -> CollisionWorld:
+    """The collision world of a leg (cabin caches shared; obstacles and allowed pair the leg's).
+
+    ``self_clearance``: the requested one (the cycle gate's world) or the planner's
+    (:data:`planner.plan.context.PLANNER_SELF_CLEARANCE_M`, for the cycle planner's own checks).
+    """
     pair = allowed_pair(cyc, state.allowed)
     return CollisionWorld(
         cyc.robot,
         cyc.base.cabin,
         payload_geometry(cyc, state),
+        self_clearance=self_clearance,
         obstacles=obstacles(cyc, state.scene),
         allowed=frozenset() if pair is None else frozenset({pair}),
     )

@@ -11,13 +11,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from planner.collision.world import DEFAULT_SELF_CLEARANCE_M, CollisionWorld
 from planner.core.exceptions import StartInvalid
 from planner.gate.checks import deflected_joints
+from planner.gate.requirements import GATE_MOTION_MARGIN_M, requirements_for
 from planner.generate import GeneratorOptions, generate_case, write_case
-from planner.plan.context import PlanContext
+from planner.plan.context import PLANNER_SELF_CLEARANCE_M, PLANNER_SELF_SLACK_M, PlanContext
+from planner.plan.pipeline import Planner
 from planner.plan.targets import goal_targets
 from planner.scenario import load_scenario
 from planner.scenario.resolve import ResolvedScenario
+from tests.conftest import admissible_joints
+from tests.plan.conftest import SCENARIOS
 
 
 def _scenario(seed: int, index: int, folder: Path) -> tuple[ResolvedScenario, dict[str, object]]:
@@ -142,7 +147,7 @@ def test_a_start_the_gate_cannot_certify_when_sagging_is_refused_with_the_distan
     ctx = PlanContext.build(sc)
     world = ctx.world
     q_def, _ = deflected_joints(sc.robot, sc.start_q[None, :], ctx.payload, sc.payload.T_tool_payload)
-    required = world.self_clearance + GATE_MOTION_MARGIN_M
+    required = ctx.clearances.self_requested_m + GATE_MOTION_MARGIN_M  # the gate's, not the planner's
     assert world.min_distance(sc.start_q).distance_m >= required  # rigid: certifiable
     assert world.min_distance(q_def[0]).distance_m < required  # sagging: not
     from planner.plan.pipeline import run_stages
@@ -259,3 +264,75 @@ def test_two_pinches_that_no_single_posture_passes_are_passed_by_a_relay(tmp_pat
     doc = json.loads(json.dumps(result_document(sc, res)))
     report = check_profile(load_scenario(path), doc)
     assert report.passed, report.summary()
+
+
+def test_a_path_hugging_a_pair_of_the_robots_bodies_passes_the_gate(tmp_path: Path) -> None:
+    """Cluttered shelf goal (seed 0, case 5): the planner's path passes the gate's pair clearance.
+
+    Its relay path once kept link_ef 5.59 mm from the platform: certified by the planner's walks (5 mm
+    with their 0.5 mm margin), refused by the gate (5 mm with a 1 mm margin). The planner's world now keeps
+    the same slack between the robot's own bodies as from the cabin (PLANNER_SELF_CLEARANCE_M).
+    """
+    case = generate_case(0, 5, GeneratorOptions(family="cluttered"))
+    assert case.meta["goal"] == "shelf"
+    sc = load_scenario(write_case(case, tmp_path))
+    result = Planner(sc).plan()
+    assert result.gate.passed, result.gate.summary()
+    q = result.profile.joints
+    world = CollisionWorld(sc.robot, sc.cabin, sc.payload)  # the gate's pair clearance: the requested one
+    closest = min(world.min_distance(q[k], include_cabin=False).distance_m for k in range(0, len(q), 10))
+    assert closest >= DEFAULT_SELF_CLEARANCE_M + GATE_MOTION_MARGIN_M, closest
+
+
+def test_the_planner_keeps_its_slack_between_the_robots_bodies_and_the_gate_the_requested_clearance() -> None:
+    """The planner keeps the requested self-clearance plus its slack; the gate requires the requested one.
+
+    A state whose closest pair of bodies lies between the two passes the gate's world and is refused by the
+    planner's; the gate's requirement is the requested self-clearance whatever its world's setting.
+    """
+    sc = load_scenario(SCENARIOS / "aisle-transfer.yaml")
+    ctx = PlanContext.build(sc)
+    assert (
+        ctx.world.self_clearance
+        == PLANNER_SELF_CLEARANCE_M
+        == DEFAULT_SELF_CLEARANCE_M + PLANNER_SELF_SLACK_M
+    )
+    req = requirements_for(sc, ctx.payload)
+    assert req.self_clearance_m == DEFAULT_SELF_CLEARANCE_M
+    gate_world = CollisionWorld(sc.robot, None, sc.payload)
+    planner_world = CollisionWorld(sc.robot, None, sc.payload, self_clearance=PLANNER_SELF_CLEARANCE_M)
+    # States whose closest pair lies between the two: bisect from clear states towards self-colliding ones.
+    target = DEFAULT_SELF_CLEARANCE_M + 0.5 * PLANNER_SELF_SLACK_M
+    qs = admissible_joints(sc.robot, 400, seed=7)
+    pair = [gate_world.min_distance(q, include_cabin=False).distance_m for q in qs]
+    clear = [q for q, d in zip(qs, pair, strict=True) if d > 0.05]
+    touching = [q for q, d in zip(qs, pair, strict=True) if d < 0.0]
+    found = 0
+    for a, b in zip(clear, touching, strict=False):
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            q = a + 0.5 * (lo + hi) * (b - a)
+            d = gate_world.min_distance(q, include_cabin=False).distance_m
+            if abs(d - target) < 2e-4:
+                break
+            lo, hi = (0.5 * (lo + hi), hi) if d > target else (lo, 0.5 * (lo + hi))
+        if abs(d - target) < 2e-4 and sc.robot.admissible_batch(q[None])[0]:
+            found += 1
+            assert gate_world.is_valid(q, 0.01) and not planner_world.is_valid(q, 0.01)
+            assert planner_world.check_state(q, 0.01).contacts[0].kind == "self"
+    assert found >= 3, found
+
+
+def test_a_start_whose_bodies_keep_the_gates_self_clearance_is_planned(tmp_path: Path) -> None:
+    """Ring-frame bay-side goal (seed 11, case 3): the start keeps link_ef 6.7 mm from the platform.
+
+    The gate certifies 5 mm between bodies with a 1 mm margin, so the start is fine; the start check must
+    ask that, not the planner's own 6 mm (it once said "6.7 mm from platform, 7.5 mm required").
+    """
+    case = generate_case(11, 3, GeneratorOptions(family="ring-frame"))
+    sc = load_scenario(write_case(case, tmp_path))
+    gate_world = CollisionWorld(sc.robot, sc.cabin, sc.payload)
+    start = gate_world.min_distance(sc.start_q, include_cabin=False)
+    assert DEFAULT_SELF_CLEARANCE_M + GATE_MOTION_MARGIN_M < start.distance_m < 0.0075, start
+    result = Planner(sc).plan()
+    assert result.gate.passed, result.gate.summary()
