@@ -117,8 +117,8 @@ class ReferenceWorld(CollisionWorld):
 
     #: The original always-probe policy of the motion walk.
     probe_when_proven = True
-    #: Every probe and distance through FCL, bodies against the cabin included.
-    compiled_cabin_tests = False
+    #: Every probe and distance through FCL: bodies against the cabin and the obstacles, pairs of bodies.
+    compiled_tests = False
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)

@@ -144,10 +144,11 @@ class CollisionWorld(Generic[RobotT]):
     #: Motion walks: probe for more than the bounds prove only where they prove nothing (states cost
     #: ~2 us, an FCL probe 10-50 us); the reference route keeps the original always-probe policy.
     probe_when_proven: bool = False
-    #: A body's probes and exact distances against the cabin by the compiled tests on the cabin's triangle
-    #: tree (FCL's verdicts, exact distances: :mod:`.kernels.mesh`) outside the walk too (state checks, the
-    #: gate, reports); the reference route uses FCL's.
-    compiled_cabin_tests: bool = True
+    #: The compiled tests (:mod:`.kernels.mesh`: FCL's verdicts, exact distances where FCL's GJK stops above
+    #: them) outside the walk too (state checks, the gate, reports): a body's probes and exact distances
+    #: against the cabin's and each obstacle's triangle tree, and the exact distance of a pair of bodies;
+    #: the reference route uses FCL's.
+    compiled_tests: bool = True
 
     def __init__(
         self,
@@ -177,7 +178,8 @@ class CollisionWorld(Generic[RobotT]):
         self._probes = Probes(
             self.bodies,
             cabin_bvh(*entry[0]) if entry is not None else None,
-            tree if self.compiled_cabin_tests else None,
+            tree if self.compiled_tests else None,
+            compiled_pairs=self.compiled_tests,
         )
         if entry is not None:
             self._grid = _cabin_grid(*entry[0], grid_step_m)
@@ -198,7 +200,7 @@ class CollisionWorld(Generic[RobotT]):
         self._fine_r = self._kernel.fine.radii
         #: The obstacles added to the cabin, with the pairs this world allows (None: no obstacles).
         self.obstacles: ObstacleSet | None = (
-            ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed), self.kernels)
+            ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed), self.kernels, self.compiled_tests)
             if obstacles
             else None
         )
@@ -540,8 +542,9 @@ class CollisionWorld(Generic[RobotT]):
     def min_distance(self, q: Array, include_self: bool = True, include_cabin: bool = True) -> Distance:
         """Smallest distance from any body to the cabin (and between non-adjacent bodies), with witnesses.
 
-        Distances are exact FCL queries on the un-grown shapes; candidates whose certified lower bound
-        already exceeds the best distance found are skipped (branch and bound). Penetration gives <= 0.
+        Distances are exact on the un-grown shapes (the compiled tests, :attr:`compiled_tests`; FCL's on the
+        reference route); candidates whose certified lower bound already exceeds the best distance found are
+        skipped (branch and bound). Penetration gives <= 0.
         ``include_self=False``: the cabin only; ``include_cabin=False``: the robot's body pairs only (an
         infinite distance when there is nothing to measure).
         """

@@ -1,4 +1,4 @@
-"""An independent minimisation of a convex hull's distance to triangles, to check the compiled distances."""
+"""Independent minimisations of convex hulls' distances (SLSQP), to check the compiled distances."""
 
 from __future__ import annotations
 
@@ -26,3 +26,25 @@ def qp_distance(pts: np.ndarray, v: np.ndarray, f: np.ndarray, near: float) -> f
         )
         best = min(best, float(np.sqrt(res.fun)))
     return best
+
+
+def hull_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Min |x - y| over x in conv(a), y in conv(b) (point sets (n, 3), (m, 3)), by SLSQP on both weights."""
+    na = len(a)
+
+    def gap(w: np.ndarray) -> np.ndarray:
+        return np.asarray(w[:na] @ a - w[na:] @ b)
+
+    res = minimize(
+        lambda w: float(gap(w) @ gap(w)),
+        np.concatenate([np.full(na, 1.0 / na), np.full(len(b), 1.0 / len(b))]),
+        jac=lambda w: 2.0 * np.concatenate([a @ gap(w), -(b @ gap(w))]),
+        bounds=[(0.0, 1.0)] * (na + len(b)),
+        constraints=[
+            {"type": "eq", "fun": lambda w: w[:na].sum() - 1.0},
+            {"type": "eq", "fun": lambda w: w[na:].sum() - 1.0},
+        ],
+        method="SLSQP",
+        options={"ftol": 1e-16, "maxiter": 1000},
+    )
+    return float(np.sqrt(res.fun))

@@ -264,6 +264,15 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
         ]
         for what, args in calls:
             _same(getattr(built, what)(*args, trees[0]), getattr(jit, what)(*args, trees[0]), what)
+        other = np.concatenate([rng.normal(size=9), p + rng.normal(0.0, 0.3, 3), [0.3]])  # a pair's pose
+        pairs = [(pose, half, 0.0, other, half, 0.0), (capsule, half, 0.05, other, half, 0.0)]
+        for pair in [*pairs, (capsule, half, 0.05, other, half, 0.03)]:
+            _same(built.pair_witness(*pair), jit.pair_witness(*pair), "pair_witness")
+            _same(
+                built.pair_witness(*pair[3:], *pair[:3]),
+                jit.pair_witness(*pair[3:], *pair[:3]),
+                "pair_witness",
+            )
 
 
 def test_build_and_jit_give_the_same_reference_speed() -> None:

@@ -132,6 +132,7 @@ EXTENSION = aot.Extension(
         Entry("capsule_touches_mesh", ("f8[1]", "f8", "f8", *_TREE), "b1"),
         Entry("capsule_mesh_distance", ("f8[1]", "f8", "f8", *_TREE), "f8"),
         Entry("cabin_witness", ("f8[1]", "f8[1]", "f8", *_TREE), "(f8,f8[1]w,f8[1]w)"),
+        Entry("pair_witness", ("f8[1]", "f8[1]", "f8", "f8[1]", "f8[1]", "f8"), "(f8,f8[1]w,f8[1]w)"),
     ),
 )
 
@@ -583,6 +584,20 @@ class Kernels:
         pose = check_array(pose, "pose", F8, 1, shape=(13,))
         half = check_array(half, "half", F8, 1, shape=(3,))
         d, pa, pb = self.module.cabin_witness(pose, half, float(radius), *tree)
+        return float(d), pa, pb
+
+    def pair_witness(
+        self, pose_a: Array, half_a: Array, radius_a: float, pose_b: Array, half_b: Array, radius_b: float
+    ) -> tuple[float, Array, Array]:
+        """:func:`.mesh.pair_witness`: (distance, a's point, b's point) of two bodies (a box: radius 0)."""
+        d, pa, pb = self.module.pair_witness(
+            check_array(pose_a, "pose_a", F8, 1, shape=(13,)),
+            check_array(half_a, "half_a", F8, 1, shape=(3,)),
+            float(radius_a),
+            check_array(pose_b, "pose_b", F8, 1, shape=(13,)),
+            check_array(half_b, "half_b", F8, 1, shape=(3,)),
+            float(radius_b),
+        )
         return float(d), pa, pb
 
     def hull_mesh_lower(self, points: Array, tree: MeshTree) -> float:

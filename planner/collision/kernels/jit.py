@@ -17,6 +17,7 @@ from planner.collision.kernels.mesh import (
     capsule_touches_mesh,
     hull_mesh_lower,
     mesh_tree,
+    pair_witness,
 )
 from planner.collision.kernels.obstacles import obstacle_bounds, obstacle_coarse_batch, obstacle_fine_batch
 from planner.collision.kernels.offsets import (
@@ -61,6 +62,7 @@ __all__ = [
     "packed_poses",
     "packed_state",
     "pair_vertices",
+    "pair_witness",
     "path_vertices",
     "propagate",
     "run_extent",

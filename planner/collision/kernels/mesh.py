@@ -671,6 +671,88 @@ def capsule_touches_mesh(
 
 
 @njit(cache=True, fastmath=False)
+def _body_points(pose: np.ndarray, half: np.ndarray, radius: float) -> np.ndarray:
+    """A body's points at ``pose`` (13,): a capsule's (``radius`` > 0) 2 axis end points, a box's 8 corners.
+
+    The body is their convex hull (a capsule: grown by its radius); corner k is at +half[j] along axis j
+    where bit j of k is set, else at -half[j].
+    """
+    n = 2 if radius > 0.0 else 8
+    pts = np.empty((n, 3))
+    for k in range(n):
+        for j in range(3):
+            if radius > 0.0:
+                pts[k, j] = pose[9 + j] + (k - 0.5) * pose[12] * pose[6 + j]
+            else:
+                c = pose[9 + j]
+                c += (half[0] if k & 1 else -half[0]) * pose[j]
+                c += (half[1] if k & 2 else -half[1]) * pose[3 + j]
+                c += (half[2] if k & 4 else -half[2]) * pose[6 + j]
+                pts[k, j] = c
+    return pts
+
+
+@njit(cache=True, fastmath=False)
+def pair_witness(
+    pose_a: np.ndarray,
+    half_a: np.ndarray,
+    radius_a: float,
+    pose_b: np.ndarray,
+    half_b: np.ndarray,
+    radius_b: float,
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """(distance, a's nearest point, b's nearest point) of two bodies, each a box or a capsule.
+
+    A box is the hull of its 8 corners (``radius`` 0, half extents ``half``), a capsule that of its 2 axis
+    end points grown by ``radius``: the distance is the norm of the minimum-norm point of the hull of the
+    points' differences (Wolfe's, :func:`_wolfe`; certified from below as in :func:`hull_triangle_lower`,
+    exact to rounding at convergence) less both radii. Where the hulls may touch: -1 (FCL's figure for a
+    contact it does not measure). Two capsules whose axes keep apart but whose radii overlap give their
+    true signed distance (negative), as FCL's does. The points come from the corral's weights, moved out
+    from an axis by its radius.
+    """
+    pa = np.full(3, np.nan)
+    pb = np.full(3, np.nan)
+    ra = _body_points(pose_a, half_a, radius_a)
+    rb = _body_points(pose_b, half_b, radius_b)
+    na, nb = ra.shape[0], rb.shape[0]
+    m = np.empty((na * nb, 3))
+    for i in range(na):
+        for j in range(nb):
+            for c in range(3):
+                m[nb * i + j, c] = ra[i, c] - rb[j, c]
+    s = np.empty(5, dtype=np.int64)
+    lam = np.empty(5)
+    k, x0, x1, x2 = _wolfe(m, na * nb, s, lam, np.empty(5), np.empty((5, 6)))
+    xx = _dot3(x0, x1, x2, x0, x1, x2)
+    w = math.inf  # as in :func:`hull_triangle_lower`: x . m >= w for every difference: w / |x| apart
+    for i in range(na * nb):
+        w = min(w, _dot3(x0, x1, x2, m[i, 0], m[i, 1], m[i, 2]))
+    if k == 0 or not (xx > 0.0 and w > 0.0):
+        return -1.0, pa, pb
+    lower = w / math.sqrt(xx)
+    pa[:] = 0.0
+    pb[:] = 0.0
+    for i in range(k):
+        for c in range(3):
+            pa[c] += lam[i] * ra[s[i] // nb, c]
+            pb[c] += lam[i] * rb[s[i] % nb, c]
+    g0, g1, g2 = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+    gap = math.sqrt(_dot3(g0, g1, g2, g0, g1, g2))
+    if gap > 0.0:  # from the axes to the capsules' surfaces (a box: radius 0)
+        pa[0] += radius_a * g0 / gap
+        pa[1] += radius_a * g1 / gap
+        pa[2] += radius_a * g2 / gap
+        pb[0] -= radius_b * g0 / gap
+        pb[1] -= radius_b * g1 / gap
+        pb[2] -= radius_b * g2 / gap
+    d = lower - radius_a - radius_b
+    if d <= 0.0 and (radius_a == 0.0 or radius_b == 0.0):
+        return -1.0, pa, pb  # a box in contact: no depth measured (FCL's convention)
+    return d, pa, pb
+
+
+@njit(cache=True, fastmath=False)
 def cabin_witness(
     pose: np.ndarray, half: np.ndarray, radius: float, tris: np.ndarray, bounds: np.ndarray, links: np.ndarray
 ) -> tuple[float, np.ndarray, np.ndarray]:
@@ -691,17 +773,7 @@ def cabin_witness(
         n = 8
     if t < 0:
         return d, pa, pb
-    pts = np.empty((n, 3))
-    for k in range(n):
-        for j in range(3):
-            if radius > 0.0:
-                pts[k, j] = pose[9 + j] + (k - 0.5) * pose[12] * pose[6 + j]
-            else:
-                c = pose[9 + j]
-                c += (half[0] if k & 1 else -half[0]) * pose[j]
-                c += (half[1] if k & 2 else -half[1]) * pose[3 + j]
-                c += (half[2] if k & 4 else -half[2]) * pose[6 + j]
-                pts[k, j] = c
+    pts = _body_points(pose, half, radius)
     m = np.empty((3 * n, 3))
     for i in range(n):
         for c in range(3):
