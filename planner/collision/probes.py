@@ -99,15 +99,16 @@ class Probes:
     A body against the cabin is probed by the compiled tests on the cabin's triangle tree when there is one
     (:mod:`planner.collision.kernels.mesh`: FCL's verdicts, a box in about 2 us instead of 10).
 
-    The exact distance of a pair of bodies is compiled too where ``compiled_pairs``
-    (:func:`.kernels.mesh.pair_witness`: FCL's GJK runs up to 0.3 mm above a capsule's distance to a box).
+    A pair of bodies' probe and exact distance are compiled too where ``compiled_pairs``
+    (:func:`.kernels.distances.pair_touches`, :func:`.kernels.mesh.pair_witness`: FCL's signed query runs
+    up to 1.1 mm above two capsules' distance, its collision query misses their contact by up to 1 um).
 
     Args:
         bodies: The world's bodies (shapes, checked pairs).
         cabin: The cabin's FCL mesh (``None``: free space).
         tree: The same cabin's triangle tree (``None``: every probe through FCL).
         kernels: The compiled kernels' entries.
-        compiled_pairs: Pairs' exact distances by the compiled test (False: FCL's).
+        compiled_pairs: Pairs' probes and exact distances by the compiled tests (False: FCL's).
     """
 
     def __init__(
@@ -127,6 +128,13 @@ class Probes:
         self._radius = [float(s.radius) if s.kind == "capsule" else 0.0 for s in bodies.shapes]
         self.queries = 0
         self.compiled_pairs = compiled_pairs
+        # The pairs' compiled tests read every body's radius and half extents (0 where it has none).
+        self._radii = np.array(self._radius, dtype=float)
+        self._halves = np.array([np.zeros(3) if h is None else h for h in self._half], dtype=float).reshape(
+            -1, 3
+        )
+        self._radii.setflags(write=False)
+        self._halves.setflags(write=False)
         self._capsule = [s.kind == "capsule" for s in bodies.shapes]
         self._grown = GrownShapes(bodies.shapes)
         self._local = threading.local()
@@ -181,8 +189,11 @@ class Probes:
         return self.collide(self.posed(st, b, margin), self.cabin_obj)
 
     def pair_hit(self, st: BodyState, k: int, margin: float) -> bool:
-        """The bodies of checked pair k, each grown by ``margin / 2``, touch."""
+        """The bodies of checked pair k, each grown by ``margin / 2``, touch (compiled: compiled_pairs)."""
         a, b = self.bodies.pairs[k]
+        if self.compiled_pairs:
+            self.queries += 1
+            return self._kernels.pair_touches(st.flat, self._radii, self._halves, a, b, margin)
         return self.collide(self.posed(st, a, margin / 2), self.posed(st, b, margin / 2))
 
     def hit(self, st: BodyState, is_cabin: bool, idx: int, margin: float) -> bool:

@@ -410,3 +410,55 @@ def test_the_worlds_pair_distances_are_the_compiled_ones_and_never_above_fcls(ro
             q_b = q_a + 0.1 * (q_b - q_a)
             assert fast.check_motion(q_a, q_b, 0.01).valid == ref.check_motion(q_a, q_b, 0.01).valid
     assert near > 20, near
+
+
+def test_pair_probes_are_fcls_verdicts_on_the_same_grown_bodies() -> None:
+    """A pair's probe (each body grown by half the growth: a box as a box, a capsule's radius): FCL's verdict.
+
+    Box-box and capsule-box: FCL's verdict at every growth, grazing ones included (0.1% either side of the
+    distance). Two capsules: exactly where their distance is at most the growth; FCL's collision query
+    misses such contacts by up to a micrometre (counted, not required).
+    """
+    rng = np.random.default_rng(23)
+    checked = {0: 0, 1: 0, 2: 0}
+    fcl_missed = 0
+    for i in range(1800):
+        Ra, Rb = Rotation.random(2, random_state=900 + i).as_matrix()
+        ca, cb = rng.uniform(-0.3, 0.3, (2, 3))
+        kind = i % 3
+        ha, hb = rng.uniform(0.02, 0.2, (2, 3))
+        ra = 0.0 if kind == 0 else float(rng.uniform(0.02, 0.08))
+        rb = float(rng.uniform(0.02, 0.08)) if kind == 2 else 0.0
+        la = float(rng.uniform(0.05, 0.5)) if ra > 0 else 0.0
+        lb = float(rng.uniform(0.05, 0.5)) if rb > 0 else 0.0
+        poses = np.array([_pose(Ra, ca), _pose(Rb, cb)])
+        poses[:, 12] = la, lb
+        radii = np.array([ra, rb])
+        halves = np.array([ha if ra == 0 else np.zeros(3), hb if rb == 0 else np.zeros(3)])
+        d = DEFAULT.pair_witness(poses[0], halves[0], ra, poses[1], halves[1], rb)[0]
+        grows = [0.0, 0.01, 0.03] + ([d * (1 - 1e-3), d * (1 + 1e-3)] if d > 0 else [])
+        for g in grows:
+            ours = DEFAULT.pair_touches(poses, radii, halves, 0, 1, g)
+            shapes = [
+                fcl.Box(*(2 * h + g)) if r == 0 else fcl.Capsule(r + g / 2, length)
+                for h, r, length in ((ha, ra, la), (hb, rb, lb))
+            ]
+            objs = [
+                fcl.CollisionObject(s, fcl.Transform(R, c))
+                for s, R, c in zip(shapes, (Ra, Rb), (ca, cb), strict=True)
+            ]
+            theirs = fcl.collide(*objs, fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+            checked[kind] += 1
+            if kind == 2:
+                assert ours == (d <= g), (i, g, d)
+                fcl_missed += ours and not theirs
+            else:
+                assert ours == theirs, (i, kind, g, d)
+            if d > 0 and g >= d:  # grown by at least the distance: they touch (a box as a box, or more)
+                assert ours, (i, kind, g, d)
+    assert min(checked.values()) > 2500, checked
+    assert DEFAULT.pair_touches(poses, radii, halves, 1, 0, 0.03) == DEFAULT.pair_touches(
+        poses, radii, halves, 0, 1, 0.03
+    )
+    with pytest.raises(ValueError, match="outside"):
+        DEFAULT.pair_touches(poses, radii, halves, 0, 2, 0.01)

@@ -273,6 +273,17 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
                 jit.pair_witness(*pair[3:], *pair[:3]),
                 "pair_witness",
             )
+            poses, radii, halves = (
+                np.array([pair[0], pair[3]]),
+                np.array([pair[2], pair[5]]),
+                np.array([half, half]),
+            )
+            for g in (0.0, 0.02, 0.2):
+                got = (
+                    built.pair_touches(poses, radii, halves, 0, 1, g),
+                    jit.pair_touches(poses, radii, halves, 0, 1, g),
+                )
+                _same(got[0], got[1], "pair_touches")
 
 
 def test_build_and_jit_give_the_same_reference_speed() -> None:

@@ -132,6 +132,7 @@ EXTENSION = aot.Extension(
         Entry("capsule_touches_mesh", ("f8[1]", "f8", "f8", *_TREE), "b1"),
         Entry("capsule_mesh_distance", ("f8[1]", "f8", "f8", *_TREE), "f8"),
         Entry("cabin_witness", ("f8[1]", "f8[1]", "f8", *_TREE), "(f8,f8[1]w,f8[1]w)"),
+        Entry("pair_touches", ("f8[2]", "f8[1]", "f8[2]", "i8", "i8", "f8"), "b1"),
         Entry("pair_witness", ("f8[1]", "f8[1]", "f8", "f8[1]", "f8[1]", "f8"), "(f8,f8[1]w,f8[1]w)"),
     ),
 )
@@ -585,6 +586,23 @@ class Kernels:
         half = check_array(half, "half", F8, 1, shape=(3,))
         d, pa, pb = self.module.cabin_witness(pose, half, float(radius), *tree)
         return float(d), pa, pb
+
+    def pair_touches(self, poses: Array, radius: Array, half: Array, a: int, b: int, grow: float) -> bool:
+        """:func:`.distances.pair_touches`: bodies a, b of ``poses`` (B, 13), each grown by ``grow`` / 2."""
+        poses = check_array(poses, "poses", F8, 2, shape=(None, 13))
+        n = poses.shape[0]
+        if not (0 <= a < n and 0 <= b < n):
+            raise ValueError(f"pair_touches: bodies {a}, {b} outside [0, {n})")
+        return bool(
+            self.module.pair_touches(
+                poses,
+                check_array(radius, "radius", F8, 1, shape=(n,)),
+                check_array(half, "half", F8, 2, shape=(n, 3)),
+                int(a),
+                int(b),
+                float(grow),
+            )
+        )
 
     def pair_witness(
         self, pose_a: Array, half_a: Array, radius_a: float, pose_b: Array, half_b: Array, radius_b: float

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from planner.collision.kernels.along import bounds_at, cover_walk
 from planner.collision.kernels.bounds import cover_centres_batch
+from planner.collision.kernels.distances import pair_touches
 from planner.collision.kernels.grid import grid_bounds, grid_marks
 from planner.collision.kernels.mesh import (
     box_mesh_distance,
@@ -61,6 +62,7 @@ __all__ = [
     "packed_check",
     "packed_poses",
     "packed_state",
+    "pair_touches",
     "pair_vertices",
     "pair_witness",
     "path_vertices",
