@@ -206,10 +206,22 @@ class Probes:
         """Exact carriage-to-cabin distance every ``step`` along the rail [lo, hi]: (lo, step, distances).
 
         The carriage moves with d1 only; between samples the distance changes by at most the rail
-        displacement (it is 1-Lipschitz in d1), which the lookup subtracts. Penetration gives -inf.
+        displacement (it is 1-Lipschitz in d1), which the lookup subtracts. Penetration gives -inf. A box
+        carriage against the cabin's tree: the compiled exact distance (FCL's GJK ran up to 28 nm above it
+        on 84 generated cabins); else FCL's.
         """
         assert self.cabin_obj is not None
         z = np.arange(lo, hi + step, step)
+        half = self._half[carriage]
+        if self.tree is not None and half is not None:
+            pose = np.zeros(13)
+            pose[[0, 4, 8]] = 1.0  # the carriage's frame is the base frame's, moved along the rail
+            pose[10] = -0.06
+            table = np.empty(len(z))
+            for k, zk in enumerate(z):
+                pose[11] = zk
+                table[k] = self._kernels.box_mesh_distance(pose, half, np.inf, self.tree)
+            return lo, step, np.where(table < 0, -np.inf, table)
         geom = self.geometry(carriage, 0.0, 0.0)
         req = fcl.DistanceRequest()
         table = np.array(

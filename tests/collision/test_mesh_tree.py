@@ -8,6 +8,7 @@ tree must report exactly what a walk with FCL's probes reports.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import fcl
 import numpy as np
@@ -20,12 +21,13 @@ from planner.collision.kernels.entries import DEFAULT
 from planner.collision.motion import CertifiedMotion
 from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
-from planner.generate import GeneratorOptions, generate_case
+from planner.generate import GeneratorOptions, generate_case, write_case
 from planner.generate.cabins import cabin_mesh
 from planner.meshes import REFERENCE_DIR
 from planner.meshio import load_mesh
 from planner.robots.cabin8 import Cabin8
 from planner.robots.geometry import BOX_CORNER_SIGNS
+from planner.scenario import load_scenario
 from tests.collision.minimise import hull_distance, qp_distance
 from tests.conftest import admissible_joints
 
@@ -462,3 +464,33 @@ def test_pair_probes_are_fcls_verdicts_on_the_same_grown_bodies() -> None:
     )
     with pytest.raises(ValueError, match="outside"):
         DEFAULT.pair_touches(poses, radii, halves, 0, 2, 0.01)
+
+
+def test_the_carriage_table_is_the_compiled_exact_distance(robot: Cabin8, tmp_path: Path) -> None:
+    """The carriage's clearance table along the rail: the compiled box distance, FCL's to 1e-7 m, never above.
+
+    A suite cabin and a generated cabin rotated about the rail (FCL's GJK ran up to 28 nm above the exact
+    distance on such cabins).
+    """
+    from planner.collision.probes import Probes, cabin_bvh
+    from planner.collision.world import cabin_key
+
+    generated = load_scenario(write_case(generate_case(0, 0, GeneratorOptions(family="cluttered")), tmp_path))
+    assert generated.cabin is not None
+    for mesh in (generated.cabin, load_mesh(REFERENCE_DIR / "cabin-cluttered.stl", units="m")):
+        world = CollisionWorld(robot, mesh, None)
+        reference = Probes(world.bodies, cabin_bvh(*cabin_key(mesh)), None)  # FCL's distances
+        carriage = world.names.index(world.model.rail_body)
+        lo, hi = world.model.rail_range
+        z0, dz, table = world._probes.carriage_table(carriage, lo, hi)
+        _, _, fcl_table = reference.carriage_table(carriage, lo, hi)
+        finite = np.isfinite(fcl_table)
+        assert np.array_equal(finite, np.isfinite(table)) and finite.any()
+        assert np.all(table[finite] <= fcl_table[finite] + 1e-12)
+        assert np.max(fcl_table[finite] - table[finite]) < 1e-7
+        half = np.array(world.bodies.shapes[carriage].size) / 2
+        for k in range(
+            0, len(table), 97
+        ):  # each entry the exact distance of the carriage at its rail position
+            pose = _pose(np.eye(3), np.array([0.0, -0.06, z0 + k * dz]))
+            assert table[k] == DEFAULT.box_mesh_distance(pose, half, np.inf, world._probes.tree)
