@@ -8,9 +8,8 @@ configuration off the rail position (:func:`planner.plan.connect.detour`), and t
 with the rest of the time. Where no transit posture rode the whole rail move, two postures one after the
 other (:func:`planner.plan.connect.via_relay`) come right after the detour, before the budgeted attempt:
 the relay is built for that case, and the attempt before it spent its whole budget in vain on the
-generated cabins where the relay then succeeded (0.25 s of a 0.68 s plan, gen-cluttered-0-002).
-The path found is cut at its corners for time
-(:func:`planner.plan.shortcut.cut_corners`).
+generated cabins where the relay then succeeded (0.25 s of a 0.68 s plan, gen-cluttered-0-002). The path
+found is cut at its corners for time (:func:`planner.plan.shortcut.cut_corners`).
 """
 
 from __future__ import annotations

@@ -108,7 +108,7 @@ class ResolvedScenario:
         """The collision world of this scenario: robot, payload, cabin and its obstacles.
 
         ``self_clearance``: what non-adjacent bodies keep from each other [m] in the world's checks (the
-        planner's world keeps more than the gate certifies: :data:`planner.plan.context.PLANNER_SLACK_M`).
+        planner's world keeps more than the gate certifies: ``PLANNER_SELF_SLACK_M``).
         """
         return CollisionWorld(
             self.robot,
