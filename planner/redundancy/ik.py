@@ -266,6 +266,19 @@ def track_pose(
     return _finish(robot, refined, T_target, q_ref, opts, 0)
 
 
+def polish_pose(
+    robot: Cabin8, q: Array, T_target: Array, options: IKOptions | None = None
+) -> IKSolution | None:
+    """Exact IK at ``q`` itself (no move along the self-motion manifold), or ``None`` unless admissible.
+
+    For a point of the closed-form redundant family (already exact to rounding): polished to the options'
+    tolerance where it stands, where :func:`track_pose` would first move it towards its secondary objectives.
+    """
+    opts = options or IKOptions()
+    q = np.asarray(q, dtype=float)
+    return _finish(robot, q, _validate_target(T_target), q, opts, 0)
+
+
 def solve_pose_ik(
     robot: Cabin8,
     T_target: Array,

@@ -336,3 +336,35 @@ def test_a_start_whose_bodies_keep_the_gates_self_clearance_is_planned(tmp_path:
     assert DEFAULT_SELF_CLEARANCE_M + GATE_MOTION_MARGIN_M < start.distance_m < 0.0075, start
     result = Planner(sc).plan()
     assert result.gate.passed, result.gate.summary()
+
+
+def test_a_clear_family_point_is_not_lost_to_its_refinement(tmp_path: Path) -> None:
+    """Near end-bay goal (seed 12, case 4, end-bay family): a clear family point refined into the cabin.
+
+    Two grid points of the redundant family keep 15.8 mm from the cabin; the refinement towards margins
+    and posture moved both to 10.1 mm, and the goal was refused as goal_in_collision ("every configuration
+    reaching it comes within the clearance"), which the generator's witness (15.8 mm) contradicts. The
+    point polished where it stands is an exact goal configuration; whatever follows, the refusal no
+    longer says the goal is unreachable.
+    """
+    from planner.core.exceptions import PlanRefused
+    from planner.plan.goals import goal_configurations
+
+    case = generate_case(12, 4, GeneratorOptions(family="end-bay"))
+    sc = load_scenario(write_case(case, tmp_path))
+    ctx = PlanContext.build(sc)
+    assert sc.T_base_tool_goal is not None
+    cands, stats = goal_configurations(
+        ctx.world, sc.T_base_tool_goal, ctx.clearances.planner_m, ctx.forces, sc.start_u
+    )
+    assert cands, stats
+    for cand in cands:  # exact, clear by the exact distance, holdable
+        assert np.linalg.norm(sc.robot.fk(cand.q)[:3, 3] - sc.T_base_tool_goal[:3, 3]) <= 1e-6
+        assert ctx.world.min_distance(cand.q).distance_m >= ctx.clearances.planner_m
+        assert ctx.forces.ok(cand.q)
+    try:
+        result = Planner(sc).plan()
+    except PlanRefused as exc:
+        assert exc.reason != "goal_in_collision", exc.message
+    else:
+        assert result.gate.passed
