@@ -490,6 +490,12 @@ def hull_triangle_lower(
     origin where w > 0: that bound, from :func:`_wolfe`'s minimum-norm point, exact at its convergence.
     """
     _, x0, x1, x2 = _wolfe(m, nm, s, lam, a, g)
+    return _certified_norm(m, nm, x0, x1, x2)
+
+
+@njit(cache=True, fastmath=False)
+def _certified_norm(m: np.ndarray, nm: int, x0: float, x1: float, x2: float) -> float:
+    """min_k x . m_k / |x| for any x (0 where that is not positive): conv(m[:nm]) is at least that far out."""
     xx = _dot3(x0, x1, x2, x0, x1, x2)
     if xx == 0.0:
         return 0.0
@@ -724,13 +730,9 @@ def pair_witness(
     s = np.empty(5, dtype=np.int64)
     lam = np.empty(5)
     k, x0, x1, x2 = _wolfe(m, na * nb, s, lam, np.empty(5), np.empty((5, 6)))
-    xx = _dot3(x0, x1, x2, x0, x1, x2)
-    w = math.inf  # as in :func:`hull_triangle_lower`: x . m >= w for every difference: w / |x| apart
-    for i in range(na * nb):
-        w = min(w, _dot3(x0, x1, x2, m[i, 0], m[i, 1], m[i, 2]))
-    if k == 0 or not (xx > 0.0 and w > 0.0):
+    lower = _certified_norm(m, na * nb, x0, x1, x2)
+    if k == 0 or not lower > 0.0:
         return -1.0, pa, pb
-    lower = w / math.sqrt(xx)
     pa[:] = 0.0
     pb[:] = 0.0
     for i in range(k):
