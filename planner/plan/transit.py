@@ -25,6 +25,7 @@ The planner then connects start -> transit at the start's d1 and transit at the 
 from __future__ import annotations
 
 import logging
+import weakref
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -60,6 +61,30 @@ def compactness(world: CollisionWorld, qs: Array) -> Array:
     return lateral + 0.5 * height
 
 
+#: Each world's seeded candidate pools, ranked most compact first: ``(seed, n_candidates)`` -> (N, 8),
+#: read-only. A plan's transit search and a relay's two rides draw the same pool (same world, seed and
+#: size): drawn and ranked once (25-40 ms each on a 2-core VM), and gone with the world.
+_POOLS: weakref.WeakKeyDictionary[CollisionWorld, dict[tuple[int, int], Array]] = weakref.WeakKeyDictionary()
+
+
+def ranked_pool(world: CollisionWorld, seed: int, n_candidates: int) -> Array:
+    """The world's seeded pool of ``n_candidates`` admissible postures, most compact first (read-only).
+
+    :func:`random_admissible_joints` from ``default_rng(seed)``, sorted by :func:`compactness` (stable):
+    the same rows whichever search asks first (tests/plan/test_transit.py).
+    """
+    pools = _POOLS.setdefault(world, {})
+    key = (int(seed), int(n_candidates))
+    pool = pools.get(key)
+    if pool is None:
+        rng = np.random.default_rng(seed)
+        drawn = random_admissible_joints(world.robot, rng, n_candidates, max_tries=4 * n_candidates)
+        pool = drawn[np.argsort(compactness(world, drawn), kind="stable")] if len(drawn) else drawn
+        pool.flags.writeable = False
+        pools[key] = pool
+    return pool
+
+
 def find_transit(
     world: CollisionWorld,
     q_start: Array,
@@ -87,7 +112,9 @@ def find_transit(
         state_ok: An extra condition on the posture, which must not depend on the rail position d1 (it is
             evaluated once per posture): the static force check is such, as gravity is normal to the rail
             and no drive force changes along it (tested).
-        segment_ok: An extra condition on the ride (the static forces along it).
+        segment_ok: An extra condition on the ride (the static forces along it), evaluated before the
+            ride's certified motion check (the cheaper of the two; a relay's change of posture rejects
+            most riders). It must be pure: the rider taken is the first that passes both, in either order.
         seed: Seed of the candidate pool.
         n_candidates: Postures drawn for the pool.
         n_sweep: Most postures swept along the rail.
@@ -107,14 +134,13 @@ def find_transit(
 
     def candidates() -> Iterator[tuple[Array, bool | None]]:
         # The start's and goal's own postures first (no reconfiguration needed); only when neither rides
-        # the rail, the seeded pool, most compact first (drawing and ranking it costs ~0.1 s), each with
-        # its posture condition when ``states_ok`` gives them all at once (None: ask ``state_ok``).
+        # the rail, the seeded pool, most compact first (drawn and ranked once per world: ranked_pool),
+        # each with its posture condition when ``states_ok`` gives them all at once (None: ``state_ok``).
         yield q_start, None
         yield q_goal, None
-        rng = np.random.default_rng(seed)
-        pool = random_admissible_joints(robot, rng, n_candidates, max_tries=4 * n_candidates)
+        pool = ranked_pool(world, seed, n_candidates)
         if len(pool):
-            swept = pool[np.argsort(compactness(world, pool), kind="stable")][: n_sweep - 2]
+            swept = pool[: n_sweep - 2]
             if states_ok is None:
                 yield from ((posture, None) for posture in swept)
             else:
@@ -176,7 +202,9 @@ def find_transit(
                 continue
             q_a, q_b = posture.copy(), posture.copy()
             q_a[chain.D1], q_b[chain.D1] = d1_a, d1_b
-            if motion_clear(world, q_a, q_b, clearance, motion_margin) and segment_ok(q_a, q_b):
+            # The extra condition first: it is the cheaper one (the static forces; a relay's change of
+            # posture, a short motion that rejects most of its riders), the rail's certification the dear one.
+            if segment_ok(q_a, q_b) and motion_clear(world, q_a, q_b, clearance, motion_margin):
                 log.info("transit posture found after %d candidates, %d state checks", tried, checks)
                 return Transit(q_a, q_b, tried, checks)
         return None

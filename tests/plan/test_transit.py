@@ -9,7 +9,8 @@ from planner.collision.world import CollisionWorld
 from planner.dynamics.holding import StaticForceCheck
 from planner.plan.motion import certify_motion
 from planner.plan.shortcut import segment_times
-from planner.plan.transit import Transit, compactness, find_transit
+from planner.plan.transit import Transit, compactness, find_transit, ranked_pool
+from planner.redundancy.ik import random_admissible_joints
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 from tests.plan.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
 
@@ -106,6 +107,55 @@ def test_seeded_transit_is_reproducible(
     assert again is not None
     assert np.array_equal(again.q_a, transit.q_a) and np.array_equal(again.q_b, transit.q_b)
     assert (again.candidates_tried, again.state_checks) == (transit.candidates_tried, transit.state_checks)
+
+
+def test_the_ranked_pool_is_drawn_once_per_world_and_is_the_seeded_draw_ranked(
+    scenario: ResolvedScenario, world: CollisionWorld
+) -> None:
+    """A relay's rides and the transit search share one pool: the same rows as a fresh draw, ranked."""
+    pool = ranked_pool(world, 5, 300)
+    assert ranked_pool(world, 5, 300) is pool  # kept with the world
+    assert ranked_pool(world, 6, 300) is not pool
+    drawn = random_admissible_joints(world.robot, np.random.default_rng(5), 300, max_tries=1200)
+    expected = drawn[np.argsort(compactness(world, drawn), kind="stable")]
+    assert np.array_equal(pool, expected)
+    assert not pool.flags.writeable  # a search that wrote into a posture would change the next one's pool
+
+
+def test_the_rides_extra_condition_is_asked_before_its_certification(
+    scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, transit: Transit
+) -> None:
+    """A rider the extra condition refuses costs no certified motion check.
+
+    The rider taken is the first in order that passes both (a relay's change of posture refuses most).
+    """
+    assert scenario.goal_q is not None
+    args = (world, np.array(scenario.start_q), np.array(scenario.goal_q), CLEARANCE_M, MOTION_MARGIN_M)
+    calls = {"extra": 0, "walks": 0}
+    walk = world.check_motion
+
+    def counting_walk(*a: object, **k: object) -> object:
+        calls["walks"] += 1
+        return walk(*a, **k)  # type: ignore[arg-type]
+
+    def refuse_all(q_a: np.ndarray, q_b: np.ndarray) -> bool:
+        calls["extra"] += 1
+        return False
+
+    world.check_motion = counting_walk  # type: ignore[method-assign]
+    try:
+        assert find_transit(*args, forces.ok, refuse_all, 1) is None
+    finally:
+        del world.check_motion
+    assert calls["extra"] > 0 and calls["walks"] == 0
+    # Refusing the first rider the plain search takes: the next one passing both is taken instead.
+    taken = transit.q_a.copy()
+
+    def not_that_one(q_a: np.ndarray, q_b: np.ndarray) -> bool:
+        return not np.array_equal(q_a, taken) and forces.segment_ok(q_a, q_b)
+
+    other = find_transit(*args, forces.ok, not_that_one, 1)
+    assert other is None or not np.array_equal(other.q_a, taken)
 
 
 def test_the_pools_posture_condition_batched_gives_the_same_transit(
