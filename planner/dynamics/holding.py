@@ -16,6 +16,9 @@ from planner.core.types import Array
 from planner.dynamics.lagrange import Cabin8Dynamics
 from planner.dynamics.payload import RigidPayload
 
+#: Spacing of :meth:`StaticForceCheck.segment_ok`'s points: m or rad of the largest joint change.
+SEGMENT_STEP = 0.02
+
 
 @dataclass(frozen=True)
 class StaticForceCheck:
@@ -38,7 +41,7 @@ class StaticForceCheck:
         """True when the drives can hold the payload at q."""
         return bool(self.ratios(q)[0] <= self.fraction)
 
-    def segment_ok(self, q_a: Array, q_b: Array, step: float = 0.02) -> bool:
+    def segment_ok(self, q_a: Array, q_b: Array, step: float = SEGMENT_STEP) -> bool:
         """Checked at every ``step`` (m or rad, largest joint change) along the straight segment."""
         n = int(max(1, np.ceil(float(np.max(np.abs(q_b - q_a))) / step)))
         t = np.linspace(0.0, 1.0, n + 1)[:, None]

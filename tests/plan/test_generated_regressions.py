@@ -6,6 +6,7 @@ failed, with the project's own independent routes (exact distances, the gate's s
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -368,3 +369,75 @@ def test_a_clear_family_point_is_not_lost_to_its_refinement(tmp_path: Path) -> N
         assert exc.reason != "goal_in_collision", exc.message
     else:
         assert result.gate.passed
+
+
+def test_an_approach_line_that_holds_is_not_hidden_by_a_neighbour_that_cannot(tmp_path: Path) -> None:
+    """Bay-side goal (seed 0, case 3, box-section family): the grid's lines fail on force or clearance.
+
+    The line of the redundant family scored best (d5 = -0.075 m) needs 99% of x3's force limit at the
+    start of the insertion line (95% allowed); its neighbours one grid step away were skipped by the
+    diversity rule as it was tried, and the goal was refused as goal_unreachable, "no configuration
+    reaching it can hold the payload", which the generator's witness contradicts: it holds the payload at
+    87% along the whole line. Every line's forces are now checked before any takes a diversity slot.
+    """
+    import json
+
+    from planner.plan.goals import approach_lines
+
+    case = generate_case(0, 3, GeneratorOptions(family="box-section"))
+    sc = load_scenario(write_case(case, tmp_path))
+    ctx = PlanContext.build(sc)
+    witness = np.array(json.loads(json.dumps(case.meta["witness_goal_q"])), dtype=float)
+    assert sc.T_base_tool_goal is not None and sc.approach_direction is not None
+    shift = np.zeros(8)
+    d = sc.approach_direction
+    shift[[0, 1, 2]] = -sc.approach_distance_m * np.array([d[2], d[0], d[1]])
+    assert ctx.forces.segment_ok(witness + shift, witness)  # the witness's own line holds
+    lines, stats = approach_lines(
+        ctx.world,
+        sc.T_base_tool_goal,
+        sc.approach_direction,
+        sc.approach_distance_m,
+        ctx.clearances.planner_m,
+        ctx.clearances.motion_margin_m,
+        ctx.forces,
+    )
+    assert lines, stats
+    for cand in lines:  # exact at the goal, holdable along the line, clear at its ends by exact distances
+        assert cand.line is not None
+        assert np.linalg.norm(sc.robot.fk(cand.q)[:3, 3] - sc.T_base_tool_goal[:3, 3]) <= 1e-6
+        assert ctx.forces.segment_ok(cand.line[0], cand.line[-1])
+        for q in (cand.line[0], cand.line[-1]):
+            assert ctx.world.min_distance(q).distance_m >= ctx.clearances.planner_m
+    result = Planner(sc).plan()
+    assert result.gate.passed
+
+
+def test_the_lines_forces_batched_are_segment_oks_verdicts() -> None:
+    """One batched evaluation of every line's forces gives each line's own ``segment_ok`` verdict."""
+    from planner.kinematics.closed_form import redundant_family
+    from planner.plan.goals import _line_force_ratios
+
+    sc = load_scenario(SCENARIOS / "hatch-bay-insert.yaml")
+    ctx = PlanContext.build(sc)
+    assert sc.T_base_tool_goal is not None and sc.approach_direction is not None
+    robot = sc.robot
+    rng = np.random.default_rng(4)
+    gammas = rng.uniform(-0.3, 0.3, 60)
+    d5s = rng.uniform(robot.limits.lower[6], robot.limits.upper[6], 60)
+    goals = redundant_family(robot.desc.serial_chain, sc.T_base_tool_goal, gammas, d5s)
+    goals = goals[np.all(np.isfinite(goals), axis=1)]
+    for distance in (0.05, sc.approach_distance_m, 0.9):
+        shift = np.zeros(8)
+        d = sc.approach_direction
+        shift[[0, 1, 2]] = -distance * np.array([d[2], d[0], d[1]])
+        worst = _line_force_ratios(ctx.forces, goals, shift)
+        verdicts = [ctx.forces.segment_ok(q + shift, q) for q in goals]
+        assert (worst <= ctx.forces.fraction).tolist() == verdicts
+    # A limit at the lines' median: half of them fail, so both verdicts are exercised.
+    heavy = dataclasses.replace(
+        ctx.forces, fraction=float(np.median(_line_force_ratios(ctx.forces, goals, shift)))
+    )
+    worst = _line_force_ratios(heavy, goals, shift)
+    verdicts = [heavy.segment_ok(q + shift, q) for q in goals]
+    assert (worst <= heavy.fraction).tolist() == verdicts and 0 < sum(verdicts) < len(verdicts)
