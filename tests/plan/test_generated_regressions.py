@@ -372,13 +372,14 @@ def test_a_clear_family_point_is_not_lost_to_its_refinement(tmp_path: Path) -> N
 
 
 def test_an_approach_line_that_holds_is_not_hidden_by_a_neighbour_that_cannot(tmp_path: Path) -> None:
-    """Bay-side goal (seed 0, case 3, box-section family): the grid's lines fail on force or clearance.
+    """Bay-side goal (seed 0, case 3, box-section family): holdable lines and goals hidden by others.
 
     The line of the redundant family scored best (d5 = -0.075 m) needs 99% of x3's force limit at the
     start of the insertion line (95% allowed); its neighbours one grid step away were skipped by the
     diversity rule as it was tried, and the goal was refused as goal_unreachable, "no configuration
     reaching it can hold the payload", which the generator's witness contradicts: it holds the payload at
-    87% along the whole line. Every line's forces are now checked before any takes a diversity slot.
+    87% along the whole line. Every line's forces are now checked before any takes a diversity slot,
+    and the goal configurations polish the family points that hold the payload first.
     """
     import json
 
@@ -409,6 +410,18 @@ def test_an_approach_line_that_holds_is_not_hidden_by_a_neighbour_that_cannot(tm
         assert ctx.forces.segment_ok(cand.line[0], cand.line[-1])
         for q in (cand.line[0], cand.line[-1]):
             assert ctx.world.min_distance(q).distance_m >= ctx.clearances.planner_m
+    # The goal configurations (the route when no line of fixed redundancy is clear): the polish budget
+    # goes to the family points that hold the payload first; 24 best-scored points that cannot used it all.
+    from planner.plan.goals import goal_configurations
+
+    cands, stats = goal_configurations(
+        ctx.world, sc.T_base_tool_goal, ctx.clearances.planner_m, ctx.forces, sc.start_u
+    )
+    assert cands, stats
+    for c in cands:
+        assert np.linalg.norm(sc.robot.fk(c.q)[:3, 3] - sc.T_base_tool_goal[:3, 3]) <= 1e-6
+        assert ctx.world.min_distance(c.q).distance_m >= ctx.clearances.planner_m
+        assert ctx.forces.ok(c.q)
     result = Planner(sc).plan()
     assert result.gate.passed
 
