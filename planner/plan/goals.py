@@ -162,8 +162,7 @@ def approach_lines(
     d5s = np.linspace(robot.limits.lower[6], robot.limits.upper[6], grid)
     gg, dd = np.meshgrid(gammas, d5s, indexing="ij")
     Q = redundant_family(robot.desc.serial_chain, T_base_tool_goal, gg.ravel(), dd.ravel())
-    shift = np.zeros(8)
-    shift[[0, 1, 2]] = -distance_m * np.array([direction[2], direction[0], direction[1]])
+    shift = line_shift(direction, distance_m)
     n_along = 11
     taus = np.linspace(0.0, 1.0, n_along)
     along = Q[None, :, :] + taus[:, None, None] * shift[None, None, :]  # (n_along, K, 8)
@@ -218,6 +217,17 @@ def approach_lines(
         line = np.stack([q_pre, q_goal])
         out.append(GoalCandidate(q_goal, float(worst[i]), line, np.array([0.0, distance_m])))
     return out, stats
+
+
+def line_shift(direction: Array, distance_m: float) -> Array:
+    """The joint change (8,) from a goal configuration to its pre-insertion one, redundancy held.
+
+    With (gamma, d5) fixed, a translation of the tool by ``-distance_m * direction`` (base frame) moves
+    only the rail and the platform: d1 by its z part, the platform's x and y by its x and y parts.
+    """
+    shift = np.zeros(8)
+    shift[[0, 1, 2]] = -distance_m * np.array([direction[2], direction[0], direction[1]])
+    return shift
 
 
 def _line_force_ratios(forces: StaticForceCheck, goals: Array, shift: Array) -> Array:

@@ -381,18 +381,14 @@ def test_an_approach_line_that_holds_is_not_hidden_by_a_neighbour_that_cannot(tm
     87% along the whole line. Every line's forces are now checked before any takes a diversity slot,
     and the goal configurations polish the family points that hold the payload first.
     """
-    import json
-
-    from planner.plan.goals import approach_lines
+    from planner.plan.goals import approach_lines, line_shift
 
     case = generate_case(0, 3, GeneratorOptions(family="box-section"))
     sc = load_scenario(write_case(case, tmp_path))
     ctx = PlanContext.build(sc)
-    witness = np.array(json.loads(json.dumps(case.meta["witness_goal_q"])), dtype=float)
+    witness = np.array(case.meta["witness_goal_q"], dtype=float)
     assert sc.T_base_tool_goal is not None and sc.approach_direction is not None
-    shift = np.zeros(8)
-    d = sc.approach_direction
-    shift[[0, 1, 2]] = -sc.approach_distance_m * np.array([d[2], d[0], d[1]])
+    shift = line_shift(sc.approach_direction, sc.approach_distance_m)
     assert ctx.forces.segment_ok(witness + shift, witness)  # the witness's own line holds
     lines, stats = approach_lines(
         ctx.world,
@@ -429,7 +425,7 @@ def test_an_approach_line_that_holds_is_not_hidden_by_a_neighbour_that_cannot(tm
 def test_the_lines_forces_batched_are_segment_oks_verdicts() -> None:
     """One batched evaluation of every line's forces gives each line's own ``segment_ok`` verdict."""
     from planner.kinematics.closed_form import redundant_family
-    from planner.plan.goals import _line_force_ratios
+    from planner.plan.goals import _line_force_ratios, line_shift
 
     sc = load_scenario(SCENARIOS / "hatch-bay-insert.yaml")
     ctx = PlanContext.build(sc)
@@ -441,9 +437,7 @@ def test_the_lines_forces_batched_are_segment_oks_verdicts() -> None:
     goals = redundant_family(robot.desc.serial_chain, sc.T_base_tool_goal, gammas, d5s)
     goals = goals[np.all(np.isfinite(goals), axis=1)]
     for distance in (0.05, sc.approach_distance_m, 0.9):
-        shift = np.zeros(8)
-        d = sc.approach_direction
-        shift[[0, 1, 2]] = -distance * np.array([d[2], d[0], d[1]])
+        shift = line_shift(sc.approach_direction, distance)
         worst = _line_force_ratios(ctx.forces, goals, shift)
         verdicts = [ctx.forces.segment_ok(q + shift, q) for q in goals]
         assert (worst <= ctx.forces.fraction).tolist() == verdicts

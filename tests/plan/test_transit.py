@@ -155,7 +155,9 @@ def test_the_rides_extra_condition_is_asked_before_its_certification(
         return not np.array_equal(q_a, taken) and forces.segment_ok(q_a, q_b)
 
     other = find_transit(*args, forces.ok, not_that_one, 1)
-    assert other is None or not np.array_equal(other.q_a, taken)
+    assert other is not None and not np.array_equal(other.q_a, taken)
+    assert forces.segment_ok(other.q_a, other.q_b)
+    assert certify_motion(world, other.q_a, other.q_b, CLEARANCE_M, MOTION_MARGIN_M).valid
 
 
 def test_the_pools_posture_condition_batched_gives_the_same_transit(
