@@ -71,8 +71,8 @@ from planner.collision.reports import (
 from planner.collision.sweep import (
     body_vertices_along,
     pair_vertices_along,
-    shape_object,
     swept_bound,
+    swept_bound_shape,
     swept_bound_tree,
     task_offsets,
 )
@@ -353,12 +353,14 @@ class AlongPath:
             shape = self.bodies.shapes[b]
             if verts is None:
                 verts = self._verts[t] = body_vertices_along(self.poses, b, shape)
-        elif t < self.n_kernel:
+        elif t < self.n_kernel:  # a pair: a's vertices in b's frame, against b's shape (compiled)
             a, b = self.bodies.pairs[t - self.n_cabin]
             shape = self.bodies.shapes[a]
-            target = shape_object(self.bodies.shapes[b], float(np.max(self.poses[i : j + 1, b, 12])))
             if verts is None:
                 verts = self._verts[t] = pair_vertices_along(self.poses, a, b, shape)
+            self.swept_queries += 1
+            length = float(np.max(self.poses[i : j + 1, b, 12]))
+            return swept_bound_shape(verts[i : j + 1], shape, self.bodies.shapes[b], length)
         else:  # an obstacle: its own bound (compiled on its triangles, see :mod:`.obstacles`)
             assert self.obstacles is not None
             b, o = self.obstacle_tasks[t - self.n_kernel]
@@ -368,7 +370,7 @@ class AlongPath:
             self.swept_queries += 1
             return self.obstacles.swept_bound(verts[i : j + 1], shape, o)
         self.swept_queries += 1
-        if t < self.n_cabin and self.probes.tree is not None:  # the cabin: compiled, on its triangle tree
+        if self.probes.tree is not None:  # the cabin: compiled, on its triangle tree
             return swept_bound_tree(verts[i : j + 1], shape, self.probes.tree)
         return swept_bound(verts[i : j + 1], shape, target)
 

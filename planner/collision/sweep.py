@@ -202,6 +202,22 @@ def swept_bound_tree(verts: Array, shape: Shape, tree: MeshTree) -> float:
     return run_bound(d, verts, shape, ROUND_M)
 
 
+def swept_bound_shape(verts: Array, shape: Shape, other: Shape, length: float) -> float:
+    """:func:`swept_bound` against another body fixed at the origin (a pair), compiled (:mod:`.kernels.mesh`).
+
+    ``other``'s shape as :func:`shape_object` poses it (a capsule of the posed ``length``); the hull is the
+    vertices at the run's two ends as they are. Its distance is a certified lower bound, FCL's own to
+    rounding where the minimum-norm search converges (``tests/collision/test_sweep.py``), less
+    :data:`~.kernels.codes.ROUND_M`.
+    """
+    if other.kind == "box":
+        half, radius = 0.5 * np.asarray(other.size, dtype=float), 0.0
+    else:
+        half, radius = np.array([0.0, 0.0, 0.5 * length]), float(other.radius)
+    points = np.ascontiguousarray(np.vstack([verts[0], verts[-1]]))
+    return run_bound(KERNELS.hull_shape_lower(points, half, radius), verts, shape, ROUND_M)
+
+
 def swept_bound(verts: Array, shape: Shape, target: Any) -> float:
     """Certified lower bound of the body's distance to ``target`` at every sample of a run.
 

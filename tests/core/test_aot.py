@@ -264,6 +264,14 @@ def test_build_and_jit_give_the_same_clearance_grid(both: tuple[Kernels, Kernels
         ]
         for what, args in calls:
             _same(getattr(built, what)(*args, trees[0]), getattr(jit, what)(*args, trees[0]), what)
+        for shape_half, radius in ((half, 0.0), (half, 0.02), (np.array([0.0, 0.0, half[2]]), 0.05)):
+            a_pts = np.ascontiguousarray(pts - p)  # a pair: the other body at the origin
+            for chosen in (a_pts, a_pts[:4], np.ascontiguousarray(np.vstack([a_pts[:2], a_pts[:2]]))):
+                _same(
+                    built.hull_shape_lower(chosen, shape_half, radius),
+                    jit.hull_shape_lower(chosen, shape_half, radius),
+                    "hull_shape_lower",
+                )
         other = np.concatenate([rng.normal(size=9), p + rng.normal(0.0, 0.3, 3), [0.3]])  # a pair's pose
         pairs = [(pose, half, 0.0, other, half, 0.0), (capsule, half, 0.05, other, half, 0.0)]
         for pair in [*pairs, (capsule, half, 0.05, other, half, 0.03)]:

@@ -129,6 +129,7 @@ EXTENSION = aot.Extension(
         Entry("box_touches_mesh", ("f8[1]", "f8[1]", "f8", *_TREE), "b1"),
         Entry("box_mesh_distance", ("f8[1]", "f8[1]", "f8", *_TREE), "f8"),
         Entry("hull_mesh_lower", ("f8[2]", *_TREE), "f8"),
+        Entry("hull_shape_lower", ("f8[2]", "f8[1]", "f8"), "f8"),
         Entry("capsule_touches_mesh", ("f8[1]", "f8", "f8", *_TREE), "b1"),
         Entry("capsule_mesh_distance", ("f8[1]", "f8", "f8", *_TREE), "f8"),
         Entry("cabin_witness", ("f8[1]", "f8[1]", "f8", *_TREE), "(f8,f8[1]w,f8[1]w)"),
@@ -623,6 +624,19 @@ class Kernels:
         tree = self._tree(tree)
         return float(
             self.module.hull_mesh_lower(check_array(points, "points", F8, 2, shape=(None, 3)), *tree)
+        )
+
+    def hull_shape_lower(self, points: Array, half: Array, radius: float) -> float:
+        """:func:`.mesh.hull_shape_lower`: a certified lower bound of conv(points (n, 3))'s distance.
+
+        The other body is the box [-half, half] (3,) grown by ``radius`` (a capsule: half (0, 0, L / 2)).
+        """
+        return float(
+            self.module.hull_shape_lower(
+                check_array(points, "points", F8, 2, shape=(None, 3)),
+                check_array(half, "half", F8, 1, shape=(3,)),
+                float(radius),
+            )
         )
 
     def grid_bounds(self, marked: BoolArray, step: float, offset: float) -> Array:

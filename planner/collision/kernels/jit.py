@@ -17,6 +17,7 @@ from planner.collision.kernels.mesh import (
     capsule_mesh_distance,
     capsule_touches_mesh,
     hull_mesh_lower,
+    hull_shape_lower,
     mesh_tree,
     pair_witness,
 )
@@ -55,6 +56,7 @@ __all__ = [
     "mesh_tree",
     "hull_deviation",
     "hull_mesh_lower",
+    "hull_shape_lower",
     "motion_walk",
     "obstacle_bounds",
     "obstacle_coarse_batch",

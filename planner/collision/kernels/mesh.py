@@ -567,6 +567,49 @@ def hull_mesh_lower(points: np.ndarray, tris: np.ndarray, bounds: np.ndarray, li
     return best
 
 
+@njit(cache=True, fastmath=False)
+def hull_shape_lower(points: np.ndarray, half: np.ndarray, radius: float) -> float:
+    """A certified lower bound of the distance between conv(``points`` (n, 3)) and a shape at the origin.
+
+    The shape: the box [-half, half] (axis-aligned, centred) grown by ``radius``; a capsule along z of
+    length L is the box (0, 0, L / 2) grown by its radius. The hulls' distance is the norm of the convex
+    hull of every point's difference with the box's corners (2 distinct ones for a segment, 8 for a box),
+    bounded from below by :func:`hull_triangle_lower`'s certified norm; less ``radius``, 0 where they may
+    touch. Where :func:`_wolfe` converges, the bound is the distance to rounding (FCL's GJK on the same
+    hull and shape, ``tests/collision/test_sweep.py``).
+    """
+    n = points.shape[0]
+    segment = half[0] == 0.0 and half[1] == 0.0
+    nc = 2 if segment else 8
+    m = np.empty((nc * n, 3))
+    nm = 0
+    for i in range(n):
+        repeated = False  # a point given twice (a run's ends where the body did not move) once only:
+        for k in range(i):  # Wolfe's corral cannot take a copy of one of its points (a singular system)
+            repeated = repeated or (
+                points[k, 0] == points[i, 0] and points[k, 1] == points[i, 1] and points[k, 2] == points[i, 2]
+            )
+        if repeated:
+            continue
+        for c in range(nc):
+            if segment:
+                cz = half[2] if c == 1 else -half[2]
+                m[nm, 0] = points[i, 0]
+                m[nm, 1] = points[i, 1]
+                m[nm, 2] = points[i, 2] - cz
+            else:
+                m[nm, 0] = points[i, 0] - (half[0] if c & 1 else -half[0])
+                m[nm, 1] = points[i, 1] - (half[1] if c & 2 else -half[1])
+                m[nm, 2] = points[i, 2] - (half[2] if c & 4 else -half[2])
+            nm += 1
+    s = np.empty(5, dtype=np.int64)
+    lam = np.empty(5)
+    a = np.empty(5)
+    g = np.empty((5, 6))
+    d = hull_triangle_lower(m, nm, s, lam, a, g) - radius
+    return d if d > 0.0 else 0.0
+
+
 @njit(cache=True, fastmath=False, inline="always")
 def _box_gap_sq(lo: np.ndarray, hi: np.ndarray, bounds: np.ndarray, k: int) -> float:
     """The squared distance between the box [lo, hi] and node k's box."""
