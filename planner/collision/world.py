@@ -249,6 +249,15 @@ class CollisionWorld(Generic[RobotT]):
         cover = self._kernel.coarse if coarse else self._kernel.fine
         return self.kernels.cover_centres_batch(flat, cover)
 
+    def cover_extents(self, q: Array) -> Array:
+        """(N, 2): how far the fine sphere cover reaches sideways (max |x| + r) and up (max y + r) [m].
+
+        Compiled (:func:`.kernels.bounds.cover_extents`): the numbers numpy gives on :meth:`cover_centres`
+        (bit for bit), without the (N, S, 3) centres.
+        """
+        flat, _ = self._evaluate(q)
+        return self.kernels.cover_extents(flat, self._kernel.fine)
+
     def poses(self, q: Array) -> tuple[Array, Array, Array]:
         """(R (N, B, 3, 3), p (N, B, 3), lengths (N, B)) of every body for (N, 8) or (8,) joints.
 

@@ -74,6 +74,25 @@ def test_batched_poses_equal_the_casadi_batch(robot: Cabin8, worlds: tuple[Colli
     np.testing.assert_allclose(fast.cover_centres(qs), ref.cover_centres(qs), rtol=0, atol=1e-12)
 
 
+def test_cover_extents_are_numpys_maxima_of_the_cover_centres_bit_for_bit(
+    worlds: tuple[CollisionWorld, ...],
+) -> None:
+    """The compiled extents (transit's compactness ranking) are numpy's on the centres, NaN included."""
+    fast, _ = worlds
+    rng = np.random.default_rng(5)
+    qs = admissible_joints(fast.robot, 500, seed=5)
+    wild = qs + rng.normal(0.0, 0.5, qs.shape)  # off-limits: some stage links cannot close (NaN poses)
+    wild[::7] = np.nan
+    for q in (qs, wild):
+        centres = fast.cover_centres(q)
+        r = fast._kernel.fine.radii[None, :]
+        lateral = np.max(np.abs(centres[:, :, 0]) + r, axis=1)
+        height = np.max(centres[:, :, 1] + r, axis=1)
+        got = fast.cover_extents(q)
+        assert got[:, 0].tobytes() == lateral.tobytes() and got[:, 1].tobytes() == height.tobytes()
+    assert np.isnan(got).any() and np.isfinite(got).any()
+
+
 def test_packed_states_equal_the_reference_route(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
     fast, ref = worlds
     for threshold in (0.005, 0.065):

@@ -100,6 +100,7 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     for cover in (d.fine, d.coarse):
         poses = out[0][0]
         _same(built.cover_centres_batch(poses, cover), jit.cover_centres_batch(poses, cover), "covers")
+        _same(built.cover_extents(poses, cover), jit.cover_extents(poses, cover), "cover_extents")
     poses = out[0][0]
     box = np.array([s.kind == "box" for s in world.bodies.shapes])
     half = np.array([0.5 * float(np.linalg.norm(s.size)) for s in world.bodies.shapes])

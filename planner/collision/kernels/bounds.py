@@ -98,6 +98,31 @@ def cover_centres_batch(
     return out
 
 
+@njit(cache=True, fastmath=False)
+def cover_extents(
+    poses: np.ndarray, body: np.ndarray, local: np.ndarray, frac: np.ndarray, r: np.ndarray
+) -> np.ndarray:
+    """(N, 2): max over the spheres of |x| + r and of y + r, for poses (N, B, 13) (NaN if any is NaN).
+
+    The numbers numpy gives on :func:`cover_centres_batch`'s centres (``np.max(np.abs(c[..., 0]) + r)``,
+    ``np.max(c[..., 1] + r)``: the same sums, and a maximum is exact whatever the order), without the
+    (N, S, 3) centres.
+    """
+    out = np.empty((poses.shape[0], 2))
+    for k in range(poses.shape[0]):
+        lateral, height = -math.inf, -math.inf
+        for s in range(body.shape[0]):
+            cx, cy, _ = sphere_centre(poses[k], body[s], local, frac, s)
+            a = abs(cx) + r[s]
+            h = cy + r[s]
+            if not math.isnan(lateral) and (a > lateral or math.isnan(a)):  # NaN sticks, as numpy's
+                lateral = a
+            if not math.isnan(height) and (h > height or math.isnan(h)):
+                height = h
+        out[k, 0], out[k, 1] = lateral, height
+    return out
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def cabin_bound(b: int, poses: np.ndarray, u: Packed, grid: np.ndarray) -> float:
     """Cabin lower bound of body b: its fine spheres on the grid, then the carriage's exact table."""

@@ -89,6 +89,7 @@ EXTENSION = aot.Extension(
             "i8",
         ),
         Entry("cover_centres_batch", ("f8[3]", "i8[1]", "f8[2]", "f8[1]"), "f8[3]w"),
+        Entry("cover_extents", ("f8[3]", "i8[1]", "f8[2]", "f8[1]", "f8[1]"), "f8[2]w"),
         Entry("run_extent", ("f8[2]", "i8", "i8", "f8[1]", "f8"), "(i8,f8)"),
         Entry("first_inadmissible", ("f8[1]", "f8[1]", "i8", *_DATA), "i8"),
         Entry("end_ratio", ("f8[1]", "f8[1]", *_DATA), "f8"),
@@ -273,6 +274,13 @@ class Kernels:
         bodies = len(cover.start)  # the cover's bodies index the poses' second axis
         poses = check_array(poses, "poses", F8, 3, shape=(None, bodies, 13))
         return self.module.cover_centres_batch(poses, cover.body, cover.local, cover.frac)
+
+    def cover_extents(self, poses: Array, cover: Cover) -> Array:
+        """:func:`.bounds.cover_extents`: (N, 2) max |x| + r and max y + r of a cover for poses (N, B, 13)."""
+        if not isinstance(cover, Cover):
+            raise TypeError(f"cover: Cover expected, got {type(cover).__name__}")
+        poses = check_array(poses, "poses", F8, 3, shape=(None, len(cover.start), 13))
+        return self.module.cover_extents(poses, cover.body, cover.local, cover.frac, cover.radii)
 
     def run_extent(self, qs: Array, i: int, j: int, rho: Array, max_extra: float) -> tuple[int, float]:
         """:func:`.walk.run_extent`: (last sample, extra clearance) of the run from sample i to at most j."""

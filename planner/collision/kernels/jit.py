@@ -7,7 +7,7 @@
 from __future__ import annotations
 
 from planner.collision.kernels.along import bounds_at, cover_walk
-from planner.collision.kernels.bounds import cover_centres_batch
+from planner.collision.kernels.bounds import cover_centres_batch, cover_extents
 from planner.collision.kernels.distances import pair_touches
 from planner.collision.kernels.grid import grid_bounds, grid_marks
 from planner.collision.kernels.mesh import (
@@ -47,6 +47,7 @@ __all__ = [
     "capsule_mesh_distance",
     "capsule_touches_mesh",
     "cover_centres_batch",
+    "cover_extents",
     "cover_walk",
     "cumulative_bound",
     "end_ratio",
