@@ -28,16 +28,21 @@ import logging
 import weakref
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from planner.collision.world import CollisionWorld
+from planner.core.lru import BoundedLRU
 from planner.core.types import Array
 from planner.kinematics import chain
 from planner.plan.motion import motion_clear
 from planner.plan.shortcut import segment_times
 from planner.redundancy.ik import random_admissible_joints
+
+if TYPE_CHECKING:
+    from planner.robots.cabin8 import Cabin8
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +71,11 @@ def compactness(world: CollisionWorld, qs: Array) -> Array:
 #: read-only. A plan's transit search and a relay's two rides draw the same pool (same world, seed and
 #: size): drawn and ranked once (25-40 ms each on a 2-core VM), and gone with the world.
 _POOLS: weakref.WeakKeyDictionary[CollisionWorld, dict[tuple[int, int], Array]] = weakref.WeakKeyDictionary()
+#: Each robot's seeded draws of admissible postures, ``(seed, n_candidates)`` -> (N, 8), read-only: the
+#: draw depends on the robot alone (its limits and stage), so every world of a process (a service's worker,
+#: a sweep) draws it once (4-5 ms) and ranks it for its own payload; the last :data:`DRAWS_KEPT` per robot.
+_DRAWS: weakref.WeakKeyDictionary[object, BoundedLRU[tuple[int, int], Array]] = weakref.WeakKeyDictionary()
+DRAWS_KEPT = 4
 
 
 def ranked_pool(world: CollisionWorld, seed: int, n_candidates: int) -> Array:
@@ -78,12 +88,29 @@ def ranked_pool(world: CollisionWorld, seed: int, n_candidates: int) -> Array:
     key = (int(seed), int(n_candidates))
     pool = pools.get(key)
     if pool is None:
-        rng = np.random.default_rng(seed)
-        drawn = random_admissible_joints(world.robot, rng, n_candidates, max_tries=4 * n_candidates)
-        pool = drawn[np.argsort(compactness(world, drawn), kind="stable")] if len(drawn) else drawn
+        drawn = seeded_draw(world.robot, *key)
+        pool = drawn[np.argsort(compactness(world, drawn), kind="stable")] if len(drawn) else drawn.copy()
         pool.flags.writeable = False
         pools[key] = pool
     return pool
+
+
+def seeded_draw(robot: Cabin8, seed: int, n_candidates: int) -> Array:
+    """:func:`random_admissible_joints` from ``default_rng(seed)`` (at most 4 n tries), kept per robot.
+
+    Read-only; the same rows for the same robot, seed and size in every call (tests/plan/test_transit.py).
+    """
+    draws = _DRAWS.get(robot)
+    if draws is None:
+        draws = _DRAWS.setdefault(robot, BoundedLRU(DRAWS_KEPT))
+    key = (int(seed), int(n_candidates))
+    drawn = draws.get(key)
+    if drawn is None:
+        rng = np.random.default_rng(seed)
+        drawn = random_admissible_joints(robot, rng, n_candidates, max_tries=4 * n_candidates)
+        drawn.flags.writeable = False
+        draws.put(key, drawn)
+    return drawn
 
 
 def find_transit(

@@ -9,7 +9,7 @@ from planner.collision.world import CollisionWorld
 from planner.dynamics.holding import StaticForceCheck
 from planner.plan.motion import certify_motion
 from planner.plan.shortcut import segment_times
-from planner.plan.transit import Transit, compactness, find_transit, ranked_pool
+from planner.plan.transit import DRAWS_KEPT, Transit, compactness, find_transit, ranked_pool, seeded_draw
 from planner.redundancy.ik import random_admissible_joints
 from planner.scenario.resolve import ResolvedScenario, load_scenario
 from tests.plan.conftest import CLEARANCE_M, MOTION_MARGIN_M, SCENARIOS
@@ -120,6 +120,24 @@ def test_the_ranked_pool_is_drawn_once_per_world_and_is_the_seeded_draw_ranked(
     expected = drawn[np.argsort(compactness(world, drawn), kind="stable")]
     assert np.array_equal(pool, expected)
     assert not pool.flags.writeable  # a search that wrote into a posture would change the next one's pool
+
+
+def test_the_seeded_draw_is_kept_per_robot_and_shared_by_its_worlds(
+    scenario: ResolvedScenario, world: CollisionWorld
+) -> None:
+    """Every world of the robot ranks the same seeded draw (drawn once), each for its own payload."""
+    drawn = seeded_draw(world.robot, 7, 300)
+    assert seeded_draw(world.robot, 7, 300) is drawn and not drawn.flags.writeable
+    fresh = random_admissible_joints(world.robot, np.random.default_rng(7), 300, max_tries=1200)
+    assert np.array_equal(drawn, fresh)
+    other = CollisionWorld(world.robot, None)  # another world of the same robot: no cabin
+    pool = ranked_pool(other, 7, 300)
+    assert np.array_equal(pool, drawn[np.argsort(compactness(other, drawn), kind="stable")])
+    assert seeded_draw(world.robot, 7, 300) is drawn  # ranking it wrote nothing into the draw
+    for seed in range(100, 100 + DRAWS_KEPT):  # the oldest draws go first, and come back the same
+        seeded_draw(world.robot, seed, 300)
+    again = seeded_draw(world.robot, 7, 300)
+    assert again is not drawn and np.array_equal(again, drawn)
 
 
 def test_the_rides_extra_condition_is_asked_before_its_certification(
