@@ -334,12 +334,20 @@ class CollisionWorld(Generic[RobotT]):
         """True when limits, margins, cabin clearance and self-clearance all hold at q.
 
         The verdict of :meth:`check_state`, without building a report: one kernel call, then FCL queries
-        only for what the bounds cannot prove clear (the obstacles at the poses that call computed).
+        only for what the bounds cannot prove clear (the obstacles at the poses that call computed). With
+        the compiled tests, the bounds' probes are in that call (:func:`.kernels.state.packed_valid`).
         """
         _check_clearance(clearance)
         q = _joints(q, self.model.n_joints)
         own = self.self_clearance
         d = self._kernel
+        if self.compiled_tests:  # the bounds and the probes in one compiled call (the same verdict)
+            verdict, flat, probes = self.kernels.packed_valid(q, d, clearance, own, d.upper_slack)
+            self._probes.queries += probes
+            if verdict == codes.STATE_INVALID:
+                return False
+            if verdict == codes.STATE_VALID:
+                return self.obstacles is None or self.obstacles.clear(flat, clearance)
         code, flat, cabin, pairs = self.kernels.packed_check(q, d, clearance, own, d.upper_slack)
         if code != codes.UNDECIDED:
             if code != codes.CLEAR:

@@ -104,6 +104,41 @@ def test_packed_states_equal_the_reference_route(robot: Cabin8, worlds: tuple[Co
             assert a.admissible == b.admissible
 
 
+def test_one_call_state_verdicts_are_the_python_probes_verdicts(worlds: tuple[CollisionWorld, ...]) -> None:
+    """packed_valid (is_valid's one compiled call) = packed_check and then the world's probes, in Python.
+
+    On the states the bounds leave undecided (the ones the call probes itself): the same verdict, and as
+    many probes counted (the world's query figure).
+    """
+    from planner.collision.kernels import codes
+    from planner.collision.reports import BodyState
+
+    fast, _ = worlds
+    d, probes = fast._kernel, fast._probes
+    rng = np.random.default_rng(11)
+    qs = admissible_joints(fast.robot, 3000, seed=11)
+    qs[:, 0] = rng.uniform(fast.robot.limits.lower[0], fast.robot.limits.upper[0], len(qs))
+    undecided = verdicts = 0
+    for q in qs:
+        for clearance in (0.005, 0.03):
+            own = fast.self_clearance
+            code, flat, cabin, pairs = fast.kernels.packed_check(q, d, clearance, own, d.upper_slack)
+            if code != codes.UNDECIDED:
+                continue
+            undecided += 1
+            before = probes.queries
+            st = BodyState(flat, cabin, pairs, True)
+            expected = not any(
+                lb <= clearance and probes.cabin_hit(st, b, clearance) for b, lb in enumerate(cabin.tolist())
+            ) and not any(lb <= own and probes.pair_hit(st, k, own) for k, lb in enumerate(pairs.tolist()))
+            asked = probes.queries - before
+            verdict, poses, n = fast.kernels.packed_valid(q, d, clearance, own, d.upper_slack)
+            assert verdict == (codes.STATE_VALID if expected else codes.STATE_INVALID)
+            assert n == asked and poses.tobytes() == flat.tobytes()
+            verdicts += expected
+    assert undecided > 100 and 0 < verdicts < undecided, (undecided, verdicts)
+
+
 def test_state_verdicts_equal_the_reference_route(robot: Cabin8, worlds: tuple[CollisionWorld, ...]) -> None:
     """is_valid (bool fast path) and check_state agree with the reference on valid and colliding states."""
     fast, ref = worlds

@@ -83,6 +83,7 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
     qs = _states(sc, robot, 40, seed=7)
     built, jit = both
     seen: set[int] = set()
+    seen_valid: set[int] = set()
     for q in qs:
         q = np.array(q)
         for clearance in (0.0, 0.01, 0.05):
@@ -91,7 +92,12 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
                 _same(got, jit.packed_check(q, d, clearance, 0.01, slack), "packed_check")
                 seen.add(int(got[0]))
         _same(built.packed_state(q, d, 0.07), jit.packed_state(q, d, 0.07), "packed_state")
+        for clearance in (0.0, 0.01, 0.05):
+            got_v = built.packed_valid(q, d, clearance, 0.01, d.upper_slack)
+            _same(got_v, jit.packed_valid(q, d, clearance, 0.01, d.upper_slack), "packed_valid")
+            seen_valid.add(got_v[0])
     assert {codes.CLEAR, codes.INADMISSIBLE, codes.UNDECIDED, codes.NOT_FINITE, codes.CONTACT} <= seen, seen
+    assert {codes.STATE_VALID, codes.STATE_INVALID} <= seen_valid, seen_valid
     n_b, m = len(world.names), len(d.c_lo)
     out = [(np.empty((len(qs), n_b, 13)), np.empty((len(qs), m))) for _ in range(2)]
     built.packed_poses(qs, d, *out[0])

@@ -9,6 +9,10 @@ from __future__ import annotations
 #: Codes of :func:`.state.packed_check`.
 CLEAR, INADMISSIBLE, UNDECIDED, NOT_FINITE, CONTACT = 0, 1, 2, 3, 4
 
+#: Verdicts of :func:`.state.packed_valid`: invalid, valid (the obstacles still to check), not decided here
+#: (a body needs a cabin probe and the world has no triangle tree: the caller's probes decide).
+STATE_INVALID, STATE_VALID, STATE_UNDECIDED = 0, 1, 2
+
 #: Codes of :func:`.walk.motion_walk`.
 WALK_DONE, WALK_PROBE, WALK_FAIL, WALK_GROW = 0, 1, 2, 3
 #: Slots of the walk's integer (``ci``) and float (``cf``) context arrays.

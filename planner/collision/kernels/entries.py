@@ -64,6 +64,7 @@ EXTENSION = aot.Extension(
     entries=(
         Entry("packed_check", ("f8[1]", *_DATA, _GRID, "f8", "f8", "f8"), "(i8,f8[2]w,f8[1]w,f8[1]w)"),
         Entry("packed_state", ("f8[1]", *_DATA, _GRID, "f8"), "(f8[2]w,f8[1]w,f8[1]w,b1)"),
+        Entry("packed_valid", ("f8[1]", *_DATA, _GRID, *_TREE, "f8", "f8", "f8"), "(i8,f8[2]w,i8)"),
         Entry("packed_poses", ("f8[2]", *_DATA, "f8[3]w", "f8[2]w"), "none"),
         Entry(
             "bounds_at",
@@ -186,6 +187,23 @@ class Kernels:
             float(self_clearance),
             float(upper_slack),
         )
+
+    def packed_valid(
+        self, q: Array, d: KernelData, clearance: float, self_clearance: float, upper_slack: float
+    ) -> tuple[int, Array, int]:
+        """:func:`.state.packed_valid` on a world's data: (``STATE_*`` verdict, poses (B, 13), probes)."""
+        d = _data(d)
+        verdict, poses, probes = self.module.packed_valid(
+            check_array(q, "q", F8, 1, shape=d.joint_shape),
+            d.fbuf,
+            d.ibuf,
+            d.grid,
+            *d.tree,
+            float(clearance),
+            float(self_clearance),
+            float(upper_slack),
+        )
+        return int(verdict), poses, int(probes)
 
     def packed_state(self, q: Array, d: KernelData, threshold: float) -> tuple[Array, Array, Array, bool]:
         """:func:`.state.packed_state`: (poses (B, 13), cabin bounds (B,), pair bounds (P,), admissible)."""

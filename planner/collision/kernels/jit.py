@@ -29,7 +29,7 @@ from planner.collision.kernels.offsets import (
     task_offsets,
 )
 from planner.collision.kernels.spread import between_bound, cumulative_bound, propagate
-from planner.collision.kernels.state import packed_check, packed_poses, packed_state
+from planner.collision.kernels.state import packed_check, packed_poses, packed_state, packed_valid
 from planner.collision.kernels.walk import (
     end_ratio,
     first_inadmissible,
@@ -65,6 +65,7 @@ __all__ = [
     "packed_check",
     "packed_poses",
     "packed_state",
+    "packed_valid",
     "pair_touches",
     "pair_vertices",
     "pair_witness",

@@ -13,7 +13,18 @@ from numba import njit
 
 from planner.collision.kernels.bounds import bounds_of_state, certain_cabin_contact
 from planner.collision.kernels.buffers import Packed
-from planner.collision.kernels.codes import CLEAR, CONTACT, INADMISSIBLE, NOT_FINITE, UNDECIDED
+from planner.collision.kernels.codes import (
+    CLEAR,
+    CONTACT,
+    INADMISSIBLE,
+    NOT_FINITE,
+    STATE_INVALID,
+    STATE_UNDECIDED,
+    STATE_VALID,
+    UNDECIDED,
+)
+from planner.collision.kernels.distances import pair_touches
+from planner.collision.kernels.mesh import box_touches_mesh, capsule_touches_mesh
 from planner.collision.kernels.packed import unpack
 from planner.collision.kernels.poses import poses_at
 
@@ -88,3 +99,53 @@ def packed_check(
             if not pairs[k] > self_clearance:
                 return UNDECIDED, poses, cabin, pairs
     return code, poses, cabin, pairs
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def packed_valid(
+    q: np.ndarray,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
+    grid: np.ndarray,
+    tris: np.ndarray,
+    tree_bounds: np.ndarray,
+    tree_links: np.ndarray,
+    clearance: float,
+    self_clearance: float,
+    upper_slack: float,
+) -> tuple[int, np.ndarray, int]:
+    """A state's verdict in one call: (``STATE_*``, poses (B, 13), probes asked).
+
+    :func:`packed_check`, then, where it leaves the state ``UNDECIDED``, the probes the collision world's
+    ``is_valid`` asks in Python, in its order: each body whose cabin bound is not above ``clearance``,
+    grown by it, against the cabin's triangle tree (:func:`.mesh.box_touches_mesh`,
+    :func:`.mesh.capsule_touches_mesh`), then each pair whose bound is not above ``self_clearance``, each
+    body grown by half of it (:func:`.distances.pair_touches`). ``STATE_VALID``: nothing touches (the
+    world's obstacles are the caller's); ``STATE_UNDECIDED``: a cabin probe is needed and there is no tree.
+    """
+    code, poses, cabin, pairs = packed_check(q, fbuf, ibuf, grid, clearance, self_clearance, upper_slack)
+    if code == CLEAR:
+        return STATE_VALID, poses, 0
+    if code == NOT_FINITE:  # no poses were computed: NaN, not whatever the memory held
+        poses[:, :] = math.nan
+    if code != UNDECIDED:
+        return STATE_INVALID, poses, 0
+    u = unpack(fbuf, ibuf)
+    probes = 0
+    for b in range(cabin.shape[0]):
+        if cabin[b] <= clearance:
+            if tris.shape[0] == 0:
+                return STATE_UNDECIDED, poses, probes
+            probes += 1
+            if u.radius[b] == 0.0:
+                hit = box_touches_mesh(poses[b], u.half[b], clearance, tris, tree_bounds, tree_links)
+            else:
+                hit = capsule_touches_mesh(poses[b], u.radius[b], clearance, tris, tree_bounds, tree_links)
+            if hit:
+                return STATE_INVALID, poses, probes
+    for k in range(pairs.shape[0]):
+        if pairs[k] <= self_clearance:
+            probes += 1
+            if pair_touches(poses, u.radius, u.half, u.pair_a[k], u.pair_b[k], self_clearance):
+                return STATE_INVALID, poses, probes
+    return STATE_VALID, poses, probes
