@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 from api.compact import document_json, pack_value
 from api.jobtypes import FileSource
 from planner.core.lifeline import die_with_parent
+from planner.core.startup import tune_allocator
 
 if TYPE_CHECKING:
     from planner.core.exceptions import PlannerError
@@ -87,6 +88,7 @@ def worker_setup(server_pid: int | None, nice: int) -> None:
             to the service's event loop.
     """
     die_with_parent(server_pid)
+    tune_allocator()
     if nice:
         os.nice(int(nice))
 

@@ -9,8 +9,9 @@ from __future__ import annotations
 import os
 import sys
 
-from planner.core.startup import loading_modules
+from planner.core.startup import loading_modules, tune_allocator
 
+tune_allocator()  # the gate's and the search's large temporaries from the heap (see its docstring)
 with loading_modules(freeze=True):  # the command line's modules, without the collector's passes
     import typer
 

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from planner.collision.world import DEFAULT_SELF_CLEARANCE_M, CollisionWorld
 from planner.core.exceptions import NoPathFound, NoPathWithinBudget
+from planner.core.startup import tune_allocator
 from planner.core.types import Array, IntArray
 from planner.dynamics.holding import StaticForceCheck
 from planner.dynamics.lagrange import Cabin8Dynamics
@@ -208,6 +209,7 @@ class PlanContext:
         preset: SearchPreset = PRODUCT,
     ) -> PlanContext:
         """The context of a plan of ``sc``: world and dynamics built, kernels warmed up, clock started."""
+        tune_allocator()  # the process's large temporaries from the heap (once; see its docstring)
         payload = sc.payload.rigid_payload() if sc.payload is not None else None
         dynamics = Cabin8Dynamics.of(sc.robot)
         clearances = Clearances.of(sc.options)
