@@ -1,4 +1,4 @@
-"""Swept-hull lower bounds: one FCL query bounds a body's distance over a whole run of samples.
+"""Swept-hull lower bounds: one query bounds a body's distance over a whole run of samples.
 
 A body is the convex hull of its *vertices* (a box: its 8 corners) or of them grown by a radius (a capsule:
 its 2 axis end points grown by its radius). Over a run of samples i..j of a path, take the convex hull H of
@@ -16,10 +16,14 @@ insertion line), e = 0 and d(H, C) is the smallest distance of the continuous sw
 grow with the square of the run's length, so halving a run that does not settle converges quickly
 (:meth:`planner.collision.along.AlongPath.clearance` does so, best first).
 
-H is an FCL convex shape (GJK against the target's triangles, so a target part inside H is found); a
-capsule's end points are thickened to cubes of half size :data:`THICKEN_M` so that H is never flat, and
-:data:`GJK_SLACK_M` is subtracted for the hull's joggled facets. A hull that touches the target proves
-nothing (``-inf``).
+The planner computes d(H, C) compiled, as a certified lower bound (Wolfe's minimum-norm point of the
+differences of H's points with the target's: :func:`swept_bound_tree` on the cabin's or an obstacle's
+triangle tree, :func:`swept_bound_shape` against the other body of a robot pair). :func:`swept_bound` is
+FCL's route, kept for the reference worlds and the tests: H an FCL convex shape (a capsule's end points
+thickened to cubes of half size :data:`THICKEN_M` so that H is never flat, :data:`GJK_SLACK_M` subtracted
+for the hull's joggled facets). FCL's GJK on such flat hulls can stop *above* the distance (by up to 34 mm
+on a robot pair, ``tests/collision/test_sweep.py``), so the planner's certificates do not use it. A hull that
+touches the target proves nothing (``-inf``).
 """
 
 from __future__ import annotations
@@ -168,7 +172,7 @@ def relative_poses(poses_a: Array, poses_b: Array) -> Array:
     """Poses (n, 13) of body a in body b's frame, from both bodies' poses (n, 13) in the base frame.
 
     A pair's distance is body a's distance to body b fixed at the origin: the pair's swept hull is a's
-    vertices in b's frame (:func:`swept_bound` with b's shape as the target, :func:`shape_object`).
+    vertices in b's frame (:func:`swept_bound_shape` against b's shape at the origin).
     """
     n = poses_a.shape[0]
     Ra = poses_a[:, :9].reshape(n, 3, 3).transpose(0, 2, 1)
@@ -206,9 +210,9 @@ def swept_bound_shape(verts: Array, shape: Shape, other: Shape, length: float) -
     """:func:`swept_bound` against another body fixed at the origin (a pair), compiled (:mod:`.kernels.mesh`).
 
     ``other``'s shape as :func:`shape_object` poses it (a capsule of the posed ``length``); the hull is the
-    vertices at the run's two ends as they are. Its distance is a certified lower bound, FCL's own to
-    rounding where the minimum-norm search converges (``tests/collision/test_sweep.py``), less
-    :data:`~.kernels.codes.ROUND_M`.
+    vertices at the run's two ends as they are. Its distance is a certified lower bound, the hulls' distance
+    to rounding where the minimum-norm search converges (``tests/collision/test_sweep.py``: FCL's GJK on
+    these flat hulls stopped up to 34 mm above it), less :data:`~.kernels.codes.ROUND_M`.
     """
     if other.kind == "box":
         half, radius = 0.5 * np.asarray(other.size, dtype=float), 0.0
