@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import os
 import subprocess
 import sys
 
@@ -99,10 +100,17 @@ def test_the_tuned_allocator_serves_large_arrays_again_without_page_faults() -> 
     In fresh processes (the test process may be tuned already): untuned, glibc maps and trims them again
     each time (about 43 000 page faults here); tuned, the heap's pages are reused.
     """
+    # glibc's defaults: none of its allocator settings from this environment
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("MALLOC_", "GLIBC_TUNABLES"))}
 
     def faults(mode: str) -> int:
         out = subprocess.run(
-            [sys.executable, "-c", _FAULTS, mode], capture_output=True, text=True, check=True, timeout=60
+            [sys.executable, "-c", _FAULTS, mode],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=60,
+            env=env,
         )
         return int(out.stdout.strip())
 
