@@ -38,8 +38,13 @@ class StaticForceCheck:
         return np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max, axis=1)
 
     def ok(self, q: Array) -> bool:
-        """True when the drives can hold the payload at q."""
-        return bool(self.ratios(q)[0] <= self.fraction)
+        """True when the drives can hold the payload at q (8,): :meth:`ratios`' figure, one configuration.
+
+        The same inverse dynamics at rest and the same arithmetic as :meth:`ratios` on one row (the same
+        verdict, bit for bit), without its batch's stacking: a sampling planner asks it of every state.
+        """
+        tau = self.dynamics.static_forces(q, self.payload)
+        return bool(np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max) <= self.fraction)
 
     def segment_ok(self, q_a: Array, q_b: Array, step: float = SEGMENT_STEP) -> bool:
         """Checked at every ``step`` (m or rad, largest joint change) along the straight segment."""

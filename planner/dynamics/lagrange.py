@@ -190,6 +190,13 @@ class Cabin8Dynamics:
         par = np.repeat(p[None, :], q2.shape[0], axis=0)
         return evaluate_mapped(self._id_map, q2, qd2, qdd2, par, small=self._id_map_small)[1]
 
+    def static_forces(self, q: Array, payload: RigidPayload | None = None) -> Array:
+        """Drive forces/torques (8,) that hold the joint configuration q (8,) at rest [N, N m].
+
+        :meth:`static_forces_batch`'s row for one configuration (the same call, the same bits).
+        """
+        return self._id(q, _ZERO8, _ZERO8, _params(payload))[1]
+
     def static_forces_batch(self, q: Array, payload: RigidPayload | None = None) -> Array:
         """Drive forces/torques (N, 8) that hold joint configurations q (N, 8) at rest [N, N m]."""
         q2 = np.atleast_2d(np.asarray(q, dtype=float))
@@ -268,6 +275,11 @@ SMALL_BATCH = 24
 
 _NO_PAYLOAD = np.zeros(10)
 _NO_PAYLOAD.flags.writeable = False
+
+
+#: Zero joint velocities and accelerations (read-only): the inverse dynamics at rest.
+_ZERO8 = np.zeros(8)
+_ZERO8.flags.writeable = False
 
 
 def _params(payload: RigidPayload | None) -> Array:

@@ -243,3 +243,26 @@ def test_static_forces_do_not_change_along_the_rail(
         np.testing.assert_allclose(
             dyn.static_forces_batch(configs[i], payload)[0], base[i], rtol=0, atol=1e-9
         )
+
+
+def test_one_configurations_holding_verdict_is_the_batch_figures_bit_for_bit(
+    dyn: Cabin8Dynamics, payload: RigidPayload, configs: np.ndarray
+) -> None:
+    """StaticForceCheck.ok (a sampling planner's every state) = ratios' row: the same forces and verdict.
+
+    ``static_forces`` is the one-configuration row of ``static_forces_batch`` (bit for bit); the check's
+    verdict is its ratio against the fraction, held and not held both seen (a heavy payload).
+    """
+    from planner.dynamics.holding import StaticForceCheck
+
+    for q in configs[:2]:
+        assert dyn.static_forces(q, payload).tobytes() == dyn.static_forces_batch(q, payload)[0].tobytes()
+    heavy = RigidPayload.from_grasp(
+        400.0, np.array([0.02, -0.01, 0.03]), box_inertia(400.0, (0.45, 0.35, 0.5)), np.eye(4)
+    )
+    check = StaticForceCheck(dyn, heavy)
+    rng = np.random.default_rng(3)
+    qs = np.resize(configs, (400, 8)) + rng.normal(0.0, 0.2, (400, 8)) * np.array([0, 0, 0, 0, 1, 1, 0.2, 1])
+    verdicts = [check.ok(q) for q in qs]
+    assert verdicts == (check.ratios(qs) <= check.fraction).tolist()
+    assert any(verdicts) and not all(verdicts)
