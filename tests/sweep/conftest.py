@@ -33,7 +33,11 @@ def bay_sweep(name: str = "bays") -> dict[str, Any]:
 
 
 def stuck_base() -> dict[str, Any]:
-    """The hatch pass with a payload too bulky for the hatch: the search runs to its 20 s time limit."""
+    """The hatch pass with a payload too bulky for the hatch: a search that finds nothing.
+
+    It ends by its work budget (``no_path_within_budget``) after about 8 s on a fast 2-core VM, longer on a
+    slower one, unless a wall-clock limit kills it first (``tests/sweep/test_run.py``: STUCK_LIMIT_S).
+    """
     data = scenario("hatch-pass")
     data["payload"]["box"] = [0.5, 0.5, 0.45]
     data["payload"]["grasp"]["position"] = [0.0, 0.0, 0.3]

@@ -120,7 +120,7 @@ def test_a_killed_sweep_takes_its_running_plans_with_it(tmp_path: Path) -> None:
     plan stuck in native code would run for ever): they end with the CLI (planner.core.lifeline).
     """
     spec = stuck_sweep("killed", 120.0)
-    spec["plans"] = [spec["plans"][1], spec["plans"][2], spec["plans"][0]]  # the 20 s search last
+    spec["plans"] = [spec["plans"][1], spec["plans"][2], spec["plans"][0]]  # the long search last
     path = write_spec(tmp_path, spec)
     journal = tmp_path / "out" / JOURNAL
     proc = subprocess.Popen(
@@ -140,7 +140,7 @@ def test_a_killed_sweep_takes_its_running_plans_with_it(tmp_path: Path) -> None:
         assert len(session_processes(proc.pid)) >= 3  # the CLI, its forkserver, the searching plan
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
-        deadline = time.monotonic() + 5.0  # well before the search's 20 s
+        deadline = time.monotonic() + 5.0  # before the search would end on its own (about 8 s)
         while time.monotonic() < deadline and session_processes(proc.pid):
             time.sleep(0.05)
         assert not session_processes(proc.pid), "processes of the killed sweep still run"
@@ -150,7 +150,7 @@ def test_a_killed_sweep_takes_its_running_plans_with_it(tmp_path: Path) -> None:
 
 
 def stuck_sweep(name: str, wall_time_limit_s: float) -> dict:
-    """A plan that would search for 20 s (killed at the wall-clock limit), a refusal and a feasible plan."""
+    """A plan that would search for about 8 s (killed at its wall-clock limit), a refusal, a feasible plan."""
     return {
         "name": name,
         "base": stuck_base(),
@@ -174,9 +174,12 @@ def check_stuck_rows(rows: list[dict], limit_s: float) -> None:
     assert by_plan[2]["status"] == "succeeded", by_plan[2]["message"]
 
 
-#: Wall-clock limit of the stuck plan in the tests [s] (the plan would search for 20 s; the two others
-#: take 0.3 s each on a quiet machine, so they finish well inside it even under heavy load).
-STUCK_LIMIT_S = 8.0
+#: Wall-clock limit of the stuck plan in the tests [s]. Its search ends by its work budget (41 500 motion
+#: checks), not by its 20 s time limit: after 7.7-8.1 s on the fastest 2-core VM seen (2026-12-04, where the
+#: 8 s this limit was once let it end on its own first), about twice that on slower ones; the limit must come
+#: well before. The two other plans take 0.3 s each on a quiet machine, so they finish well inside it even
+#: under heavy load.
+STUCK_LIMIT_S = 4.0
 
 
 def _gone(pid: int) -> bool:
