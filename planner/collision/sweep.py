@@ -186,15 +186,6 @@ def relative_poses(poses_a: Array, poses_b: Array) -> Array:
     return out
 
 
-def shape_object(shape: Shape, length: float) -> fcl.CollisionObject:
-    """Body b's shape at the origin as an FCL object (a capsule of the posed ``length``).
-
-    A capsule frame is centred on the body, so the longest posed length of a run contains every shorter.
-    """
-    geom = fcl.Box(*shape.size) if shape.kind == "box" else fcl.Capsule(shape.radius, length)
-    return fcl.CollisionObject(geom, fcl.Transform())
-
-
 def swept_bound_tree(verts: Array, shape: Shape, tree: MeshTree) -> float:
     """:func:`swept_bound` against the cabin's triangle tree, compiled (:mod:`.kernels.mesh`).
 
@@ -209,7 +200,7 @@ def swept_bound_tree(verts: Array, shape: Shape, tree: MeshTree) -> float:
 def swept_bound_shape(verts: Array, shape: Shape, other: Shape, length: float) -> float:
     """:func:`swept_bound` against another body fixed at the origin (a pair), compiled (:mod:`.kernels.mesh`).
 
-    ``other``'s shape as :func:`shape_object` poses it (a capsule of the posed ``length``); the hull is the
+    ``other`` centred at the origin in its own frame (a capsule of the posed ``length``); the hull is the
     vertices at the run's two ends as they are. Its distance is a certified lower bound, the hulls' distance
     to rounding where the minimum-norm search converges (``tests/collision/test_sweep.py``: FCL's GJK on
     these flat hulls stopped up to 34 mm above it), less :data:`~.kernels.codes.ROUND_M`.

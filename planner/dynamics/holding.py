@@ -34,8 +34,11 @@ class StaticForceCheck:
 
     def ratios(self, qs: Array) -> Array:
         """Largest |static force| / limit of each configuration (N,) for (N, 8) joints."""
-        tau = self.dynamics.static_forces_batch(qs, self.payload)
-        return np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max, axis=1)
+        return self._ratios(self.dynamics.static_forces_batch(qs, self.payload))
+
+    def _ratios(self, tau: Array) -> Array:
+        """Largest |force| / limit of forces tau (..., 8), over the last axis."""
+        return np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max, axis=-1)
 
     def ok(self, q: Array) -> bool:
         """True when the drives can hold the payload at q (8,): :meth:`ratios`' figure, one configuration.
@@ -43,8 +46,7 @@ class StaticForceCheck:
         The same inverse dynamics at rest and the same arithmetic as :meth:`ratios` on one row (the same
         verdict, bit for bit), without its batch's stacking: a sampling planner asks it of every state.
         """
-        tau = self.dynamics.static_forces(q, self.payload)
-        return bool(np.max(np.abs(tau) / self.dynamics.robot.limits.effort_max) <= self.fraction)
+        return bool(self._ratios(self.dynamics.static_forces(q, self.payload)) <= self.fraction)
 
     def segment_ok(self, q_a: Array, q_b: Array, step: float = SEGMENT_STEP) -> bool:
         """Checked at every ``step`` (m or rad, largest joint change) along the straight segment."""

@@ -14,7 +14,6 @@ from planner.collision.sweep import (
     pair_vertices_along,
     pose_offsets,
     relative_poses,
-    shape_object,
     swept_bound,
     swept_bound_shape,
     task_offsets,
@@ -33,6 +32,12 @@ def _room() -> fcl.CollisionObject:
     model.addSubModel(np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int32))
     model.endModel()
     return fcl.CollisionObject(model, fcl.Transform())
+
+
+def shape_object(shape: Shape, length: float) -> fcl.CollisionObject:
+    """A body's shape at the origin as an FCL object (a capsule of the posed ``length``): a pair's target."""
+    geom = fcl.Box(*shape.size) if shape.kind == "box" else fcl.Capsule(shape.radius, length)
+    return fcl.CollisionObject(geom, fcl.Transform())
 
 
 def _pose(R: np.ndarray, p: np.ndarray, length: float = 0.0) -> np.ndarray:
