@@ -362,6 +362,46 @@ class CollisionWorld(Generic[RobotT]):
                 return False
         return self.obstacles is None or self.obstacles.clear(flat, clearance)
 
+    def first_invalid_on_axis(
+        self, q: Array, axis: int, values: Array, clearance: float = DEFAULT_CLEARANCE_M
+    ) -> tuple[int, int]:
+        """The first of ``values`` where q with joint ``axis`` set to it is not :meth:`is_valid`.
+
+        The states are checked in the order given and the sweep stops at the first one that fails: the
+        same verdicts, in the same order, and the same probes counted as :meth:`is_valid` on each copy of
+        q, in one compiled call where the world allows it (its compiled tests, a triangle tree, no extra
+        obstacles: those are checked in Python state by state). A transit posture swept along the rail is
+        the use: about 6 us a state instead of 10.
+
+        Returns:
+            (index into ``values`` of the first state not valid, or -1; states checked).
+        """
+        _check_clearance(clearance)
+        q = _joints(q, self.model.n_joints)
+        values = np.ascontiguousarray(values, dtype=float)
+        if values.ndim != 1:
+            raise InvalidInput(f"values: a vector expected, got shape {values.shape}", field="values")
+        if not 0 <= axis < q.shape[0]:
+            raise InvalidInput(f"axis: a joint index below {q.shape[0]} expected, got {axis}", field="axis")
+        start = 0
+        d = self._kernel
+        if self.compiled_tests and self.obstacles is None:
+            verdict, start, probes = self.kernels.axis_sweep(
+                q, axis, values, d, clearance, self.self_clearance, d.upper_slack
+            )
+            self._probes.queries += probes
+            if verdict == codes.STATE_VALID:
+                return -1, len(values)
+            if verdict == codes.STATE_INVALID:
+                return start, start + 1
+            # STATE_UNDECIDED: a cabin probe without a tree; that state and the rest as is_valid does
+        s = q.copy()
+        for i in range(start, len(values)):
+            s[axis] = values[i]
+            if not self.is_valid(s, clearance):
+                return i, i + 1
+        return -1, len(values)
+
     def _state(self, q: Array, threshold: float = DEFAULT_CLEARANCE_M) -> BodyState:
         """Poses and certified bounds at one configuration (8,), contiguous float64: one kernel call.
 

@@ -176,12 +176,8 @@ def find_transit(
 
     def free_run(posture: Array, order: NDArray[np.intp]) -> float:
         """How far [m] the posture rides from the first d1 of ``order`` before it meets the cabin."""
-        for k in order:
-            q = posture.copy()
-            q[chain.D1] = d1s[k]
-            if not world.is_valid(q, clearance):
-                return abs(float(d1s[k] - d1s[order[0]]))
-        return abs(d1_b - d1_a)
+        bad, _ = world.first_invalid_on_axis(posture, chain.D1, d1s[order], clearance)
+        return abs(d1_b - d1_a) if bad < 0 else abs(float(d1s[order[bad]] - d1s[order[0]]))
 
     # The rail time before the start's posture meets the narrow section, and after the goal's leaves it:
     # a posture change that fits in these windows overlaps the rail move (the planner connects onto
@@ -209,13 +205,13 @@ def find_transit(
         q[chain.D1] = d1_a
         if not (state_ok(q) if holdable is None else holdable):
             return False
-        for k in np.argsort(-kills, kind="stable"):
-            q = posture.copy()
-            q[chain.D1] = d1s[k]
-            checks += 1
-            if not world.is_valid(q, clearance):
-                kills[k] += 1
-                return False
+        # The sweep positions in that order, up to the first the posture fails at (one compiled call).
+        order = np.argsort(-kills, kind="stable")
+        bad, checked = world.first_invalid_on_axis(posture, chain.D1, d1s[order], clearance)
+        checks += checked
+        if bad >= 0:
+            kills[order[bad]] += 1
+            return False
         return True
 
     lo6, hi6 = robot.limits.lower[chain.THETA6], robot.limits.upper[chain.THETA6]

@@ -346,3 +346,51 @@ def test_run_extent_is_the_halving_rule_of_check_path() -> None:
         got_j, got_extra = walk.run_extent(qs, i, j0, rho, max_extra)
         assert got_j == j, trial
         assert got_extra == pytest.approx(extra, rel=1e-9, abs=1e-15)
+
+
+def _first_invalid_state_by_state(world: CollisionWorld, q: np.ndarray, values: np.ndarray, c: float) -> int:
+    """The reference: is_valid on each copy of q with its rail position set, in order, to the first fail."""
+    for i, x in enumerate(values):
+        s = q.copy()
+        s[0] = x
+        if not world.is_valid(s, c):
+            return i
+    return -1
+
+
+def test_a_rail_sweep_in_one_call_is_is_valid_state_by_state(
+    robot: Cabin8, payload: PayloadGeometry, worlds: tuple[CollisionWorld, ...]
+) -> None:
+    """first_invalid_on_axis (transit's sweep along the rail) = is_valid on each state: index, checks, probes.
+
+    In the cluttered cabin (the compiled sweep), with an extra obstacle (checked state by state in Python)
+    and on the reference route (no compiled tests); sweeps that pass whole and that fail early and late.
+    """
+    from planner.collision.obstacles import Obstacle
+
+    fast, ref = worlds
+    T = np.eye(4)
+    T[:3, 3] = [3.0, 0.6, 0.4]
+    mesh = fast.cabin
+    boxed = CollisionWorld(robot, mesh, payload, obstacles=(Obstacle.box("unit X", (0.3, 0.3, 0.3), T),))
+    rng = np.random.default_rng(17)
+    postures = admissible_joints(robot, 120, seed=17)
+    outcomes = set()
+    for world in (fast, boxed, ref):
+        for k, q in enumerate(postures):
+            values = np.sort(rng.uniform(0.0, 6.0, 12))[:: 1 if k % 2 else -1]
+            for c in (0.005, 0.03):
+                before = world._probes.queries
+                expected = _first_invalid_state_by_state(world, q, values, c)
+                asked = world._probes.queries - before
+                before = world._probes.queries
+                got = world.first_invalid_on_axis(q, 0, values, c)
+                assert got == (expected, len(values) if expected < 0 else expected + 1)
+                assert world._probes.queries - before == asked
+                outcomes.add("all" if expected < 0 else "first" if expected == 0 else "later")
+    assert outcomes == {"all", "first", "later"}
+    with pytest.raises(InvalidInput, match="axis"):
+        fast.first_invalid_on_axis(postures[0], 8, np.zeros(3))
+    with pytest.raises(InvalidInput, match="values"):
+        fast.first_invalid_on_axis(postures[0], 0, np.zeros((3, 2)))
+    assert fast.first_invalid_on_axis(postures[0], 0, np.zeros(0)) == (-1, 0)

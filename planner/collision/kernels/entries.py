@@ -66,6 +66,7 @@ EXTENSION = aot.Extension(
         Entry("packed_state", ("f8[1]", *_DATA, _GRID, "f8"), "(f8[2]w,f8[1]w,f8[1]w,b1)"),
         Entry("packed_valid", ("f8[1]", *_DATA, _GRID, *_TREE, "f8", "f8", "f8"), "(i8,f8[2]w,i8)"),
         Entry("packed_poses", ("f8[2]", *_DATA, "f8[3]w", "f8[2]w"), "none"),
+        Entry("axis_sweep", ("f8[1]", "i8", "f8[1]", *_DATA, _GRID, *_TREE, "f8", "f8", "f8"), "(i8,i8,i8)"),
         Entry(
             "bounds_at",
             ("i8[1]", "f8[3]", "f8[2]", *_DATA, _GRID, "f8", "f8[2]w", "f8[2]w"),
@@ -204,6 +205,32 @@ class Kernels:
             float(upper_slack),
         )
         return int(verdict), poses, int(probes)
+
+    def axis_sweep(
+        self,
+        q: Array,
+        axis: int,
+        values: Array,
+        d: KernelData,
+        clearance: float,
+        self_clearance: float,
+        upper_slack: float,
+    ) -> tuple[int, int, int]:
+        """:func:`.state.axis_sweep` on a world's data: (``STATE_*`` verdict, its state's index, probes)."""
+        d = _data(d)
+        verdict, index, probes = self.module.axis_sweep(
+            check_array(q, "q", F8, 1, shape=d.joint_shape),
+            int(axis),
+            check_array(values, "values", F8, 1),
+            d.fbuf,
+            d.ibuf,
+            d.grid,
+            *d.tree,
+            float(clearance),
+            float(self_clearance),
+            float(upper_slack),
+        )
+        return int(verdict), int(index), int(probes)
 
     def packed_state(self, q: Array, d: KernelData, threshold: float) -> tuple[Array, Array, Array, bool]:
         """:func:`.state.packed_state`: (poses (B, 13), cabin bounds (B,), pair bounds (P,), admissible)."""

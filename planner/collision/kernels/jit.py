@@ -29,7 +29,7 @@ from planner.collision.kernels.offsets import (
     task_offsets,
 )
 from planner.collision.kernels.spread import between_bound, cumulative_bound, propagate
-from planner.collision.kernels.state import packed_check, packed_poses, packed_state, packed_valid
+from planner.collision.kernels.state import axis_sweep, packed_check, packed_poses, packed_state, packed_valid
 from planner.collision.kernels.walk import (
     end_ratio,
     first_inadmissible,
@@ -39,6 +39,7 @@ from planner.collision.kernels.walk import (
 )
 
 __all__ = [
+    "axis_sweep",
     "between_bound",
     "bounds_at",
     "box_mesh_distance",
