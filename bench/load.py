@@ -1,6 +1,7 @@
 """Load check of the HTTP service: concurrent clients submitting the reference scenarios.
 
-Starts the real server (``python -m api``, temp data dir, SQLite), then ``--clients`` threads each submit
+Starts the real server (``python -m api``, temp data dir, SQLite), then ``--clients`` threads (each with its
+HTTP session made before the load starts, as a plant's client holds one) each submit
 ``--rounds`` reference scenarios one after another (round robin over the suite's succeeding scenarios), each
 waited for to its end with long polls (``GET /plans/{id}?wait_s=30``: answered when the plan ends), while a
 prober calls ``/health`` every 50 ms. Prints throughput, p50/p95/max latency of ``/health`` and of ``GET
@@ -270,10 +271,17 @@ def main() -> None:
         stop, out = mp.Event(), mp.Queue()
         prober = mp.Process(target=probe, args=(url, headers, probe_job, stop, out))
         prober.start()
+        assert prober.pid is not None
+        prober_pid = prober.pid
         time.sleep(2.0)  # the prober's interpreter is up before the load starts
 
+        # Each client's HTTP session is made before the load starts, as a plant's client holds one for
+        # its lifetime: making 20 (an SSL context each, though the URL is plain HTTP) costs 0.3 s of CPU,
+        # which inside the measured window delayed the first submissions while the workers stood idle.
+        sessions = [httpx.Client(base_url=url, timeout=60, headers=headers) for _ in range(args.clients)]
+
         def client(k: int) -> None:
-            with httpx.Client(base_url=url, timeout=60, headers=headers) as c:
+            with sessions[k] as c:
                 for rnd in range(args.rounds):  # one plan after another, each to its end
                     n = k + rnd * args.clients
                     sc = scenarios[n % len(scenarios)]
@@ -294,7 +302,7 @@ def main() -> None:
                     with lock:
                         results.append({"scenario": sc, "body": body})
 
-        cpu0 = _cpu_s(proc.pid), time.process_time()
+        cpu0 = _cpu_s(proc.pid), time.process_time(), _cpu_s(prober_pid)
         t0 = time.perf_counter()
         threads = [threading.Thread(target=client, args=(k,)) for k in range(args.clients)]
         for th in threads:
@@ -303,6 +311,7 @@ def main() -> None:
             th.join()
         wall = time.perf_counter() - t0
         server_cpu, clients_cpu = _cpu_s(proc.pid) - cpu0[0], time.process_time() - cpu0[1]
+        prober_cpu = _cpu_s(prober_pid) - cpu0[2]
         stop.set()
         health_s, probe_status_s, slow = out.get(timeout=30)
         prober.join()
@@ -363,7 +372,7 @@ def main() -> None:
     )
     print(
         f"  CPU time during the load, besides the jobs: server {server_cpu:.1f} s, the clients "
-        f"{clients_cpu:.1f} s (of {2 * wall:.1f} core-seconds)"
+        f"{clients_cpu:.1f} s, the prober {prober_cpu:.1f} s (of {2 * wall:.1f} core-seconds)"
     )
     print(
         "  service processes after the run (server, forkserver, job workers): "
