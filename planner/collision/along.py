@@ -349,7 +349,7 @@ class AlongPath:
         """The swept-hull bound of task t over samples i..j (:mod:`.sweep`; a pair: body a in b's frame)."""
         verts = self._verts.get(t)
         if t < self.n_cabin:
-            b, target = t, self.probes.cabin_obj
+            b = t
             shape = self.bodies.shapes[b]
             if verts is None:
                 verts = self._verts[t] = body_vertices_along(self.poses, b, shape)
@@ -372,7 +372,7 @@ class AlongPath:
         self.swept_queries += 1
         if self.probes.tree is not None:  # the cabin: compiled, on its triangle tree
             return swept_bound_tree(verts[i : j + 1], shape, self.probes.tree)
-        return swept_bound(verts[i : j + 1], shape, target)
+        return swept_bound(verts[i : j + 1], shape, self.probes.cabin_obj)
 
     # ---------------------------------------------------------- certificate
     def certify(self, clearance: float, self_clearance: float, margin: float) -> AlongReport:

@@ -104,7 +104,7 @@ class CertifiedMotion:
             self.model.slope_half_width,
             adq,
         )
-        has_cabin = self.probes.cabin_obj is not None
+        has_cabin = self.probes.has_cabin
         d_max = max([*(reach.tolist() if has_cabin else []), *pair_reach.tolist()], default=0.0)
         # One schedule step never exceeds the smallest step the walk may take (at least ``floor`` of motion).
         n = int(max(1, np.ceil(d_max / floor)))

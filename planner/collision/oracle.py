@@ -275,7 +275,7 @@ class ReferenceWorld(CollisionWorld):
         probes = self._probes
         before = probes.queries
         tasks: list[tuple[bool, int, float]] = []
-        if probes.cabin_obj is not None:
+        if probes.has_cabin:
             tasks += [(True, b, float(reach[b])) for b in range(self._n_bodies)]
         pair_reach = pair_rho @ np.abs(dq)
         tasks += [(False, k, float(pair_reach[k])) for k in range(len(self.bodies.pairs))]

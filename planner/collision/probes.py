@@ -2,13 +2,18 @@
 
 Bodies are FCL boxes and capsules grown by a margin (:meth:`Probes.object`: reused per thread and only
 moved, since building one costs more than the query); the cabin is one BVH mesh, cached per mesh content
-and pose so that several worlds on one cabin share it. *Collision* queries (microseconds) decide; distance
-queries (milliseconds) only where a number is needed (reports, the carriage's clearance table).
+and pose so that several worlds on one cabin share it, and built at its first use (:attr:`Probes.cabin_obj`):
+with the cabin's triangle tree the compiled tests answer every probe and distance, so a plan on the
+compiled route never builds it (25 ms for a generated cabin of 5 000-12 000 triangles, once per cabin and
+process: a CLI call, a service worker's first job on the cabin). *Collision* queries (microseconds)
+decide; distance queries (milliseconds) only where a number is needed (reports, the carriage's clearance
+table).
 """
 
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from functools import cache
 from typing import Any
 
@@ -105,7 +110,7 @@ class Probes:
 
     Args:
         bodies: The world's bodies (shapes, checked pairs).
-        cabin: The cabin's FCL mesh (``None``: free space).
+        cabin: The cabin's FCL mesh, or what builds it at its first use (``None``: free space).
         tree: The same cabin's triangle tree (``None``: every probe through FCL).
         kernels: The compiled kernels' entries.
         compiled_pairs: Pairs' probes and exact distances by the compiled tests (False: FCL's).
@@ -114,13 +119,16 @@ class Probes:
     def __init__(
         self,
         bodies: BodySet,
-        cabin: fcl.BVHModel | None,
+        cabin: fcl.BVHModel | Callable[[], fcl.BVHModel] | None,
         tree: MeshTree | None = None,
         kernels: Kernels = KERNELS,
         compiled_pairs: bool = False,
     ) -> None:
         self.bodies = bodies
-        self.cabin_obj = fcl.CollisionObject(cabin, fcl.Transform()) if cabin is not None else None
+        #: Whether the world has a cabin (its FCL object, :attr:`cabin_obj`, is built when first asked for).
+        self.has_cabin = cabin is not None
+        self._cabin_source = cabin
+        self._cabin_obj: fcl.CollisionObject | None = None
         #: The cabin's triangle tree for the compiled tests (None: FCL only).
         self.tree = tree if tree is not None and len(tree.tris) and cabin is not None else None
         self._kernels = kernels
@@ -139,6 +147,15 @@ class Probes:
         self._grown = GrownShapes(bodies.shapes)
         self._local = threading.local()
         self._req = fcl.CollisionRequest()
+
+    @property
+    def cabin_obj(self) -> fcl.CollisionObject | None:
+        """The cabin as an FCL object (``None``: free space), its BVH built at the first use."""
+        if self._cabin_obj is None and self._cabin_source is not None:
+            source = self._cabin_source
+            model = source if isinstance(source, fcl.BVHModel) else source()
+            self._cabin_obj = fcl.CollisionObject(model, fcl.Transform())
+        return self._cabin_obj
 
     def geometry(self, b: int, margin: float, length: float) -> Any:
         """FCL shape of body b grown by ``margin`` (a capsule with its posed ``length``), cached."""
@@ -179,7 +196,7 @@ class Probes:
 
     def cabin_hit(self, st: BodyState, b: int, margin: float) -> bool:
         """Body b grown by ``margin`` touches the cabin."""
-        assert self.cabin_obj is not None
+        assert self.has_cabin
         if self.tree is not None:
             self.queries += 1
             half = self._half[b]
@@ -210,7 +227,7 @@ class Probes:
         carriage against the cabin's tree: the compiled exact distance (FCL's GJK ran up to 28 nm above it
         on 84 generated cabins); else FCL's.
         """
-        assert self.cabin_obj is not None
+        assert self.has_cabin
         z = np.arange(lo, hi + step, step)
         half = self._half[carriage]
         if self.tree is not None and half is not None:

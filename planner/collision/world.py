@@ -34,7 +34,7 @@ from __future__ import annotations
 import hashlib
 import math
 import weakref
-from functools import cache
+from functools import cache, partial
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -177,7 +177,7 @@ class CollisionWorld(Generic[RobotT]):
         tree = _cabin_tree(*entry[0]) if entry is not None else buffers.NO_TREE
         self._probes = Probes(
             self.bodies,
-            cabin_bvh(*entry[0]) if entry is not None else None,
+            partial(cabin_bvh, *entry[0]) if entry is not None else None,  # built if ever used
             tree if self.compiled_tests else None,
             compiled_pairs=self.compiled_tests,
         )
@@ -589,7 +589,7 @@ class CollisionWorld(Generic[RobotT]):
         def walk(k: int, clearance: float, own: float, margin: float) -> MotionReport:
             return self._walk(qs[k], qs[k + 1], Walk(clearance, margin, own, ratio=ratio_floor))
 
-        has_cabin = self._probes.cabin_obj is not None
+        has_cabin = self._probes.has_cabin
         kernels = (self.kernels, self._kernel, threshold)
         return AlongPath(
             qs, poses, c, has_cabin, self.model, self.bodies, self._probes, kernels, walk, self.obstacles
@@ -607,7 +607,7 @@ class CollisionWorld(Generic[RobotT]):
         """
         st = self._state(_joints(q, self.model.n_joints))
         candidates: list[tuple[float, bool, int]] = []
-        if include_cabin and self._probes.cabin_obj is not None:
+        if include_cabin and self._probes.has_cabin:
             candidates += [(float(lb), True, b) for b, lb in enumerate(st.cabin_lb)]
         if include_self:
             candidates += [(float(lb), False, k) for k, lb in enumerate(st.pair_lb)]

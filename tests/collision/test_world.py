@@ -423,3 +423,29 @@ def test_body_lengths_follow_the_description(tmp_path: Path) -> None:
         for name, (i, j) in {"column": (2, 3), "arm": (3, 4), "slide": (4, 6)}.items():
             shape = world.bodies.shapes[world.names.index(name)]
             assert np.linalg.norm(f[j, :3, 3] - f[i, :3, 3]) <= shape.length + 1e-12
+
+
+def test_the_compiled_route_never_builds_the_cabins_fcl_mesh_and_the_reference_route_does() -> None:
+    """A whole plan (search, timing, gate, report figures) on the compiled route leaves the FCL BVH unbuilt.
+
+    It is built lazily (25 ms a new cabin in each process); the reference route, which probes with FCL,
+    builds it at its first probe, and both routes give the same verdicts.
+    """
+    from planner.plan.pipeline import Planner
+    from planner.scenario import load_scenario
+
+    sc = load_scenario(Path(__file__).parents[1] / "scenarios" / "hatch-bay-insert.yaml")
+    planner = Planner(sc)
+    result = planner.plan()
+    assert result.gate.passed
+    probes = planner.world._probes
+    assert probes.has_cabin and probes._cabin_obj is None
+    d = planner.world.min_distance(sc.start_q)  # the report's exact distances: compiled too
+    assert d.distance_m > 0 and probes._cabin_obj is None
+    fast, ref = CollisionWorld(sc.robot, sc.cabin, sc.payload), ReferenceWorld(sc.robot, sc.cabin, sc.payload)
+    assert ref._probes._cabin_obj is None
+    qs = admissible_joints(sc.robot, 60, seed=4)
+    qs[:, 0] = sc.start_q[0]
+    verdicts = [ref.is_valid(q, 0.01) for q in qs]
+    assert verdicts == [fast.is_valid(q, 0.01) for q in qs] and any(verdicts) and not all(verdicts)
+    assert ref._probes._cabin_obj is not None and fast._probes._cabin_obj is None
