@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from planner.collision.kernels.entries import DEFAULT as KERNELS
-from planner.core.cache import cache_dir, prune, touch, write_atomic
+from planner.core.cache import DATA_PATTERNS, cache_dir, prune, touch, write_atomic
 from planner.core.types import Array, IntArray
 
 log = logging.getLogger(__name__)
@@ -191,6 +191,6 @@ def _write_cached(folder: Path, name: str, grid: ClearanceGrid) -> None:
     try:
         write_atomic(folder / f"grid-{name}.npy", lambda f: np.save(f, bounds, allow_pickle=False))
         write_atomic(folder / f"grid-{name}.json", lambda f: json.dump(meta, f), text=True)  # last: complete
-        prune(folder, ("grid-*", "meshes/*.npz"))
+        prune(folder, DATA_PATTERNS)
     except OSError as exc:
         log.warning("clearance grid cache not written (%s)", exc)

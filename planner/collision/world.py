@@ -32,8 +32,10 @@ functions and kernel, and its admissibility constraints through its
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import weakref
+from collections.abc import Callable
 from functools import cache, partial
 from typing import Generic, TypeVar
 
@@ -44,7 +46,7 @@ from planner.collision.bodies import BodySet, PayloadGeometry, robot_bodies, seg
 from planner.collision.clearance_grid import ClearanceGrid, cached_build
 from planner.collision.kernels import buffers, codes
 from planner.collision.kernels.entries import DEFAULT as KERNELS
-from planner.collision.kernels.entries import Kernels
+from planner.collision.kernels.entries import EXTENSION, Kernels
 from planner.collision.motion import CertifiedMotion, Walk
 from planner.collision.obstacles import Obstacle, ObstacleSet, obstacle_contact
 from planner.collision.probes import Probes, cabin_bvh
@@ -58,6 +60,8 @@ from planner.collision.reports import (
     body_contact,
     limit_contacts,
 )
+from planner.core import aot
+from planner.core.cache import DATA_PATTERNS, cache_dir, prune, touch, write_atomic
 from planner.core.exceptions import InvalidInput
 from planner.core.types import Array
 from planner.meshio import LoadedMesh
@@ -67,6 +71,8 @@ DEFAULT_CLEARANCE_M = 0.01
 DEFAULT_MOTION_MARGIN_M = 0.005
 DEFAULT_SELF_CLEARANCE_M = 0.005
 MIN_MOTION_MARGIN_M = 1e-4
+
+log = logging.getLogger(__name__)
 
 #: The world's robot model type (``world.robot`` keeps it: cabin8's world gives a Cabin8).
 RobotT = TypeVar("RobotT", bound=RobotModel)
@@ -94,6 +100,52 @@ def _cabin_tree(sha256: str, vertices_bytes: bytes, faces_bytes: bytes) -> buffe
 
 #: Carriage clearance tables by (cabin, carriage shape, rail travel), built once (``Probes.carriage_table``).
 _CARRIAGE_TABLES: dict[tuple[str, str, float, float], tuple[float, float, Array]] = {}
+#: Bump when the carriage table's construction or its cache layout changes (the compiled kernels' build key
+#: is part of an entry's name too: a changed distance kernel never reads an older kernel's table).
+CARRIAGE_TABLE_VERSION = 1
+
+
+@cache
+def _kernels_key() -> str:
+    return aot.key(EXTENSION)
+
+
+def _cached_carriage_table(
+    key: tuple[str, str, float, float], compiled: bool, build: Callable[[], tuple[float, float, Array]]
+) -> tuple[float, float, Array]:
+    """``build()``, cached on disk (``carriage-<hash>.npy``: the rail start, the step, then the distances).
+
+    A carriage table costs 10 ms (600 exact box-mesh distances) for each new cabin in each process: every
+    CLI call, a service worker's first job on a cabin. Keyed by the cabin's geometry digest, the carriage's
+    shape, the rail, the route (compiled distances or FCL's) and the kernels' build; a missing, unreadable or
+    malformed entry is built again, so the cache never changes a figure.
+    """
+    folder = cache_dir()
+    if folder is None:
+        return build()
+    kernels = _kernels_key() if compiled else "fcl"
+    name = hashlib.sha256(f"{key!r}|{kernels}|{CARRIAGE_TABLE_VERSION}".encode()).hexdigest()[:32]
+    path = folder / f"carriage-{name}.npy"
+    try:
+        data = np.load(path, allow_pickle=False)
+        if data.ndim == 1 and data.dtype == np.float64 and len(data) >= 3 and np.isfinite(data[:2]).all():
+            touch(path)
+            table = data[2:].copy()
+            table.setflags(write=False)
+            return float(data[0]), float(data[1]), table
+        log.warning("carriage table cache %s malformed; rebuilding", path)
+    except FileNotFoundError:
+        pass
+    except (OSError, ValueError) as exc:
+        log.warning("carriage table cache %s unreadable (%s); rebuilding", path, exc)
+    lo, step, table = build()
+    entry = np.concatenate([[lo, step], table])
+    try:
+        write_atomic(path, lambda f: np.save(f, entry, allow_pickle=False))
+        prune(folder, DATA_PATTERNS)
+    except OSError as exc:
+        log.warning("carriage table cache not written (%s)", exc)
+    return lo, step, table
 
 
 #: The geometry key and digest of each loaded cabin (the mesh object's arrays are read-only).
@@ -227,7 +279,11 @@ class CollisionWorld(Generic[RobotT]):
         if table is None:
             if len(_CARRIAGE_TABLES) >= 64:
                 _CARRIAGE_TABLES.clear()
-            table = _CARRIAGE_TABLES[table_key] = self._probes.carriage_table(carriage, lo, hi)
+            table = _CARRIAGE_TABLES[table_key] = _cached_carriage_table(
+                table_key,
+                self._probes.tree is not None,
+                partial(self._probes.carriage_table, carriage, lo, hi),
+            )
         return table
 
     # ------------------------------------------------------------------ poses

@@ -20,6 +20,10 @@ from typing import IO, Any
 
 log = logging.getLogger(__name__)
 
+#: The cache folder's data entries, pruned together within its size bound: clearance grids, carriage
+#: clearance tables, parsed meshes (the compiled builds are pruned by their own pattern).
+DATA_PATTERNS = ("grid-*", "carriage-*", "meshes/*.npz")
+
 #: Default bound of the cache folder's size [bytes].
 DEFAULT_MAX_BYTES = 2 * 1024**3
 #: A temporary file older than this [s] belongs to a writer that died: :func:`prune` deletes it.

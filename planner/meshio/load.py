@@ -46,7 +46,7 @@ from typing import Any, get_args
 import numpy as np
 from numpy.typing import ArrayLike
 
-from planner.core.cache import cache_dir, prune, touch, write_atomic
+from planner.core.cache import DATA_PATTERNS, cache_dir, prune, touch, write_atomic
 from planner.core.lru import BoundedLRU
 from planner.core.types import Array, IntArray
 from planner.meshio.build import validate_and_build, validate_pose
@@ -294,7 +294,7 @@ def _write_parts(
         arrays[f"f{i}"] = faces
     try:
         write_atomic(path, lambda f: np.savez(f, **arrays))  # a reader sees the old entry or the new one
-        prune(path.parent.parent, ("grid-*", "meshes/*.npz"))
+        prune(path.parent.parent, DATA_PATTERNS)
     except OSError as exc:  # a read-only or full cache folder only costs the next call a parse
         _LOG.warning("mesh parse cache %s not written: %s", path, exc)
 

@@ -449,3 +449,44 @@ def test_the_compiled_route_never_builds_the_cabins_fcl_mesh_and_the_reference_r
     verdicts = [ref.is_valid(q, 0.01) for q in qs]
     assert verdicts == [fast.is_valid(q, 0.01) for q in qs] and any(verdicts) and not all(verdicts)
     assert ref._probes._cabin_obj is not None and fast._probes._cabin_obj is None
+
+
+def test_the_carriage_table_is_cached_on_disk_and_read_back_bit_for_bit(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A new process's world reads the carriage table a first one wrote: the same bits, nothing rebuilt.
+
+    A malformed entry is rebuilt (with a warning) to the same table; the reference route (FCL's distances)
+    keeps entries of its own.
+    """
+    import planner.collision.world as world_module
+    from planner.collision.probes import Probes
+
+    monkeypatch.setenv("CABINPLAN_CACHE_DIR", str(tmp_path))
+    robot = Cabin8()
+    cabin = load_mesh(REFERENCE_DIR / "cabin-hatch.stl", units="m")
+
+    def fresh() -> CollisionWorld:
+        world_module._CARRIAGE_TABLES.clear()  # as in a new process
+        return CollisionWorld(robot, cabin)
+
+    built = fresh()._carriage_table
+    assert built is not None and np.isfinite(built[2]).any()
+    entries = sorted(tmp_path.glob("carriage-*.npy"))
+    assert len(entries) == 1
+
+    def no_build(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the table was built again")
+
+    with monkeypatch.context() as m:
+        m.setattr(Probes, "carriage_table", no_build)
+        read = fresh()._carriage_table
+    assert read is not None and read[:2] == built[:2] and read[2].tobytes() == built[2].tobytes()
+    entries[0].write_bytes(b"not a table")
+    with caplog.at_level("WARNING"):
+        again = fresh()._carriage_table
+    assert again is not None and again[2].tobytes() == built[2].tobytes()
+    assert "carriage table cache" in caplog.text
+    world_module._CARRIAGE_TABLES.clear()
+    ReferenceWorld(robot, cabin)
+    assert len(list(tmp_path.glob("carriage-*.npy"))) == 2  # FCL's table: an entry of its own
