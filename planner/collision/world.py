@@ -250,6 +250,7 @@ class CollisionWorld(Generic[RobotT]):
         self._motion = CertifiedMotion(self.model, self.bodies, self._kernel, self._probes, self.kernels)
         #: Fine-cover sphere radii (S,), grouped by body (the spheres of :meth:`cover_centres`).
         self._fine_r = self._kernel.fine.radii
+        self._cover_digest: str | None = None
         #: The obstacles added to the cabin, with the pairs this world allows (None: no obstacles).
         self.obstacles: ObstacleSet | None = (
             ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed), self.kernels, self.compiled_tests)
@@ -313,6 +314,21 @@ class CollisionWorld(Generic[RobotT]):
         """
         flat, _ = self._evaluate(q)
         return self.kernels.cover_extents(flat, self._kernel.fine)
+
+    def cover_digest(self) -> str:
+        """Digest of what :meth:`cover_extents` depends on besides the robot (the cabin plays no part).
+
+        The world's route (a reference world evaluates poses its own way), the bodies, the tool-to-payload
+        transform and the fine sphere cover: worlds of one robot with equal digests give equal extents
+        (transit's pool ranking is shared by them, :func:`planner.plan.transit.ranked_pool`).
+        """
+        if self._cover_digest is None:
+            cover = self._kernel.fine
+            h = hashlib.sha256(f"{type(self).__qualname__}|{self.names!r}".encode())  # the route, the bodies
+            for part in (self._T_tool_box, cover.body, cover.local, cover.frac, cover.radii, cover.start):
+                h.update(np.ascontiguousarray(part).tobytes())
+            self._cover_digest = h.hexdigest()
+        return self._cover_digest
 
     def poses(self, q: Array) -> tuple[Array, Array, Array]:
         """(R (N, B, 3, 3), p (N, B, 3), lengths (N, B)) of every body for (N, 8) or (8,) joints.

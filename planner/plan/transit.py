@@ -76,6 +76,13 @@ _POOLS: weakref.WeakKeyDictionary[CollisionWorld, dict[tuple[int, int], Array]] 
 #: a sweep) draws it once (4-5 ms) and ranks it for its own payload; the last :data:`DRAWS_KEPT` per robot.
 _DRAWS: weakref.WeakKeyDictionary[object, BoundedLRU[tuple[int, int], Array]] = weakref.WeakKeyDictionary()
 DRAWS_KEPT = 4
+#: Each robot's ranked pools by payload: ``(seed, n_candidates, geometry)`` -> (N, 8), read-only. The ranking
+#: depends on the robot and what it carries (the tool-to-payload transform and the sphere cover), never
+#: on the cabin: a sweep's plans (one payload, many cabins or goals) and a worker's repeated scenarios
+#: rank a draw once (4-5 ms a transit plan); the last :data:`DRAWS_KEPT` per robot.
+_RANKED: weakref.WeakKeyDictionary[object, BoundedLRU[tuple[int, int, str], Array]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 def ranked_pool(world: CollisionWorld, seed: int, n_candidates: int) -> Array:
@@ -88,9 +95,16 @@ def ranked_pool(world: CollisionWorld, seed: int, n_candidates: int) -> Array:
     key = (int(seed), int(n_candidates))
     pool = pools.get(key)
     if pool is None:
-        drawn = seeded_draw(world.robot, *key)
-        pool = drawn[np.argsort(compactness(world, drawn), kind="stable")] if len(drawn) else drawn.copy()
-        pool.flags.writeable = False
+        ranked = _RANKED.get(world.robot)
+        if ranked is None:
+            ranked = _RANKED.setdefault(world.robot, BoundedLRU(DRAWS_KEPT))
+        by_payload = (*key, world.cover_digest())
+        pool = ranked.get(by_payload)
+        if pool is None:
+            drawn = seeded_draw(world.robot, *key)
+            pool = drawn[np.argsort(compactness(world, drawn), kind="stable")] if len(drawn) else drawn.copy()
+            pool.flags.writeable = False
+            ranked.put(by_payload, pool)
         pools[key] = pool
     return pool
 

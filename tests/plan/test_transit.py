@@ -140,6 +140,38 @@ def test_the_seeded_draw_is_kept_per_robot_and_shared_by_its_worlds(
     assert again is not drawn and np.array_equal(again, drawn)
 
 
+def test_the_ranked_pool_is_shared_by_the_worlds_that_carry_the_same_payload(
+    scenario: ResolvedScenario, world: CollisionWorld
+) -> None:
+    """A sweep's next world (the same robot and payload, another cabin) ranks nothing: the same pool.
+
+    Another payload, or the reference route, ranks its own (each equal to its fresh ranking).
+    """
+    from planner.collision.bodies import PayloadGeometry
+    from planner.collision.oracle import ReferenceWorld
+    from planner.meshes import REFERENCE_DIR
+    from planner.meshio import load_mesh
+
+    pool = ranked_pool(world, 8, 300)
+    drawn = seeded_draw(world.robot, 8, 300)
+    aisle = load_mesh(REFERENCE_DIR / "cabin-aisle.stl", units="m")
+    other_cabin = CollisionWorld(world.robot, aisle, scenario.payload)  # the ranking ignores the cabin
+    assert other_cabin.cover_digest() == world.cover_digest()
+    assert ranked_pool(other_cabin, 8, 300) is pool
+    grasp = np.eye(4)
+    grasp[:3, 3] = [0.0, 0.0, 0.35]
+    heavier = CollisionWorld(
+        world.robot, None, PayloadGeometry((0.6, 0.3, 0.3), T_tool_payload=grasp, mass=80.0)
+    )
+    reference = ReferenceWorld(world.robot, None, scenario.payload)
+    for w in (heavier, reference):
+        assert w.cover_digest() != world.cover_digest()
+        own = ranked_pool(w, 8, 300)
+        assert own is not pool
+        assert np.array_equal(own, drawn[np.argsort(compactness(w, drawn), kind="stable")])
+    assert not np.array_equal(ranked_pool(heavier, 8, 300), pool)  # a longer payload ranks differently
+
+
 def test_the_rides_extra_condition_is_asked_before_its_certification(
     scenario: ResolvedScenario, world: CollisionWorld, forces: StaticForceCheck, transit: Transit
 ) -> None:
