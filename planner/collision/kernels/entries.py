@@ -148,6 +148,13 @@ def _data(d: object) -> KernelData:
     return d
 
 
+def _verdict_inputs(
+    d: KernelData, clearance: float, self_clearance: float, upper_slack: float
+) -> tuple[Any, ...]:
+    """The world's data and the thresholds, as the state verdict entries take them after their own inputs."""
+    return (d.fbuf, d.ibuf, d.grid, *d.tree, float(clearance), float(self_clearance), float(upper_slack))
+
+
 def _obstacles(d: object) -> ObstacleKernelData:
     if not isinstance(d, ObstacleKernelData):
         raise TypeError(f"d: ObstacleKernelData expected, got {type(d).__name__}")
@@ -194,15 +201,9 @@ class Kernels:
     ) -> tuple[int, Array, int]:
         """:func:`.state.packed_valid` on a world's data: (``STATE_*`` verdict, poses (B, 13), probes)."""
         d = _data(d)
+        q = check_array(q, "q", F8, 1, shape=d.joint_shape)
         verdict, poses, probes = self.module.packed_valid(
-            check_array(q, "q", F8, 1, shape=d.joint_shape),
-            d.fbuf,
-            d.ibuf,
-            d.grid,
-            *d.tree,
-            float(clearance),
-            float(self_clearance),
-            float(upper_slack),
+            q, *_verdict_inputs(d, clearance, self_clearance, upper_slack)
         )
         return int(verdict), poses, int(probes)
 
@@ -218,17 +219,10 @@ class Kernels:
     ) -> tuple[int, int, int]:
         """:func:`.state.axis_sweep` on a world's data: (``STATE_*`` verdict, its state's index, probes)."""
         d = _data(d)
+        q = check_array(q, "q", F8, 1, shape=d.joint_shape)
+        values = check_array(values, "values", F8, 1)
         verdict, index, probes = self.module.axis_sweep(
-            check_array(q, "q", F8, 1, shape=d.joint_shape),
-            int(axis),
-            check_array(values, "values", F8, 1),
-            d.fbuf,
-            d.ibuf,
-            d.grid,
-            *d.tree,
-            float(clearance),
-            float(self_clearance),
-            float(upper_slack),
+            q, int(axis), values, *_verdict_inputs(d, clearance, self_clearance, upper_slack)
         )
         return int(verdict), int(index), int(probes)
 
