@@ -57,12 +57,16 @@ def test_the_search_finds_the_order_that_installs_both(searched: Searched) -> No
 
 
 def test_the_cabins_caches_are_built_once_for_the_whole_campaign(searched: Searched) -> None:
-    """Four cycles in three cabin states (none, D, F installed): one clearance grid, one cabin BVH."""
+    """Four cycles in three cabin states (none, D, F installed): one clearance grid, and no cabin FCL mesh.
+
+    The cabin's FCL mesh is built at its first use (once per cabin, cached) and the compiled route never
+    uses it: not one is built for the whole campaign.
+    """
     assert len(searched.executor.ran) == 4
     cabin_grids = sum(n for tris, n in searched.grids.items() if tris > CABIN_SIZED)
     cabin_bvhs = sum(n for tris, n in searched.bvhs.items() if tris > CABIN_SIZED)
     assert cabin_grids == 1, searched.grids
-    assert cabin_bvhs == 1, searched.bvhs
+    assert cabin_bvhs == 0, searched.bvhs
 
 
 def _box_mesh(obstacle: Obstacle) -> fcl.CollisionObject:
