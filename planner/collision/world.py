@@ -123,7 +123,11 @@ def _cached_carriage_table(
     folder = cache_dir()
     if folder is None:
         return build()
-    kernels = _kernels_key() if compiled else "fcl"
+    try:
+        kernels = _kernels_key() if compiled else "fcl"
+    except OSError as exc:  # the kernels' sources unreadable: no key to trust, so no cache
+        log.warning("carriage table not cached: the kernels' build key is unknown (%s)", exc)
+        return build()
     name = hashlib.sha256(f"{key!r}|{kernels}|{CARRIAGE_TABLE_VERSION}".encode()).hexdigest()[:32]
     path = folder / f"carriage-{name}.npy"
     try:

@@ -490,3 +490,14 @@ def test_the_carriage_table_is_cached_on_disk_and_read_back_bit_for_bit(
     world_module._CARRIAGE_TABLES.clear()
     ReferenceWorld(robot, cabin)
     assert len(list(tmp_path.glob("carriage-*.npy"))) == 2  # FCL's table: an entry of its own
+
+    def unreadable() -> str:
+        raise OSError("no sources")
+
+    with monkeypatch.context() as m:  # no build key to trust: built, not cached
+        m.setattr(world_module, "_kernels_key", unreadable)
+        m.setenv("CABINPLAN_CACHE_DIR", str(tmp_path / "other"))
+        (tmp_path / "other").mkdir()
+        keyless = fresh()._carriage_table
+    assert keyless is not None and keyless[2].tobytes() == built[2].tobytes()
+    assert not list((tmp_path / "other").glob("carriage-*"))
