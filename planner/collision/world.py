@@ -447,7 +447,7 @@ class CollisionWorld(Generic[RobotT]):
         same verdicts, in the same order, and the same probes counted as :meth:`is_valid` on each copy of
         q, in one compiled call where the world allows it (its compiled tests, a triangle tree, no extra
         obstacles: those are checked in Python state by state). A transit posture swept along the rail is
-        the use: about 6 us a state instead of 10.
+        the use: 5.5 us a state instead of 7.4.
 
         Returns:
             (index into ``values`` of the first state not valid, or -1; states checked).

@@ -178,7 +178,7 @@ def axis_sweep(
 
     The states are exactly the ones a caller makes by copying q and setting the joint, and each is judged
     by the same call, so the verdicts are :func:`packed_valid`'s bit for bit; this is the loop without a
-    call from Python per state (a transit posture swept along the rail: about 40% of a check's cost).
+    call from Python per state (a transit posture swept along the rail: 5.5 instead of 7.4 us a state).
 
     Returns:
         (``STATE_VALID`` when every state is, else the first other verdict; the index of that state in
