@@ -447,7 +447,8 @@ class CollisionWorld(Generic[RobotT]):
         same verdicts, in the same order, and the same probes counted as :meth:`is_valid` on each copy of
         q, in one compiled call where the world allows it (its compiled tests, a triangle tree, no extra
         obstacles: those are checked in Python state by state). A transit posture swept along the rail is
-        the use: 5.5 us a state instead of 7.4.
+        the use: 3.8 us a state instead of 8 (the pairs' bounds, which the rail does not change, are
+        computed once a posture is clear).
 
         Returns:
             (index into ``values`` of the first state not valid, or -1; states checked).
@@ -462,8 +463,9 @@ class CollisionWorld(Generic[RobotT]):
         start = 0
         d = self._kernel
         if self.compiled_tests and self.obstacles is None:
+            fixed = bool(d.pair_rigid[:, axis].all())  # the rail: every pair moves as one
             verdict, start, probes = self.kernels.axis_sweep(
-                q, axis, values, d, clearance, self.self_clearance, d.upper_slack
+                q, axis, values, fixed, d, clearance, self.self_clearance, d.upper_slack
             )
             self._probes.queries += probes
             if verdict == codes.STATE_VALID:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from planner.collision.bodies import PayloadGeometry
-from planner.collision.kernels import bounds, state, walk
+from planner.collision.kernels import bounds, codes, state, walk
 from planner.collision.kernels.packed import unpack
 from planner.collision.oracle import ReferenceWorld
 from planner.collision.world import CollisionWorld
@@ -394,3 +394,34 @@ def test_a_rail_sweep_in_one_call_is_is_valid_state_by_state(
     with pytest.raises(InvalidInput, match="values"):
         fast.first_invalid_on_axis(postures[0], 0, np.zeros((3, 2)))
     assert fast.first_invalid_on_axis(postures[0], 0, np.zeros(0)) == (-1, 0)
+
+
+def test_a_sweeps_states_after_the_pairs_are_settled_get_packed_valids_verdicts(
+    worlds: tuple[CollisionWorld, ...],
+) -> None:
+    """The rail sweep's shortcut (cabin part only, once every pair is clear by PAIR_SETTLED_M) = packed_valid.
+
+    On states whose pair bounds are all that far above the self-clearance (the only ones it is used on):
+    the same verdict and probe count, valid and invalid, probed and not, both seen.
+    """
+    fast, _ = worlds
+    d = fast._kernel
+    u = unpack(d.fbuf, d.ibuf)
+    own = fast.self_clearance
+    qs = along_rail(fast.robot, 1500, seed=23)
+    poses, c, no_pairs = np.empty((len(fast.names), 13)), np.empty(len(u.c_lo)), np.empty(0)
+    seen = set()
+    for q in qs:
+        for clearance in (0.005, 0.03):
+            code, _, _, pairs = state.packed_check(q, d.fbuf, d.ibuf, d.grid, clearance, own, d.upper_slack)
+            if code == codes.NOT_FINITE or not np.all(pairs > own + state.PAIR_SETTLED_M):
+                continue
+            expected, _, probes = state.packed_valid(
+                q, d.fbuf, d.ibuf, d.grid, *d.tree, clearance, own, d.upper_slack
+            )
+            got = state._settled_verdict(
+                q, u, d.fbuf, d.ibuf, d.grid, *d.tree, clearance, own, d.upper_slack, poses, c, no_pairs
+            )
+            assert got == (expected, probes)
+            seen.add((expected, probes > 0))
+    assert {(codes.STATE_VALID, False), (codes.STATE_INVALID, False), (codes.STATE_VALID, True)} <= seen, seen

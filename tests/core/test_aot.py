@@ -97,8 +97,9 @@ def test_build_and_jit_give_the_same_bits_in_suite_cabins(name: str, both: tuple
             _same(got_v, jit.packed_valid(q, d, clearance, 0.01, d.upper_slack), "packed_valid")
             seen_valid.add(got_v[0])
             values = np.linspace(q[0] - 1.0, q[0] + 1.0, 9)
-            got_s = built.axis_sweep(q, 0, values, d, clearance, 0.01, d.upper_slack)
-            _same(got_s, jit.axis_sweep(q, 0, values, d, clearance, 0.01, d.upper_slack), "axis_sweep")
+            for fixed in (True, False):
+                got_s = built.axis_sweep(q, 0, values, fixed, d, clearance, 0.01, d.upper_slack)
+                _same(got_s, jit.axis_sweep(q, 0, values, fixed, d, clearance, 0.01, d.upper_slack), "sweep")
     assert {codes.CLEAR, codes.INADMISSIBLE, codes.UNDECIDED, codes.NOT_FINITE, codes.CONTACT} <= seen, seen
     assert {codes.STATE_VALID, codes.STATE_INVALID} <= seen_valid, seen_valid
     n_b, m = len(world.names), len(d.c_lo)

@@ -221,33 +221,38 @@ def cabin_bounds(
 
 
 @njit(cache=True, fastmath=False)
+def cabin_bounds_of_state(poses: np.ndarray, u: Packed, grid: np.ndarray) -> np.ndarray:
+    """The cabin part of :func:`bounds_of_state`: each body's bound (B,), the carriage's by its table."""
+    if u.has_grid:
+        centres = cover_centres(poses, u.fine_body, u.fine_local, u.fine_frac)
+        cabin = cabin_bounds(centres, u.fine_r, u.fine_bounds, grid, u.origin, u.inv_step, u.shape)
+    else:
+        cabin = np.full(poses.shape[0], math.inf)
+    carriage = u.carriage
+    if carriage >= 0:
+        cabin[carriage] = carriage_bound(
+            cabin[carriage], poses[carriage, 11], u.table, u.table_z0, u.table_dz
+        )
+    return cabin
+
+
+@njit(cache=True, fastmath=False)
 def bounds_of_state(
     poses: np.ndarray, u: Packed, grid: np.ndarray, c: np.ndarray, threshold: float
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """Everything one state needs in one call, on unpacked data: see :func:`state_bounds`."""
-    fine_body, fine_local, fine_frac, fine_r, fine_bounds = (
-        u.fine_body, u.fine_local, u.fine_frac, u.fine_r, u.fine_bounds
-    )  # fmt: skip
     coarse_body, coarse_local, coarse_frac, coarse_r, coarse_bounds = (
         u.coarse_body, u.coarse_local, u.coarse_frac, u.coarse_r, u.coarse_bounds
     )  # fmt: skip
-    origin, inv_step, shape, has_grid = u.origin, u.inv_step, u.shape, u.has_grid
     pair_a, pair_b, radius, half, capsule_pair, capsule_box = (
         u.pair_a, u.pair_b, u.radius, u.half, u.capsule_pair, u.capsule_box
     )  # fmt: skip
-    carriage, table, z0, dz, c_lo, c_hi = u.carriage, u.table, u.table_z0, u.table_dz, u.c_lo, u.c_hi
-    if has_grid:
-        centres = cover_centres(poses, fine_body, fine_local, fine_frac)
-        cabin = cabin_bounds(centres, fine_r, fine_bounds, grid, origin, inv_step, shape)
-    else:
-        cabin = np.full(poses.shape[0], math.inf)
+    cabin = cabin_bounds_of_state(poses, u, grid)
     coarse = cover_centres(poses, coarse_body, coarse_local, coarse_frac)
     pairs = pair_bounds(coarse, coarse_r, coarse_bounds, pair_a, pair_b, threshold)
     capsule_pair_distances(poses, radius, pair_a, pair_b, capsule_pair, pairs, threshold)
     capsule_box_distances(poses, radius, half, pair_a, pair_b, capsule_box, pairs, threshold)
-    if carriage >= 0:
-        cabin[carriage] = carriage_bound(cabin[carriage], poses[carriage, 11], table, z0, dz)
-    return cabin, pairs, admissible(c, c_lo, c_hi)
+    return cabin, pairs, admissible(c, u.c_lo, u.c_hi)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

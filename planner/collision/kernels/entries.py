@@ -66,7 +66,11 @@ EXTENSION = aot.Extension(
         Entry("packed_state", ("f8[1]", *_DATA, _GRID, "f8"), "(f8[2]w,f8[1]w,f8[1]w,b1)"),
         Entry("packed_valid", ("f8[1]", *_DATA, _GRID, *_TREE, "f8", "f8", "f8"), "(i8,f8[2]w,i8)"),
         Entry("packed_poses", ("f8[2]", *_DATA, "f8[3]w", "f8[2]w"), "none"),
-        Entry("axis_sweep", ("f8[1]", "i8", "f8[1]", *_DATA, _GRID, *_TREE, "f8", "f8", "f8"), "(i8,i8,i8)"),
+        Entry(
+            "axis_sweep",
+            ("f8[1]", "i8", "f8[1]", "b1", *_DATA, _GRID, *_TREE, "f8", "f8", "f8"),
+            "(i8,i8,i8)",
+        ),
         Entry(
             "bounds_at",
             ("i8[1]", "f8[3]", "f8[2]", *_DATA, _GRID, "f8", "f8[2]w", "f8[2]w"),
@@ -212,6 +216,7 @@ class Kernels:
         q: Array,
         axis: int,
         values: Array,
+        pairs_fixed: bool,
         d: KernelData,
         clearance: float,
         self_clearance: float,
@@ -222,7 +227,11 @@ class Kernels:
         q = check_array(q, "q", F8, 1, shape=d.joint_shape)
         values = check_array(values, "values", F8, 1)
         verdict, index, probes = self.module.axis_sweep(
-            q, int(axis), values, *_verdict_inputs(d, clearance, self_clearance, upper_slack)
+            q,
+            int(axis),
+            values,
+            bool(pairs_fixed),
+            *_verdict_inputs(d, clearance, self_clearance, upper_slack),
         )
         return int(verdict), int(index), int(probes)
 
