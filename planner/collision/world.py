@@ -255,6 +255,9 @@ class CollisionWorld(Generic[RobotT]):
         #: Fine-cover sphere radii (S,), grouped by body (the spheres of :meth:`cover_centres`).
         self._fine_r = self._kernel.fine.radii
         self._cover_digest: str | None = None
+        #: Per joint: it moves both bodies of every pair as one (the rail), so pair bounds do not change
+        #: along it (:meth:`first_invalid_on_axis`).
+        self._pairs_fixed: tuple[bool, ...] = tuple(np.all(self._kernel.pair_rigid, axis=0).tolist())
         #: The obstacles added to the cabin, with the pairs this world allows (None: no obstacles).
         self.obstacles: ObstacleSet | None = (
             ObstacleSet(tuple(obstacles), self.bodies, frozenset(allowed), self.kernels, self.compiled_tests)
@@ -463,9 +466,8 @@ class CollisionWorld(Generic[RobotT]):
         start = 0
         d = self._kernel
         if self.compiled_tests and self.obstacles is None:
-            fixed = bool(d.pair_rigid[:, axis].all())  # the rail: every pair moves as one
             verdict, start, probes = self.kernels.axis_sweep(
-                q, axis, values, fixed, d, clearance, self.self_clearance, d.upper_slack
+                q, axis, values, self._pairs_fixed[axis], d, clearance, self.self_clearance, d.upper_slack
             )
             self._probes.queries += probes
             if verdict == codes.STATE_VALID:

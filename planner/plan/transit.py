@@ -67,10 +67,6 @@ def compactness(world: CollisionWorld, qs: Array) -> Array:
     return extents[:, 0] + 0.5 * extents[:, 1]
 
 
-#: Each world's seeded candidate pools, ranked most compact first: ``(seed, n_candidates)`` -> (N, 8),
-#: read-only. A plan's transit search and a relay's two rides draw the same pool (same world, seed and
-#: size): drawn and ranked once (25-40 ms each on a 2-core VM), and gone with the world.
-_POOLS: weakref.WeakKeyDictionary[CollisionWorld, dict[tuple[int, int], Array]] = weakref.WeakKeyDictionary()
 #: Each robot's seeded draws of admissible postures, ``(seed, n_candidates)`` -> (N, 8), read-only: the
 #: draw depends on the robot alone (its limits and stage), so every world of a process (a service's worker,
 #: a sweep) draws it once (4-5 ms) and ranks it for its own payload; the last :data:`DRAWS_KEPT` per robot.
@@ -78,8 +74,9 @@ _DRAWS: weakref.WeakKeyDictionary[object, BoundedLRU[tuple[int, int], Array]] = 
 DRAWS_KEPT = 4
 #: Each robot's ranked pools by payload: ``(seed, n_candidates, geometry)`` -> (N, 8), read-only. The ranking
 #: depends on the robot and what it carries (the tool-to-payload transform and the sphere cover), never
-#: on the cabin: a sweep's plans (one payload, many cabins or goals) and a worker's repeated scenarios
-#: rank a draw once (4-5 ms a transit plan); the last :data:`DRAWS_KEPT` per robot.
+#: on the cabin: a plan's transit search and a relay's two rides, a sweep's plans (one payload, many cabins
+#: or goals) and a worker's repeated scenarios rank a draw once (4-5 ms a transit plan); the last
+#: :data:`DRAWS_KEPT` per robot.
 _RANKED: weakref.WeakKeyDictionary[object, BoundedLRU[tuple[int, int, str], Array]] = (
     weakref.WeakKeyDictionary()
 )
@@ -91,21 +88,16 @@ def ranked_pool(world: CollisionWorld, seed: int, n_candidates: int) -> Array:
     :func:`random_admissible_joints` from ``default_rng(seed)``, sorted by :func:`compactness` (stable):
     the same rows whichever search asks first (tests/plan/test_transit.py).
     """
-    pools = _POOLS.setdefault(world, {})
-    key = (int(seed), int(n_candidates))
-    pool = pools.get(key)
+    ranked = _RANKED.get(world.robot)
+    if ranked is None:
+        ranked = _RANKED.setdefault(world.robot, BoundedLRU(DRAWS_KEPT))
+    key = (int(seed), int(n_candidates), world.cover_digest())
+    pool = ranked.get(key)
     if pool is None:
-        ranked = _RANKED.get(world.robot)
-        if ranked is None:
-            ranked = _RANKED.setdefault(world.robot, BoundedLRU(DRAWS_KEPT))
-        by_payload = (*key, world.cover_digest())
-        pool = ranked.get(by_payload)
-        if pool is None:
-            drawn = seeded_draw(world.robot, *key)
-            pool = drawn[np.argsort(compactness(world, drawn), kind="stable")] if len(drawn) else drawn.copy()
-            pool.flags.writeable = False
-            ranked.put(by_payload, pool)
-        pools[key] = pool
+        drawn = seeded_draw(world.robot, *key[:2])
+        pool = drawn[np.argsort(compactness(world, drawn), kind="stable")] if len(drawn) else drawn.copy()
+        pool.flags.writeable = False
+        ranked.put(key, pool)
     return pool
 
 

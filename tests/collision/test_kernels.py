@@ -409,7 +409,7 @@ def test_a_sweeps_states_after_the_pairs_are_settled_get_packed_valids_verdicts(
     u = unpack(d.fbuf, d.ibuf)
     own = fast.self_clearance
     qs = along_rail(fast.robot, 1500, seed=23)
-    poses, c, no_pairs = np.empty((len(fast.names), 13)), np.empty(len(u.c_lo)), np.empty(0)
+    poses, c = np.empty((len(fast.names), 13)), np.empty(len(u.c_lo))
     seen = set()
     for q in qs:
         for clearance in (0.005, 0.03):
@@ -420,7 +420,7 @@ def test_a_sweeps_states_after_the_pairs_are_settled_get_packed_valids_verdicts(
                 q, d.fbuf, d.ibuf, d.grid, *d.tree, clearance, own, d.upper_slack
             )
             got = state._settled_verdict(
-                q, u, d.fbuf, d.ibuf, d.grid, *d.tree, clearance, own, d.upper_slack, poses, c, no_pairs
+                q, u, d.fbuf, d.ibuf, d.grid, *d.tree, clearance, d.upper_slack, poses, c
             )
             assert got == (expected, probes)
             seen.add((expected, probes > 0))

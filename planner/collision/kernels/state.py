@@ -152,30 +152,35 @@ def packed_valid(
     world's obstacles are the caller's); ``STATE_UNDECIDED``: a cabin probe is needed and there is no tree.
     """
     code, poses, cabin, pairs = packed_check(q, fbuf, ibuf, grid, clearance, self_clearance, upper_slack)
-    if code == CLEAR:
-        return STATE_VALID, poses, 0
-    if code != UNDECIDED:
-        return STATE_INVALID, poses, 0
-    u = unpack(fbuf, ibuf)
-    verdict, probes = _probed(
-        poses, cabin, pairs, u, tris, tree_bounds, tree_links, clearance, self_clearance
+    verdict, probes = _verdict(
+        code, poses, cabin, pairs, fbuf, ibuf, tris, tree_bounds, tree_links, clearance, self_clearance
     )
     return verdict, poses, probes
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _probed(
+def _verdict(
+    code: int,
     poses: np.ndarray,
     cabin: np.ndarray,
     pairs: np.ndarray,
-    u: Packed,
+    fbuf: np.ndarray,
+    ibuf: np.ndarray,
     tris: np.ndarray,
     tree_bounds: np.ndarray,
     tree_links: np.ndarray,
     clearance: float,
     self_clearance: float,
 ) -> tuple[int, int]:
-    """:func:`packed_valid`'s probes of an ``UNDECIDED`` state, in its order: (``STATE_*``, probes asked)."""
+    """:func:`packed_valid`'s (``STATE_*``, probes asked) from a :func:`packed_check` code.
+
+    An ``UNDECIDED`` state gets its probes, in :func:`packed_valid`'s order.
+    """
+    if code == CLEAR:
+        return STATE_VALID, 0
+    if code != UNDECIDED:
+        return STATE_INVALID, 0
+    u = unpack(fbuf, ibuf)
     probes = 0
     for b in range(cabin.shape[0]):
         if cabin[b] <= clearance:
@@ -235,7 +240,6 @@ def axis_sweep(
     u = unpack(fbuf, ibuf)
     poses = np.empty((ibuf[0], 13))
     c = np.empty(u.c_lo.shape[0])
-    no_pairs = np.empty(0)
     probes = 0
     settled = False
     s = q.copy()
@@ -243,21 +247,15 @@ def axis_sweep(
         s[axis] = values[i]
         if settled:
             verdict, asked = _settled_verdict(
-                s, u, fbuf, ibuf, grid, tris, tree_bounds, tree_links, clearance, self_clearance, upper_slack,
-                poses, c, no_pairs,
-            )  # fmt: skip
+                s, u, fbuf, ibuf, grid, tris, tree_bounds, tree_links, clearance, upper_slack, poses, c
+            )
         else:
             code, flat, cabin, pairs = packed_check(
                 s, fbuf, ibuf, grid, clearance, self_clearance, upper_slack
             )
-            if code == CLEAR:
-                verdict, asked = STATE_VALID, 0
-            elif code != UNDECIDED:
-                verdict, asked = STATE_INVALID, 0
-            else:
-                verdict, asked = _probed(
-                    flat, cabin, pairs, u, tris, tree_bounds, tree_links, clearance, self_clearance
-                )
+            verdict, asked = _verdict(
+                code, flat, cabin, pairs, fbuf, ibuf, tris, tree_bounds, tree_links, clearance, self_clearance
+            )
             if verdict == STATE_VALID and pairs_fixed:
                 settled = True
                 for k in range(pairs.shape[0]):
@@ -282,16 +280,14 @@ def _settled_verdict(
     tree_bounds: np.ndarray,
     tree_links: np.ndarray,
     clearance: float,
-    self_clearance: float,
     upper_slack: float,
     poses: np.ndarray,
     c: np.ndarray,
-    no_pairs: np.ndarray,
 ) -> tuple[int, int]:
     """:func:`packed_valid`'s (verdict, probes) at s when every pair is known clear: its steps without them.
 
     The same poses, cabin bounds, admissibility and cabin probes as :func:`packed_check` and
-    :func:`_probed` compute, in their order.
+    :func:`_verdict` compute, in their order (``poses`` and ``c``: scratch space).
     """
     for i in range(s.shape[0]):
         if not math.isfinite(s[i]):
@@ -301,8 +297,5 @@ def _settled_verdict(
     if not admissible(c, u.c_lo, u.c_hi):
         return STATE_INVALID, 0
     code = _cabin_code(poses, cabin, clearance, fbuf, ibuf, grid, upper_slack)
-    if code == CLEAR:
-        return STATE_VALID, 0
-    if code == CONTACT:
-        return STATE_INVALID, 0
-    return _probed(poses, cabin, no_pairs, u, tris, tree_bounds, tree_links, clearance, self_clearance)
+    no_pairs = np.empty(0)  # every pair clear: none to probe
+    return _verdict(code, poses, cabin, no_pairs, fbuf, ibuf, tris, tree_bounds, tree_links, clearance, 0.0)
